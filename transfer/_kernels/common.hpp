@@ -1,0 +1,229 @@
+// Shared pieces of the transfer kernels: small vector algebra, the local
+// (per target element) accumulation of B and D, and sparse assembly.
+//
+// Assembly is organised per target element (paper eq. 3): every target element
+// gathers the pieces of its intersection with the source mesh, integrates
+// products of basis functions on them, and emits its local rows of B (target
+// dofs x source dofs) and of D (target x target). Rows are global dof ids, so a
+// distributed version only has to give each rank its target elements plus the
+// source elements that overlap them.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+namespace vc {
+
+using Vec3 = std::array<double, 3>;
+
+inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+inline Vec3 add(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+inline Vec3 scale(const Vec3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+inline Vec3 lerp(const Vec3& a, const Vec3& b, double t) {
+  return {a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])};
+}
+
+struct BBox {
+  Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  void grow(const Vec3& p) {
+    for (int d = 0; d < 3; ++d) {
+      lo[d] = std::min(lo[d], p[d]);
+      hi[d] = std::max(hi[d], p[d]);
+    }
+  }
+  bool overlaps(const BBox& o, double tol) const {
+    for (int d = 0; d < 3; ++d)
+      if (lo[d] > o.hi[d] + tol || o.lo[d] > hi[d] + tol) return false;
+    return true;
+  }
+  double diagonal() const { return norm(sub(hi, lo)); }
+};
+
+// Quadrature rule on a reference simplex: barycentric points (npts x (dim+1)),
+// weights summing to 1 (they are multiplied by the simplex measure).
+struct SimplexRule {
+  int npts = 0;
+  int nbary = 0;
+  std::vector<double> bary;
+  std::vector<double> weights;
+};
+
+// COO triplets of one thread; merged into CSR by to_csr (sparse.cpp).
+struct Triplets {
+  std::vector<int64_t> rows, cols;
+  std::vector<double> vals;
+  void add(int64_t r, int64_t c, double v) {
+    rows.push_back(r);
+    cols.push_back(c);
+    vals.push_back(v);
+  }
+};
+
+struct CSR {
+  std::vector<int64_t> indptr, indices;
+  std::vector<double> data;
+};
+
+// Sum the triplets of all threads into a CSR matrix with nrows rows
+// (duplicates added, columns sorted within each row).
+CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int nthreads = 1);
+
+// Local accumulation for one target element with `nt` basis functions.
+// B_loc[s][a] = integral of (source basis of source dof s) * (target basis a);
+// M_loc[a][b] = integral over the overlap of target basis a * target basis b.
+struct LocalAssembly {
+  int nt = 0;
+  std::vector<int64_t> src_dofs;          // distinct source dofs seen
+  std::vector<double> b;                  // src_dofs.size() x nt
+  std::array<double, 64> m{};             // nt x nt (nt <= 8)
+  double overlap = 0.0;                   // measure of target element covered
+  std::vector<int32_t>* slot = nullptr;   // global source dof -> local slot, -1 if none
+
+  void reset(int nt_, std::vector<int32_t>* slot_) {
+    for (int64_t s : src_dofs) (*slot_)[s] = -1;
+    nt = nt_;
+    slot = slot_;
+    src_dofs.clear();
+    b.clear();
+    m.fill(0.0);
+    overlap = 0.0;
+  }
+  double* row_of(int64_t sdof) {
+    int32_t k = (*slot)[sdof];
+    if (k < 0) {
+      k = static_cast<int32_t>(src_dofs.size());
+      (*slot)[sdof] = k;
+      src_dofs.push_back(sdof);
+      b.resize(b.size() + nt, 0.0);
+    }
+    return b.data() + static_cast<size_t>(k) * nt;
+  }
+  // Add w * phi_t[a] * phi_s[i] to B and w * phi_t[a] * phi_t[b] to M.
+  void add_point(double w, const double* phi_t, const int64_t* sdofs, const double* phi_s, int ns) {
+    for (int i = 0; i < ns; ++i) {
+      double* row = row_of(sdofs[i]);
+      const double wi = w * phi_s[i];
+      for (int a = 0; a < nt; ++a) row[a] += wi * phi_t[a];
+    }
+    for (int a = 0; a < nt; ++a)
+      for (int c = 0; c < nt; ++c) m[a * nt + c] += w * phi_t[a] * phi_t[c];
+    overlap += w;
+  }
+  // Add a block of integrals: vals[i * nt + a] = int phi_s[i] phi_t[a].
+  void add_block(const int64_t* sdofs, int ns, const double* vals) {
+    for (int i = 0; i < ns; ++i) {
+      double* row = row_of(sdofs[i]);
+      for (int a = 0; a < nt; ++a) row[a] += vals[i * nt + a];
+    }
+  }
+  // Emit the local rows into global triplets. `tdofs` are the target element's
+  // dofs; `dual` (nt x nt, row-major, or nullptr) are the coefficients of the
+  // dual basis psi_a = sum_c dual[a][c] phi_c (paper eq. 4); `lump` replaces
+  // the local mass matrix by its row sums (diagonal D).
+  void emit(const int64_t* tdofs, const double* dual, bool lump, Triplets& B, Triplets& D) const {
+    std::array<double, 64> md{};
+    std::array<double, 8> tmp{};
+    const size_t ns = src_dofs.size();
+    for (size_t k = 0; k < ns; ++k) {
+      const double* row = b.data() + k * nt;
+      for (int a = 0; a < nt; ++a) {
+        double v = row[a];
+        if (dual) {
+          v = 0.0;
+          for (int c = 0; c < nt; ++c) v += dual[a * nt + c] * row[c];
+        }
+        tmp[a] = v;
+      }
+      for (int a = 0; a < nt; ++a)
+        if (tmp[a] != 0.0) B.add(tdofs[a], src_dofs[k], tmp[a]);
+    }
+    for (int a = 0; a < nt; ++a)
+      for (int c = 0; c < nt; ++c) {
+        double v = m[a * nt + c];
+        if (dual) {
+          v = 0.0;
+          for (int e = 0; e < nt; ++e) v += dual[a * nt + e] * m[e * nt + c];
+        }
+        md[a * nt + c] = v;
+      }
+    for (int a = 0; a < nt; ++a) {
+      if (lump) {
+        double s = 0.0;
+        for (int c = 0; c < nt; ++c) s += md[a * nt + c];
+        D.add(tdofs[a], tdofs[a], s);
+      } else {
+        for (int c = 0; c < nt; ++c)
+          if (md[a * nt + c] != 0.0) D.add(tdofs[a], tdofs[c], md[a * nt + c]);
+      }
+    }
+  }
+};
+
+// Result of one assembly, handed to Python.
+struct AssemblyResult {
+  CSR B, D;
+  std::vector<double> overlap;   // per target element: measure covered by the source
+  std::vector<double> measure;   // per target element: its own measure
+  int64_t pairs_tested = 0;
+  int64_t pairs_intersected = 0;
+};
+
+enum Kind : int { TET = 0, HEX = 1, BOX = 2, TRI = 3, QUAD = 4 };
+
+// A mesh as the kernels see it. Dofs: degree 0 -> the cell index, degree 1 ->
+// the vertex index (vertex order of VTK for every kind).
+struct ElementSet {
+  const double* points = nullptr;  // npoints x 3
+  int64_t npoints = 0;
+  const int64_t* cells = nullptr;  // ncells x nverts
+  int64_t ncells = 0;
+  int nverts = 0;
+  int kind = TET;
+  int degree = 1;
+  int nbasis() const { return degree == 0 ? 1 : nverts; }
+  Vec3 vertex(int64_t c, int k) const {
+    const double* p = points + 3 * cells[c * nverts + k];
+    return {p[0], p[1], p[2]};
+  }
+  void dofs(int64_t c, int64_t* out) const {
+    if (degree == 0)
+      out[0] = c;
+    else
+      for (int k = 0; k < nverts; ++k) out[k] = cells[c * nverts + k];
+  }
+};
+
+// Axis-aligned structured grid of boxes (cell id = i + nx * (j + ny * k)),
+// giving index-based search when the source is such a grid.
+struct GridInfo {
+  Vec3 origin{}, spacing{};
+  std::array<int64_t, 3> shape{};
+};
+
+// A target element uses the dual basis only when the source covers all of it
+// (relative tolerance on the measures); cut elements fall back to the standard
+// basis with a lumped mass, which keeps D diagonal and positive.
+constexpr double kFullCoverage = 1e-10;
+
+// Volume-volume (TET, HEX, BOX) by exact polyhedron clipping.
+// `rule` is a rule on the reference tetrahedron (4 barycentric coordinates).
+// `dual` is nullptr or tgt.ncells x nt x nt.
+AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
+                               const double* dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
+                               const GridInfo* src_grid, int nthreads);
+
+// Surface-surface (TRI, QUAD embedded in 3D) by mortar segmentation: pair by
+// proximity along the target normal, project on the target element's plane,
+// clip, integrate. `rule` is on the reference triangle (3 barycentric coords).
+AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
+                                const double* dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
+                                double search_distance, double min_normal_cos, int nthreads);
+
+}  // namespace vc

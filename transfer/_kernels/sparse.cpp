@@ -1,0 +1,59 @@
+// Triplets -> CSR with duplicate summation: a counting sort by row, then each
+// row sorted by column and compacted (rows in parallel).
+#include <algorithm>
+#include <numeric>
+
+#include "common.hpp"
+
+namespace vc {
+
+namespace {
+struct Entry {
+  int64_t col;
+  double val;
+};
+}  // namespace
+
+CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int nthreads) {
+  nthreads = std::max(1, nthreads);
+  std::vector<int64_t> start(nrows + 1, 0);
+  for (const auto& p : parts)
+    for (int64_t r : p.rows) ++start[r + 1];
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<Entry> entries(start[nrows]);
+  {
+    std::vector<int64_t> next(start.begin(), start.end() - 1);
+    for (const auto& p : parts)
+      for (size_t k = 0; k < p.rows.size(); ++k) entries[next[p.rows[k]]++] = {p.cols[k], p.vals[k]};
+  }
+  std::vector<int64_t> unique(nrows + 1, 0);
+#pragma omp parallel for schedule(dynamic, 1024) num_threads(nthreads)
+  for (int64_t r = 0; r < nrows; ++r) {
+    Entry* a = entries.data() + start[r];
+    Entry* b = entries.data() + start[r + 1];
+    std::sort(a, b, [](const Entry& x, const Entry& y) { return x.col < y.col; });
+    Entry* out = a;
+    for (Entry* e = a; e < b; ++e) {
+      if (out > a && (out - 1)->col == e->col)
+        (out - 1)->val += e->val;
+      else
+        *out++ = *e;
+    }
+    unique[r + 1] = out - a;
+  }
+  CSR csr;
+  csr.indptr.resize(nrows + 1);
+  std::partial_sum(unique.begin(), unique.end(), csr.indptr.begin());
+  csr.indices.resize(csr.indptr[nrows]);
+  csr.data.resize(csr.indptr[nrows]);
+#pragma omp parallel for schedule(static) num_threads(nthreads)
+  for (int64_t r = 0; r < nrows; ++r)
+    for (int64_t k = 0; k < unique[r + 1]; ++k) {
+      const Entry& e = entries[start[r] + k];
+      csr.indices[csr.indptr[r] + k] = e.col;
+      csr.data[csr.indptr[r] + k] = e.val;
+    }
+  return csr;
+}
+
+}  // namespace vc

@@ -1,0 +1,521 @@
+// Volume-volume coupling (paper eq. 3): exact intersection of tetrahedra,
+// hexahedra and axis-aligned boxes by clipping, quadrature on the pieces.
+//
+// Geometry: every element is a union of tetrahedra (a tet is itself, a hex is
+// six tets around its 0-6 diagonal, a box likewise) and a union of convex
+// pieces given by half-spaces (a tet: 4 planes, a box: 6 planes, a hex: its six
+// tets). The intersection of two elements is computed by clipping the tets of
+// one against the convex pieces of the other; a tet cut by a plane is again a
+// union of at most three tets, so the pieces stay tets and any simplex rule
+// integrates on them.
+#include <algorithm>
+#include <cfloat>
+#include <stdexcept>
+#include <cstdio>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#include "basis.hpp"
+#include "common.hpp"
+
+namespace vc {
+namespace {
+
+struct Tet {
+  Vec3 v[4];
+};
+
+struct Plane {
+  Vec3 n;    // unit outward normal
+  double d;  // inside: n.x <= d
+};
+
+struct Convex {
+  int nplanes = 0;
+  Plane p[6];
+};
+
+constexpr int kHexTets[6][4] = {{0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6},
+                                {0, 7, 4, 6}, {0, 4, 5, 6}, {0, 5, 1, 6}};
+
+double tet_volume(const Tet& t) {
+  return std::fabs(dot(sub(t.v[1], t.v[0]), cross(sub(t.v[2], t.v[0]), sub(t.v[3], t.v[0])))) / 6.0;
+}
+
+Convex tet_planes(const Tet& t) {
+  static constexpr int opp[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+  Convex c;
+  c.nplanes = 4;
+  for (int i = 0; i < 4; ++i) {
+    const Vec3& a = t.v[opp[i][0]];
+    Vec3 n = cross(sub(t.v[opp[i][1]], a), sub(t.v[opp[i][2]], a));
+    if (dot(n, sub(t.v[i], a)) > 0) n = scale(n, -1.0);
+    n = scale(n, 1.0 / norm(n));
+    c.p[i] = {n, dot(n, a)};
+  }
+  return c;
+}
+
+// An element seen as a union of tets and a union of convex pieces.
+struct ElementGeometry {
+  int ntets = 0;
+  Tet tets[6];
+  int nconvex = 0;
+  Convex convex[6];
+  BBox box;
+  Vec3 verts[8];
+  double measure = 0.0;
+  int kind = TET;
+
+  void build(const ElementSet& e, int64_t c) {
+    box = BBox{};
+    for (int k = 0; k < e.nverts; ++k) {
+      verts[k] = e.vertex(c, k);
+      box.grow(verts[k]);
+    }
+    if (e.kind == TET) {
+      ntets = 1;
+      for (int k = 0; k < 4; ++k) tets[0].v[k] = verts[k];
+    } else {
+      ntets = 6;
+      for (int t = 0; t < 6; ++t)
+        for (int k = 0; k < 4; ++k) tets[t].v[k] = verts[kHexTets[t][k]];
+    }
+    measure = 0.0;
+    for (int t = 0; t < ntets; ++t) measure += tet_volume(tets[t]);
+    kind = e.kind;
+    nconvex = 0;
+  }
+
+  int convex_count() const { return kind == HEX ? 6 : 1; }
+
+  // The convex pieces (half-spaces), needed only for the element that clips.
+  void build_planes() {
+    if (nconvex) return;
+    if (kind == BOX) {
+      nconvex = 1;
+      convex[0].nplanes = 6;
+      for (int d = 0; d < 3; ++d) {
+        Vec3 n{0, 0, 0};
+        n[d] = -1.0;
+        convex[0].p[2 * d] = {n, -box.lo[d]};
+        n[d] = 1.0;
+        convex[0].p[2 * d + 1] = {n, box.hi[d]};
+      }
+    } else {
+      nconvex = ntets;
+      for (int t = 0; t < ntets; ++t) convex[t] = tet_planes(tets[t]);
+    }
+  }
+};
+
+// Integrals of 1, x and x x^T over a union of tets, in coordinates relative to
+// an origin near the element (no cancellation for meshes far from 0). Products
+// of two affine functions are integrated exactly from them.
+struct Moments {
+  double m0 = 0.0;
+  Vec3 m1{0, 0, 0};
+  double m2[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+
+  void add_tet(const Tet& t, const Vec3& origin, double vol) {
+    // int_K x_i x_j = |K|/20 (sum_k v_k,i v_k,j + s_i s_j), s = sum_k v_k
+    Vec3 v[4], s{0, 0, 0};
+    for (int k = 0; k < 4; ++k) {
+      v[k] = sub(t.v[k], origin);
+      s = add(s, v[k]);
+    }
+    m0 += vol;
+    m1 = add(m1, scale(s, vol / 4.0));
+    const double c = vol / 20.0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = i; j < 3; ++j) {
+        double q = s[i] * s[j];
+        for (int k = 0; k < 4; ++k) q += v[k][i] * v[k][j];
+        m2[i][j] += c * q;
+      }
+  }
+  void merge(const Moments& o) {
+    m0 += o.m0;
+    m1 = add(m1, o.m1);
+    for (int i = 0; i < 3; ++i)
+      for (int j = i; j < 3; ++j) m2[i][j] += o.m2[i][j];
+  }
+  // int (ca + ga.x)(cb + gb.x)
+  double product(double ca, const Vec3& ga, double cb, const Vec3& gb) const {
+    double q = 0.0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) q += ga[i] * gb[j] * (i <= j ? m2[i][j] : m2[j][i]);
+    return ca * cb * m0 + ca * dot(gb, m1) + cb * dot(ga, m1) + q;
+  }
+};
+
+bool is_affine(const ElementSet& e) { return e.degree == 0 || e.kind == TET; }
+
+// Basis functions of one element evaluated at physical points.
+struct Evaluator {
+  int kind = TET, degree = 1;
+  Vec3 v0{}, lo{}, inv_extent{};
+  double jinv[3][3]{};
+  const Vec3* verts = nullptr;
+
+  void build(const ElementSet& e, const ElementGeometry& g) {
+    kind = e.kind;
+    degree = e.degree;
+    verts = g.verts;
+    if (degree == 0) return;
+    if (kind == TET) {
+      v0 = g.verts[0];
+      double J[3][3];
+      for (int k = 0; k < 3; ++k)
+        for (int d = 0; d < 3; ++d) J[d][k] = g.verts[k + 1][d] - v0[d];
+      const double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
+                         J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+                         J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          const int i1 = (j + 1) % 3, i2 = (j + 2) % 3, j1 = (i + 1) % 3, j2 = (i + 2) % 3;
+          jinv[i][j] = (J[i1][j1] * J[i2][j2] - J[i1][j2] * J[i2][j1]) / det;
+        }
+    } else if (kind == BOX) {
+      lo = g.box.lo;
+      for (int d = 0; d < 3; ++d) inv_extent[d] = 1.0 / (g.box.hi[d] - g.box.lo[d]);
+    }
+  }
+
+  // Affine basis phi_a(x) = c[a] + g[a].(x - origin) (degree 0 or tetrahedra).
+  void affine(const Vec3& origin, double* c, Vec3* g) const {
+    if (degree == 0) {
+      c[0] = 1.0;
+      g[0] = {0, 0, 0};
+      return;
+    }
+    const Vec3 r = sub(origin, v0);
+    c[0] = 1.0;
+    g[0] = {0, 0, 0};
+    for (int i = 0; i < 3; ++i) {
+      g[i + 1] = {jinv[i][0], jinv[i][1], jinv[i][2]};
+      c[i + 1] = dot(g[i + 1], r);
+      c[0] -= c[i + 1];
+      g[0] = sub(g[0], g[i + 1]);
+    }
+  }
+
+  void eval(const Vec3& x, double* phi) const {
+    if (degree == 0) {
+      phi[0] = 1.0;
+      return;
+    }
+    if (kind == TET) {
+      const Vec3 r = sub(x, v0);
+      double s = 0.0;
+      for (int i = 0; i < 3; ++i) {
+        phi[i + 1] = jinv[i][0] * r[0] + jinv[i][1] * r[1] + jinv[i][2] * r[2];
+        s += phi[i + 1];
+      }
+      phi[0] = 1.0 - s;
+    } else if (kind == BOX) {
+      q1_hex((x[0] - lo[0]) * inv_extent[0], (x[1] - lo[1]) * inv_extent[1], (x[2] - lo[2]) * inv_extent[2], phi);
+    } else {
+      const Vec3 xi = invert_hex(verts, x);
+      q1_hex(xi[0], xi[1], xi[2], phi);
+    }
+  }
+};
+
+// Clip a union of tets by one half-space; `eps` is the distance below which a
+// vertex counts as lying on the plane (kept), so coplanar faces give no slivers.
+void clip_plane(const std::vector<Tet>& in, const Plane& pl, double eps, std::vector<Tet>& out) {
+  out.clear();
+  for (const Tet& t : in) {
+    double s[4];
+    int inside[4], outside[4], ni = 0, no = 0;
+    for (int k = 0; k < 4; ++k) {
+      s[k] = dot(pl.n, t.v[k]) - pl.d;
+      if (s[k] > eps)
+        outside[no++] = k;
+      else
+        inside[ni++] = k;
+    }
+    if (no == 0) {
+      out.push_back(t);
+      continue;
+    }
+    if (ni == 0) continue;
+    auto cut = [&](int i, int o) {
+      const double si = std::min(s[i], 0.0);
+      return lerp(t.v[i], t.v[o], si / (si - s[o]));
+    };
+    if (ni == 1) {
+      const int i = inside[0];
+      out.push_back(Tet{{t.v[i], cut(i, outside[0]), cut(i, outside[1]), cut(i, outside[2])}});
+    } else {
+      // A prism (a, b, c | a', b', c') with planar faces; three tets.
+      Vec3 a, b, c, a2, b2, c2;
+      if (ni == 3) {
+        const int o = outside[0];
+        a = t.v[inside[0]]; b = t.v[inside[1]]; c = t.v[inside[2]];
+        a2 = cut(inside[0], o); b2 = cut(inside[1], o); c2 = cut(inside[2], o);
+      } else {
+        const int i = inside[0], j = inside[1], o1 = outside[0], o2 = outside[1];
+        a = t.v[i]; b = cut(i, o1); c = cut(i, o2);
+        a2 = t.v[j]; b2 = cut(j, o1); c2 = cut(j, o2);
+      }
+      out.push_back(Tet{{a, b, c, a2}});
+      out.push_back(Tet{{b, c, a2, b2}});
+      out.push_back(Tet{{c, a2, b2, c2}});
+    }
+  }
+}
+
+struct ClipBuffers {
+  std::vector<Tet> a, b, pieces;
+};
+
+// Pieces of (union of `subject` tets) inside convex `c`, appended to buf.pieces.
+void clip_convex(const Tet* subject, int nsubject, const Convex& c, double eps, ClipBuffers& buf) {
+  // Quick rejection: all subject vertices outside one plane.
+  for (int p = 0; p < c.nplanes; ++p) {
+    bool all_out = true;
+    for (int t = 0; t < nsubject && all_out; ++t)
+      for (int k = 0; k < 4; ++k)
+        if (dot(c.p[p].n, subject[t].v[k]) - c.p[p].d <= eps) {
+          all_out = false;
+          break;
+        }
+    if (all_out) return;
+  }
+  buf.a.assign(subject, subject + nsubject);
+  for (int p = 0; p < c.nplanes && !buf.a.empty(); ++p) {
+    clip_plane(buf.a, c.p[p], eps, buf.b);
+    std::swap(buf.a, buf.b);
+  }
+  buf.pieces.insert(buf.pieces.end(), buf.a.begin(), buf.a.end());
+}
+
+// Candidate source elements of a target bounding box.
+class SourceSearch {
+ public:
+  SourceSearch(const ElementSet& src, const std::vector<BBox>& boxes, const GridInfo* grid)
+      : boxes_(boxes), grid_(grid) {
+    if (grid_) return;
+    BBox all;
+    double mean = 0.0;
+    for (const auto& b : boxes_) {
+      all.grow(b.lo);
+      all.grow(b.hi);
+      mean += (b.hi[0] - b.lo[0]) + (b.hi[1] - b.lo[1]) + (b.hi[2] - b.lo[2]);
+    }
+    mean /= std::max<double>(1.0, 3.0 * boxes_.size());
+    lo_ = all.lo;
+    int64_t total = 1;
+    for (int d = 0; d < 3; ++d) {
+      const double ext = all.hi[d] - all.lo[d];
+      n_[d] = std::max<int64_t>(1, static_cast<int64_t>(ext / std::max(mean, 1e-300)));
+      total *= n_[d];
+    }
+    while (total > 4 * static_cast<int64_t>(boxes_.size()) + 64) {  // cap the bin count
+      total = 1;
+      for (int d = 0; d < 3; ++d) {
+        n_[d] = std::max<int64_t>(1, n_[d] / 2);
+        total *= n_[d];
+      }
+    }
+    for (int d = 0; d < 3; ++d) h_[d] = std::max((all.hi[d] - all.lo[d]) / n_[d], 1e-300);
+    start_.assign(total + 1, 0);
+    for (int pass = 0; pass < 2; ++pass) {
+      std::vector<int64_t> fill;
+      if (pass == 1) {
+        for (int64_t k = 0; k < total; ++k) start_[k + 1] += start_[k];
+        items_.resize(start_[total]);
+        fill.assign(start_.begin(), start_.end() - 1);
+      }
+      for (int64_t e = 0; e < static_cast<int64_t>(boxes_.size()); ++e) {
+        int64_t r[3][2];
+        range(boxes_[e], 0.0, r);
+        for (int64_t k = r[2][0]; k <= r[2][1]; ++k)
+          for (int64_t j = r[1][0]; j <= r[1][1]; ++j)
+            for (int64_t i = r[0][0]; i <= r[0][1]; ++i) {
+              const int64_t bin = i + n_[0] * (j + n_[1] * k);
+              if (pass == 0)
+                ++start_[bin + 1];
+              else
+                items_[fill[bin]++] = e;
+            }
+      }
+    }
+    (void)src;
+  }
+
+  // Calls f(e) once for every source element whose box may overlap `b`.
+  template <class F>
+  void for_each(const BBox& b, double tol, std::vector<int64_t>& stamp, int64_t tag, F&& f) const {
+    int64_t r[3][2];
+    if (grid_) {
+      for (int d = 0; d < 3; ++d) {
+        const double a = (b.lo[d] - tol - grid_->origin[d]) / grid_->spacing[d];
+        const double z = (b.hi[d] + tol - grid_->origin[d]) / grid_->spacing[d];
+        r[d][0] = std::max<int64_t>(0, static_cast<int64_t>(std::floor(a)));
+        r[d][1] = std::min<int64_t>(grid_->shape[d] - 1, static_cast<int64_t>(std::floor(z)));
+        if (r[d][0] > r[d][1]) return;
+      }
+      for (int64_t k = r[2][0]; k <= r[2][1]; ++k)
+        for (int64_t j = r[1][0]; j <= r[1][1]; ++j)
+          for (int64_t i = r[0][0]; i <= r[0][1]; ++i) f(i + grid_->shape[0] * (j + grid_->shape[1] * k));
+      return;
+    }
+    if (!range(b, tol, r)) return;
+    for (int64_t k = r[2][0]; k <= r[2][1]; ++k)
+      for (int64_t j = r[1][0]; j <= r[1][1]; ++j)
+        for (int64_t i = r[0][0]; i <= r[0][1]; ++i) {
+          const int64_t bin = i + n_[0] * (j + n_[1] * k);
+          for (int64_t q = start_[bin]; q < start_[bin + 1]; ++q) {
+            const int64_t e = items_[q];
+            if (stamp[e] == tag) continue;
+            stamp[e] = tag;
+            if (boxes_[e].overlaps(b, tol)) f(e);
+          }
+        }
+  }
+
+ private:
+  bool range(const BBox& b, double tol, int64_t r[3][2]) const {
+    for (int d = 0; d < 3; ++d) {
+      const double a = (b.lo[d] - tol - lo_[d]) / h_[d];
+      const double z = (b.hi[d] + tol - lo_[d]) / h_[d];
+      if (z < 0 || a >= n_[d]) return false;
+      r[d][0] = std::clamp<int64_t>(static_cast<int64_t>(std::floor(a)), 0, n_[d] - 1);
+      r[d][1] = std::clamp<int64_t>(static_cast<int64_t>(std::floor(z)), 0, n_[d] - 1);
+    }
+    return true;
+  }
+
+  const std::vector<BBox>& boxes_;
+  const GridInfo* grid_;
+  Vec3 lo_{}, h_{};
+  int64_t n_[3] = {1, 1, 1};
+  std::vector<int64_t> start_, items_;
+};
+
+}  // namespace
+
+AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
+                               const double* dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
+                               const GridInfo* src_grid, int nthreads) {
+  AssemblyResult result;
+  result.overlap.assign(tgt.ncells, 0.0);
+  result.measure.assign(tgt.ncells, 0.0);
+
+  std::vector<BBox> src_boxes(src.ncells);
+  for (int64_t e = 0; e < src.ncells; ++e)
+    for (int k = 0; k < src.nverts; ++k) src_boxes[e].grow(src.vertex(e, k));
+  const SourceSearch search(src, src_boxes, src_grid);
+
+#ifdef _OPENMP
+  const int nth = nthreads > 0 ? nthreads : omp_get_max_threads();
+#else
+  const int nth = 1;
+  (void)nthreads;
+#endif
+  std::vector<Triplets> Bparts(nth), Dparts(nth);
+  int64_t tested = 0, intersected = 0;
+  const int nt = tgt.nbasis(), ns = src.nbasis();
+  // An empty rule asks for exact integration from moments (affine bases only).
+  const bool exact = rule.npts == 0;
+  if (exact && !(is_affine(src) && is_affine(tgt)))
+    throw std::invalid_argument("exact (moment) integration needs affine bases: P0/P1 on tets, degree 0");
+
+#pragma omp parallel num_threads(nth) reduction(+ : tested, intersected)
+  {
+    int tid = 0;
+#ifdef _OPENMP
+    tid = omp_get_thread_num();
+#endif
+    std::vector<int32_t> slot(n_src_dofs, -1);
+    std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
+    LocalAssembly la;
+    ClipBuffers buf;
+    ElementGeometry tg, sg;
+    Evaluator tev, sev;
+    Moments pair, total;
+    int64_t tdofs[8], sdofs[8];
+    double phi_t[8], phi_s[8], ct[8], cs[8], block[64];
+    Vec3 gt[8], gs[8];
+
+#pragma omp for schedule(dynamic, 64)
+    for (int64_t t = 0; t < tgt.ncells; ++t) {
+      tg.build(tgt, t);
+      tev.build(tgt, tg);
+      tgt.dofs(t, tdofs);
+      la.reset(nt, &slot);
+      total = Moments{};
+      const Vec3 origin = tg.verts[0];
+      if (exact) tev.affine(origin, ct, gt);
+      const double h = tg.box.diagonal();
+      const double vmin = 1e-15 * tg.measure;
+      search.for_each(tg.box, 1e-10 * h, stamp, t, [&](int64_t s) {
+        ++tested;
+        sg.build(src, s);
+        // Clip the tets of the element with fewer of them by the convex pieces
+        // of the other (fewest tet-piece pairs).
+        const bool clip_source = sg.ntets * tg.convex_count() <= tg.ntets * sg.convex_count();
+        const ElementGeometry& subj = clip_source ? sg : tg;
+        ElementGeometry& clipper = clip_source ? tg : sg;
+        clipper.build_planes();
+        const double eps = 1e-12 * std::min(h, sg.box.diagonal()) +
+                           4 * DBL_EPSILON * std::max(norm(tg.box.hi), norm(tg.box.lo));
+        buf.pieces.clear();
+        for (int c = 0; c < clipper.nconvex; ++c) clip_convex(subj.tets, subj.ntets, clipper.convex[c], eps, buf);
+        bool any = false;
+        pair = Moments{};
+        for (const Tet& piece : buf.pieces) {
+          const double vol = tet_volume(piece);
+          if (!(vol > vmin)) continue;
+          if (!any) {
+            sev.build(src, sg);
+            src.dofs(s, sdofs);
+            any = true;
+          }
+          if (exact) {
+            pair.add_tet(piece, origin, vol);
+            continue;
+          }
+          for (int q = 0; q < rule.npts; ++q) {
+            const double* l = &rule.bary[4 * q];
+            Vec3 x{0, 0, 0};
+            for (int k = 0; k < 4; ++k) x = add(x, scale(piece.v[k], l[k]));
+            tev.eval(x, phi_t);
+            sev.eval(x, phi_s);
+            la.add_point(rule.weights[q] * vol, phi_t, sdofs, phi_s, ns);
+          }
+        }
+        if (!any) return;
+        ++intersected;
+        if (exact) {  // B block from the moments of the intersection
+          sev.affine(origin, cs, gs);
+          for (int i = 0; i < ns; ++i)
+            for (int a = 0; a < nt; ++a) block[i * nt + a] = pair.product(cs[i], gs[i], ct[a], gt[a]);
+          la.add_block(sdofs, ns, block);
+          total.merge(pair);
+        }
+      });
+      if (exact) {  // target mass over the overlap, from the summed moments
+        for (int a = 0; a < nt; ++a)
+          for (int b = 0; b < nt; ++b) la.m[a * nt + b] = total.product(ct[a], gt[a], ct[b], gt[b]);
+        la.overlap = total.m0;
+      }
+      result.measure[t] = tg.measure;
+      result.overlap[t] = la.overlap;
+      const bool full = la.overlap >= (1.0 - kFullCoverage) * tg.measure;
+      la.emit(tdofs, (dual && full) ? dual + t * nt * nt : nullptr, lump, Bparts[tid], Dparts[tid]);
+    }
+  }
+  result.pairs_tested = tested;
+  result.pairs_intersected = intersected;
+  result.B = to_csr(Bparts, n_tgt_dofs, nth);
+  result.D = to_csr(Dparts, n_tgt_dofs, nth);
+  return result;
+}
+
+}  // namespace vc

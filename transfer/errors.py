@@ -1,0 +1,25 @@
+"""Typed errors of the transfer library.
+
+Every error names what was wrong with which input, so that command-line tools
+can print it as one line instead of a traceback.
+"""
+
+
+class TransferError(Exception):
+    """Base class of all errors raised by :mod:`transfer`."""
+
+
+class MeshError(TransferError, ValueError):
+    """A mesh is malformed: bad arrays, unknown cell type, inverted or degenerate cells."""
+
+
+class SpaceError(TransferError, ValueError):
+    """A function space does not fit its mesh (e.g. P1 on a hexahedral mesh)."""
+
+
+class NoOverlapError(TransferError):
+    """Source and target do not overlap: nothing can be transferred."""
+
+
+class FieldError(TransferError, ValueError):
+    """A field has the wrong shape or contains NaN/inf."""

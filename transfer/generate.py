@@ -1,0 +1,72 @@
+"""Simple mesh generators: boxes split into tetrahedra or hexahedra, and surfaces.
+
+Non-matching meshes of one domain are made by choosing different resolutions
+and moving interior vertices at random (`jitter`, a fraction of the spacing,
+below 0.25 so no cell inverts). Used by the tests, the benchmarks and the demo.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .mesh import HEX_TETS, Mesh
+
+_QUAD_TRIS = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def _lattice(shape, lower, upper, jitter, seed):
+    """Points of a (nx+1)(ny+1)(nz+1) lattice (x fastest) with interior jitter."""
+    shape = np.asarray(shape)
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    axes = [np.linspace(lower[d], upper[d], shape[d] + 1) for d in range(len(shape))]
+    index = np.meshgrid(*[np.arange(n + 1) for n in shape[::-1]], indexing="ij")[::-1]
+    idx = np.stack([g.ravel() for g in index], axis=1)  # lattice index of each point
+    points = np.stack([axes[d][idx[:, d]] for d in range(len(shape))], axis=1)
+    if jitter:
+        move = np.random.default_rng(seed).uniform(-jitter, jitter, points.shape) * (upper - lower) / shape
+        on_face = (idx == 0) | (idx == shape)  # vertices on a boundary face stay on it
+        points = points + np.where(on_face, 0.0, move)
+    return points
+
+
+def _hex_cells(shape):
+    nx, ny, nz = shape
+    px, py = nx + 1, ny + 1
+    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    base = (i + px * (j + py * k)).ravel()
+    offsets = np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
+    return base[:, None] + offsets[None, :]
+
+
+def box_hexahedra(shape, lower=(0, 0, 0), upper=(1, 1, 1), jitter=0.0, seed=0, name="box") -> Mesh:
+    """Hexahedral mesh of a box with `shape` = (nx, ny, nz) cells."""
+    return Mesh(_lattice(shape, lower, upper, jitter, seed), _hex_cells(shape), "hexahedron", name=name)
+
+
+def box_tetrahedra(shape, lower=(0, 0, 0), upper=(1, 1, 1), jitter=0.0, seed=0, name="box") -> Mesh:
+    """Tetrahedral mesh of a box: every hexahedron of the lattice split in six tets
+    (:data:`transfer.mesh.HEX_TETS`, conforming across faces)."""
+    points = _lattice(shape, lower, upper, jitter, seed)
+    cells = _hex_cells(shape)[:, HEX_TETS].reshape(-1, 4)
+    return Mesh(points, cells, "tetra", name=name)
+
+
+def tetrahedra_with_cells(target_cells: int, **kwargs) -> Mesh:
+    """A box tet mesh with about `target_cells` cells (6 per lattice hexahedron)."""
+    n = max(1, int(round((target_cells / 6) ** (1 / 3))))
+    return box_tetrahedra((n, n, n), **kwargs)
+
+
+def rectangle(shape, lower=(0, 0), upper=(1, 1), cell_type="triangle", jitter=0.0, seed=0,
+              height=None, name="surface") -> Mesh:
+    """A surface mesh of a rectangle in 3D, z = height(x, y) (0 by default)."""
+    points2 = _lattice(shape, lower, upper, jitter, seed)
+    z = np.zeros(len(points2)) if height is None else height(points2[:, 0], points2[:, 1])
+    points = np.column_stack([points2, z])
+    nx, ny = shape
+    j, i = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+    base = (i + (nx + 1) * j).ravel()
+    quads = base[:, None] + np.array([0, 1, nx + 2, nx + 1])[None, :]
+    if cell_type == "quad":
+        return Mesh(points, quads, "quad", name=name)
+    return Mesh(points, quads[:, _QUAD_TRIS].reshape(-1, 3), "triangle", name=name)

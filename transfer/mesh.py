@@ -1,0 +1,188 @@
+"""Meshes: tetrahedra and hexahedra (volume), triangles and quadrilaterals in 3D (surface).
+
+Vertex order is VTK's (and meshio's) for every cell type. A mesh is validated
+when it is made: finite coordinates, indices in range, no repeated vertex in a
+cell, no degenerate cell and, for volume cells, no inverted cell. Tolerances
+are relative to each cell's own size, so a mesh in metres and the same mesh in
+millimetres are judged alike.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import MeshError
+
+#: cell type -> (topological dimension, vertices per cell)
+CELL_TYPES = {
+    "tetra": (3, 4),
+    "hexahedron": (3, 8),
+    "triangle": (2, 3),
+    "quad": (2, 4),
+}
+
+#: tetrahedra splitting a hexahedron along its 0-6 diagonal (same as the kernels)
+HEX_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])
+
+#: a cell whose measure is below this times (longest edge)^dim is degenerate
+DEGENERATE_RTOL = 1e-13
+
+
+def _signed_tet_volumes(p: np.ndarray) -> np.ndarray:
+    """Signed volumes of tetrahedra given as (n, 4, 3) vertex arrays."""
+    a, b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
+    return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+
+
+def _triangle_areas(p: np.ndarray) -> np.ndarray:
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """An unstructured mesh of one cell type.
+
+    Parameters
+    ----------
+    points : (n, 3) float array (2D points are padded with z = 0)
+    cells : (m, k) integer array of vertex indices, VTK order
+    cell_type : ``"tetra"``, ``"hexahedron"``, ``"triangle"`` or ``"quad"``
+    name : label used in error messages (e.g. the file it was read from)
+    """
+
+    points: np.ndarray
+    cells: np.ndarray
+    cell_type: str
+    name: str = "mesh"
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        points = np.asarray(self.points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] not in (2, 3):
+            raise MeshError(f"{self.name}: points must have shape (n, 3), got {points.shape}")
+        if points.shape[1] == 2:
+            points = np.hstack([points, np.zeros((len(points), 1))])
+        object.__setattr__(self, "points", np.ascontiguousarray(points))
+        if self.cell_type not in CELL_TYPES:
+            raise MeshError(f"{self.name}: unsupported cell type {self.cell_type!r}; "
+                            f"use one of {sorted(CELL_TYPES)}")
+        cells = np.ascontiguousarray(np.asarray(self.cells, dtype=np.int64))
+        object.__setattr__(self, "cells", cells)
+        self._validate()
+
+    # -- construction ---------------------------------------------------
+    @classmethod
+    def from_meshio(cls, mesh, cell_type: str | None = None, name: str = "mesh") -> "Mesh":
+        """The cells of one type of a :class:`meshio.Mesh` (by default its
+        highest-dimensional supported type; blocks of that type are joined)."""
+        present = [b.type for b in mesh.cells if b.type in CELL_TYPES]
+        if cell_type is None:
+            if not present:
+                raise MeshError(f"{name}: no tetra, hexahedron, triangle or quad cells "
+                                f"(found {[b.type for b in mesh.cells]})")
+            cell_type = max(present, key=lambda t: CELL_TYPES[t][0])
+            others = {t for t in present if t != cell_type and CELL_TYPES[t][0] == CELL_TYPES[cell_type][0]}
+            if others:
+                raise MeshError(f"{name}: mixed cell types {sorted(others | {cell_type})} of the same "
+                                f"dimension; pass cell_type to choose one")
+        blocks = [b.data for b in mesh.cells if b.type == cell_type]
+        if not blocks:
+            raise MeshError(f"{name}: no cells of type {cell_type!r}")
+        return cls(mesh.points, np.concatenate(blocks), cell_type, name=name)
+
+    def to_meshio(self):
+        import meshio
+
+        return meshio.Mesh(self.points, [(self.cell_type, self.cells)])
+
+    # -- properties -----------------------------------------------------
+    @property
+    def tdim(self) -> int:
+        return CELL_TYPES[self.cell_type][0]
+
+    @property
+    def num_cells(self) -> int:
+        return len(self.cells)
+
+    @property
+    def num_points(self) -> int:
+        return len(self.points)
+
+    @property
+    def is_simplex(self) -> bool:
+        return self.cell_type in ("tetra", "triangle")
+
+    def bounding_box(self) -> tuple[np.ndarray, np.ndarray]:
+        used = self.points[self.cells.ravel()] if self.num_cells else self.points
+        return used.min(axis=0), used.max(axis=0)
+
+    def cell_vertices(self) -> np.ndarray:
+        """(m, k, 3) coordinates of the vertices of each cell."""
+        return self.points[self.cells]
+
+    def cell_measures(self, signed: bool = False) -> np.ndarray:
+        """Volume (3D cells) or area (surface cells) of each cell.
+
+        Hexahedra are measured as the union of the six tets of :data:`HEX_TETS`,
+        the same decomposition the intersection kernels use."""
+        key = ("measures", signed)
+        if key not in self._cache:
+            p = self.cell_vertices()
+            if self.cell_type == "tetra":
+                m = _signed_tet_volumes(p)
+            elif self.cell_type == "hexahedron":
+                m = sum(_signed_tet_volumes(p[:, t]) for t in HEX_TETS)
+            elif self.cell_type == "triangle":
+                m = _triangle_areas(p)
+            else:
+                m = _triangle_areas(p[:, [0, 1, 2]]) + _triangle_areas(p[:, [0, 2, 3]])
+            self._cache[key] = m if signed else np.abs(m)
+        return self._cache[key]
+
+    def longest_edges(self) -> np.ndarray:
+        p = self.cell_vertices()
+        k = p.shape[1]
+        d = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1).reshape(len(p), k * k)
+        return d.max(axis=1)
+
+    # -- validation -------------------------------------------------------
+    def _validate(self):
+        tdim, nverts = CELL_TYPES[self.cell_type]
+        if self.cells.ndim != 2 or self.cells.shape[1] != nverts:
+            raise MeshError(f"{self.name}: {self.cell_type} cells need {nverts} vertices, "
+                            f"got cells of shape {self.cells.shape}")
+        if not np.all(np.isfinite(self.points)):
+            bad = int(np.argwhere(~np.isfinite(self.points))[0, 0])
+            raise MeshError(f"{self.name}: point {bad} has a non-finite coordinate")
+        if self.num_cells == 0:
+            raise MeshError(f"{self.name}: mesh has no cells")
+        if self.cells.min() < 0 or self.cells.max() >= self.num_points:
+            raise MeshError(f"{self.name}: cell vertex index out of range [0, {self.num_points})")
+        s = np.sort(self.cells, axis=1)
+        rep = np.flatnonzero((s[:, 1:] == s[:, :-1]).any(axis=1))
+        if rep.size:
+            raise MeshError(f"{self.name}: cell {rep[0]} repeats a vertex ({self.cells[rep[0]].tolist()}); "
+                            f"{rep.size} such cell(s)")
+        h = self.longest_edges()
+        measure = self.cell_measures()
+        degenerate = np.flatnonzero(measure <= DEGENERATE_RTOL * h**tdim)
+        if degenerate.size:
+            raise MeshError(f"{self.name}: cell {degenerate[0]} is degenerate (measure {measure[degenerate[0]]:.3e} "
+                            f"for edge length {h[degenerate[0]]:.3e}); {degenerate.size} such cell(s)")
+        if tdim == 3:
+            self._check_orientation(h)
+
+    def _check_orientation(self, h):
+        p = self.cell_vertices()
+        if self.cell_type == "tetra":
+            vol = _signed_tet_volumes(p)
+        else:  # Jacobian sign at the eight corners of each hexahedron
+            corner = np.array([[0, 1, 3, 4], [1, 2, 0, 5], [2, 3, 1, 6], [3, 0, 2, 7],
+                               [4, 7, 5, 0], [5, 4, 6, 1], [6, 5, 7, 2], [7, 6, 4, 3]])
+            vol = np.min([_signed_tet_volumes(p[:, c]) for c in corner], axis=0)
+        inverted = np.flatnonzero(vol <= DEGENERATE_RTOL * h**3)
+        if inverted.size:
+            raise MeshError(f"{self.name}: cell {inverted[0]} is inverted (negative orientation, "
+                            f"vertices {self.cells[inverted[0]].tolist()}); {inverted.size} such cell(s)")
