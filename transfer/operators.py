@@ -26,7 +26,6 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import _kernels
-from .dual import dual_coefficients
 from .errors import FieldError, NoOverlapError, TransferError
 from .grid import StructuredGrid
 from .quadrature import simplex_rule
@@ -117,7 +116,7 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
     else:
         qdeg = quadrature_degree or default_quadrature_degree(source, target)
         bary, weights = simplex_rule(smesh.tdim, qdeg)
-    dual = dual_coefficients(target) if (method == "pseudo_l2" and target.degree > 0) else None
+    dual = method == "pseudo_l2" and target.degree > 0  # the dual of P0/Q0 is itself
     args = (smesh.points, smesh.cells, _kind(smesh), source.degree,
             tmesh.points, tmesh.cells, _kind(tmesh), target.degree,
             bary, weights, dual, method == "pseudo_l2", source.num_dofs, target.num_dofs)
@@ -169,10 +168,7 @@ class Transfer:
         self.covered = (self.coverage > COVERED_RTOL) & (self.D.diagonal() > 0)
         self._index = np.flatnonzero(self.covered)
         Dc = self.D[self._index][:, self._index]
-        if method == "pseudo_l2":
-            self._solve = _DiagonalSolve(Dc.diagonal())
-        else:
-            self._solve = spla.splu(Dc.tocsc(), permc_spec="MMD_AT_PLUS_A").solve
+        self._solve = _DiagonalSolve(Dc.diagonal()) if method == "pseudo_l2" else _MassSolve(Dc)
 
     @classmethod
     def assemble(cls, source: FunctionSpace, target: FunctionSpace, method: str = "l2", **kwargs) -> "Transfer":
@@ -221,6 +217,52 @@ class Transfer:
         """Relative difference of the integrals of u and T u over the overlap."""
         a, b = np.atleast_1d(self.integral_source(u)), np.atleast_1d(self.integral_target(self.apply(u)))
         return float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), np.finfo(float).tiny))
+
+
+class _MassSolve:
+    """Solve with the (overlap) mass matrix: conjugate gradients with a Jacobi
+    preconditioner, which needs a handful of iterations on mass matrices of
+    shape-regular meshes whatever their size; a sparse LU where CG stalls (a
+    dof covered only by a sliver of overlap makes D ill-conditioned)."""
+
+    def __init__(self, D: sp.csr_matrix, rtol: float = 1e-15, maxiter: int = 200):
+        self.D, self.rtol, self.maxiter = D, rtol, maxiter
+        self.inv_diag = 1.0 / D.diagonal()
+        self._lu = None
+        #: iterations of the last solve (-1: direct)
+        self.iterations = 0
+
+    def __call__(self, rhs: np.ndarray) -> np.ndarray:
+        x = self._pcg(rhs)
+        if x is None:
+            if self._lu is None:
+                self._lu = spla.splu(self.D.tocsc())
+            self.iterations = -1
+            x = self._lu.solve(rhs)
+        return x
+
+    def _pcg(self, b):
+        """Preconditioned CG on all columns of b at once."""
+        d = self.inv_diag.reshape((-1,) + (1,) * (b.ndim - 1))
+        x = b * d
+        r = b - self.D @ x
+        z = r * d
+        p = z.copy()
+        rz = np.sum(r * z, axis=0)
+        target = self.rtol * np.sqrt(np.sum(b * b, axis=0)) + np.finfo(float).tiny
+        for it in range(self.maxiter):
+            if np.all(np.sqrt(np.sum(r * r, axis=0)) <= 4 * target):
+                self.iterations = it
+                return x
+            q = self.D @ p
+            alpha = rz / np.where(rz == 0, 1.0, np.sum(p * q, axis=0))
+            x += alpha * p
+            r -= alpha * q
+            z = r * d
+            rz_new = np.sum(r * z, axis=0)
+            p = z + (rz_new / np.where(rz == 0, 1.0, rz)) * p
+            rz = rz_new
+        return None
 
 
 class _DiagonalSolve:

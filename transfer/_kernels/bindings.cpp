@@ -5,6 +5,7 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/optional.h>
 #include <nanobind/stl/tuple.h>
+#include <nanobind/stl/array.h>
 
 #include <optional>
 #include <stdexcept>
@@ -20,7 +21,6 @@ namespace {
 using Points = nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 using Cells = nb::ndarray<const int64_t, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 using Vector = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
-using Dual = nb::ndarray<const double, nb::ndim<3>, nb::c_contig, nb::device::cpu>;
 using Grid = std::tuple<std::array<double, 3>, std::array<double, 3>, std::array<int64_t, 3>>;
 
 template <class T>
@@ -54,15 +54,6 @@ vc::SimplexRule simplex_rule(const Points& bary, const Vector& w) {
   return r;
 }
 
-const double* dual_ptr(const std::optional<Dual>& dual, const vc::ElementSet& tgt) {
-  if (!dual) return nullptr;
-  const int nt = tgt.nbasis();
-  if (dual->shape(0) != static_cast<size_t>(tgt.ncells) || dual->shape(1) != static_cast<size_t>(nt) ||
-      dual->shape(2) != static_cast<size_t>(nt))
-    throw std::invalid_argument("dual coefficients must have shape (ncells, nbasis, nbasis)");
-  return dual->data();
-}
-
 nb::dict to_dict(vc::AssemblyResult&& r) {
   nb::dict d;
   d["B"] = nb::make_tuple(to_numpy(std::move(r.B.indptr)), to_numpy(std::move(r.B.indices)),
@@ -83,13 +74,12 @@ NB_MODULE(_kernels, m) {
   m.def(
       "assemble_volume",
       [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
-         int tdeg, const Points& bary, const Vector& w, std::optional<Dual> dual, bool lump, int64_t nsd,
+         int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,
          int64_t ntd, std::optional<Grid> grid, int nthreads) {
         auto src = element_set(sp, sc, skind, sdeg);
         auto tgt = element_set(tp, tc, tkind, tdeg);
         auto rule = simplex_rule(bary, w);
         if (rule.nbary != 4) throw std::invalid_argument("volume rule needs 4 barycentric coordinates");
-        const double* dp = dual_ptr(dual, tgt);
         vc::GridInfo g;
         if (grid) {
           g.origin = std::get<0>(*grid);
@@ -99,33 +89,32 @@ NB_MODULE(_kernels, m) {
         vc::AssemblyResult r;
         {
           nb::gil_scoped_release release;
-          r = vc::assemble_volume(src, tgt, rule, dp, lump, nsd, ntd, grid ? &g : nullptr, nthreads);
+          r = vc::assemble_volume(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads);
         }
         return to_dict(std::move(r));
       },
       "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
-      "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a.none(), "lump"_a,
+      "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
       "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1);
   m.def(
       "assemble_surface",
       [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
-         int tdeg, const Points& bary, const Vector& w, std::optional<Dual> dual, bool lump, int64_t nsd,
+         int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,
          int64_t ntd, double search_distance, double min_normal_cos, int nthreads) {
         auto src = element_set(sp, sc, skind, sdeg);
         auto tgt = element_set(tp, tc, tkind, tdeg);
         auto rule = simplex_rule(bary, w);
         if (rule.nbary != 3) throw std::invalid_argument("surface rule needs 3 barycentric coordinates");
-        const double* dp = dual_ptr(dual, tgt);
         vc::AssemblyResult r;
         {
           nb::gil_scoped_release release;
-          r = vc::assemble_surface(src, tgt, rule, dp, lump, nsd, ntd, search_distance, min_normal_cos,
+          r = vc::assemble_surface(src, tgt, rule, dual, lump, nsd, ntd, search_distance, min_normal_cos,
                                    nthreads);
         }
         return to_dict(std::move(r));
       },
       "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
-      "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a.none(), "lump"_a,
+      "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
       "n_src_dofs"_a, "n_tgt_dofs"_a, "search_distance"_a, "min_normal_cos"_a, "nthreads"_a = 1);
   m.attr("TET") = static_cast<int>(vc::TET);
   m.attr("HEX") = static_cast<int>(vc::HEX);

@@ -9,6 +9,7 @@
 // source elements that overlap them.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -59,6 +60,11 @@ struct SimplexRule {
 struct Triplets {
   std::vector<int64_t> rows, cols;
   std::vector<double> vals;
+  void reserve(size_t n) {
+    rows.reserve(n);
+    cols.reserve(n);
+    vals.reserve(n);
+  }
   void add(int64_t r, int64_t c, double v) {
     rows.push_back(r);
     cols.push_back(c);
@@ -116,6 +122,36 @@ struct LocalAssembly {
       for (int c = 0; c < nt; ++c) m[a * nt + c] += w * phi_t[a] * phi_t[c];
     overlap += w;
   }
+  // A = diag(M 1) M^{-1} (row-major into `a`) by Gauss-Jordan elimination with
+  // partial pivoting; false if M is singular.
+  bool dual_coefficients(double* a) const {
+    double w[8][16];
+    for (int i = 0; i < nt; ++i)
+      for (int j = 0; j < nt; ++j) {
+        w[i][j] = m[i * nt + j];
+        w[i][nt + j] = (i == j) ? 1.0 : 0.0;
+      }
+    for (int c = 0; c < nt; ++c) {
+      int piv = c;
+      for (int r = c + 1; r < nt; ++r)
+        if (std::fabs(w[r][c]) > std::fabs(w[piv][c])) piv = r;
+      if (w[piv][c] == 0.0) return false;
+      for (int j = 0; j < 2 * nt; ++j) std::swap(w[c][j], w[piv][j]);
+      const double inv = 1.0 / w[c][c];
+      for (int j = 0; j < 2 * nt; ++j) w[c][j] *= inv;
+      for (int r = 0; r < nt; ++r)
+        if (r != c && w[r][c] != 0.0) {
+          const double f = w[r][c];
+          for (int j = 0; j < 2 * nt; ++j) w[r][j] -= f * w[c][j];
+        }
+    }
+    for (int i = 0; i < nt; ++i) {
+      double rowsum = 0.0;
+      for (int j = 0; j < nt; ++j) rowsum += m[i * nt + j];
+      for (int j = 0; j < nt; ++j) a[i * nt + j] = rowsum * w[i][nt + j];
+    }
+    return true;
+  }
   // Add a block of integrals: vals[i * nt + a] = int phi_s[i] phi_t[a].
   void add_block(const int64_t* sdofs, int ns, const double* vals) {
     for (int i = 0; i < ns; ++i) {
@@ -124,12 +160,15 @@ struct LocalAssembly {
     }
   }
   // Emit the local rows into global triplets. `tdofs` are the target element's
-  // dofs; `dual` (nt x nt, row-major, or nullptr) are the coefficients of the
-  // dual basis psi_a = sum_c dual[a][c] phi_c (paper eq. 4); `lump` replaces
-  // the local mass matrix by its row sums (diagonal D).
-  void emit(const int64_t* tdofs, const double* dual, bool lump, Triplets& B, Triplets& D) const {
-    std::array<double, 64> md{};
+  // dofs; with `use_dual` the rows are those of the dual basis (paper eq. 4),
+  // psi_a = sum_c A[a][c] phi_c with A = diag(M 1) M^{-1} from the element's
+  // own mass matrix M as integrated here, so int psi_a phi_c = delta_ac int phi_c
+  // holds for exactly the integration that B uses. `lump` replaces the local
+  // mass matrix by its row sums (diagonal D).
+  void emit(const int64_t* tdofs, bool use_dual, bool lump, Triplets& B, Triplets& D) const {
+    std::array<double, 64> md{}, coeffs{};
     std::array<double, 8> tmp{};
+    const double* dual = (use_dual && dual_coefficients(coeffs.data())) ? coeffs.data() : nullptr;
     const size_t ns = src_dofs.size();
     for (size_t k = 0; k < ns; ++k) {
       const double* row = b.data() + k * nt;
@@ -214,16 +253,16 @@ constexpr double kFullCoverage = 1e-10;
 
 // Volume-volume (TET, HEX, BOX) by exact polyhedron clipping.
 // `rule` is a rule on the reference tetrahedron (4 barycentric coordinates).
-// `dual` is nullptr or tgt.ncells x nt x nt.
+// `dual`: use the dual basis of eq. 4 on the target (fully covered elements).
 AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
-                               const double* dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
+                               bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
                                const GridInfo* src_grid, int nthreads);
 
 // Surface-surface (TRI, QUAD embedded in 3D) by mortar segmentation: pair by
 // proximity along the target normal, project on the target element's plane,
 // clip, integrate. `rule` is on the reference triangle (3 barycentric coords).
 AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
-                                const double* dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
+                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
                                 double search_distance, double min_normal_cos, int nthreads);
 
 }  // namespace vc

@@ -69,7 +69,7 @@ struct ElementGeometry {
   double measure = 0.0;
   int kind = TET;
 
-  void build(const ElementSet& e, int64_t c) {
+  void build(const ElementSet& e, int64_t c, bool with_measure = true) {
     box = BBox{};
     for (int k = 0; k < e.nverts; ++k) {
       verts[k] = e.vertex(c, k);
@@ -84,7 +84,8 @@ struct ElementGeometry {
         for (int k = 0; k < 4; ++k) tets[t].v[k] = verts[kHexTets[t][k]];
     }
     measure = 0.0;
-    for (int t = 0; t < ntets; ++t) measure += tet_volume(tets[t]);
+    if (with_measure)
+      for (int t = 0; t < ntets; ++t) measure += tet_volume(tets[t]);
     kind = e.kind;
     nconvex = 0;
   }
@@ -275,16 +276,22 @@ struct ClipBuffers {
 
 // Pieces of (union of `subject` tets) inside convex `c`, appended to buf.pieces.
 void clip_convex(const Tet* subject, int nsubject, const Convex& c, double eps, ClipBuffers& buf) {
-  // Quick rejection: all subject vertices outside one plane.
+  // Quick rejection (all subject vertices outside one plane) and acceptance
+  // (all inside every plane: the subject lies in the convex piece).
+  bool inside_all = true;
   for (int p = 0; p < c.nplanes; ++p) {
     bool all_out = true;
-    for (int t = 0; t < nsubject && all_out; ++t)
-      for (int k = 0; k < 4; ++k)
-        if (dot(c.p[p].n, subject[t].v[k]) - c.p[p].d <= eps) {
-          all_out = false;
-          break;
-        }
+    for (int t = 0; t < nsubject; ++t)
+      for (int k = 0; k < 4; ++k) {
+        const double s = dot(c.p[p].n, subject[t].v[k]) - c.p[p].d;
+        all_out = all_out && s > eps;
+        inside_all = inside_all && s <= eps;
+      }
     if (all_out) return;
+  }
+  if (inside_all) {
+    buf.pieces.insert(buf.pieces.end(), subject, subject + nsubject);
+    return;
   }
   buf.a.assign(subject, subject + nsubject);
   for (int p = 0; p < c.nplanes && !buf.a.empty(); ++p) {
@@ -332,7 +339,7 @@ class SourceSearch {
         fill.assign(start_.begin(), start_.end() - 1);
       }
       for (int64_t e = 0; e < static_cast<int64_t>(boxes_.size()); ++e) {
-        int64_t r[3][2];
+        int64_t r[3][2] = {{0, 0}, {0, 0}, {0, 0}};
         range(boxes_[e], 0.0, r);
         for (int64_t k = r[2][0]; k <= r[2][1]; ++k)
           for (int64_t j = r[1][0]; j <= r[1][1]; ++j)
@@ -351,7 +358,7 @@ class SourceSearch {
   // Calls f(e) once for every source element whose box may overlap `b`.
   template <class F>
   void for_each(const BBox& b, double tol, std::vector<int64_t>& stamp, int64_t tag, F&& f) const {
-    int64_t r[3][2];
+    int64_t r[3][2] = {{0, 0}, {0, 0}, {0, 0}};
     if (grid_) {
       for (int d = 0; d < 3; ++d) {
         const double a = (b.lo[d] - tol - grid_->origin[d]) / grid_->spacing[d];
@@ -401,7 +408,7 @@ class SourceSearch {
 }  // namespace
 
 AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
-                               const double* dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
+                               bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
                                const GridInfo* src_grid, int nthreads) {
   AssemblyResult result;
   result.overlap.assign(tgt.ncells, 0.0);
@@ -433,6 +440,8 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
     tid = omp_get_thread_num();
 #endif
     std::vector<int32_t> slot(n_src_dofs, -1);
+    Bparts[tid].reserve(8 * nt * (tgt.ncells / nth + 1));
+    Dparts[tid].reserve((lump ? 1 : nt) * nt * (tgt.ncells / nth + 1));
     std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
     LocalAssembly la;
     ClipBuffers buf;
@@ -456,7 +465,7 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
       const double vmin = 1e-15 * tg.measure;
       search.for_each(tg.box, 1e-10 * h, stamp, t, [&](int64_t s) {
         ++tested;
-        sg.build(src, s);
+        sg.build(src, s, false);
         // Clip the tets of the element with fewer of them by the convex pieces
         // of the other (fewest tet-piece pairs).
         const bool clip_source = sg.ntets * tg.convex_count() <= tg.ntets * sg.convex_count();
@@ -508,7 +517,7 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
       result.measure[t] = tg.measure;
       result.overlap[t] = la.overlap;
       const bool full = la.overlap >= (1.0 - kFullCoverage) * tg.measure;
-      la.emit(tdofs, (dual && full) ? dual + t * nt * nt : nullptr, lump, Bparts[tid], Dparts[tid]);
+      la.emit(tdofs, dual && full, lump, Bparts[tid], Dparts[tid]);
     }
   }
   result.pairs_tested = tested;
