@@ -188,6 +188,16 @@ class Transfer:
         """Indices of target dofs the source does not reach."""
         return np.flatnonzero(~self.covered)
 
+    def matrix(self) -> sp.csr_matrix:
+        """T = D^{-1} B as a sparse matrix (pseudo-L2 only: with the full mass
+        matrix of the L2 method T is dense, use :meth:`apply`). Rows of
+        uncovered target dofs are empty."""
+        if self.method != "pseudo_l2":
+            raise TransferError("T of the l2 method is dense; use Transfer.apply, or method='pseudo_l2'")
+        scale = np.zeros(self.target.num_dofs)
+        scale[self._index] = self._solve.inverse
+        return (sp.diags(scale) @ self.B).tocsr()
+
     def apply(self, u, fill: float = np.nan) -> np.ndarray:
         """T u on the covered target dofs; `fill` (NaN by default) elsewhere."""
         u = np.asarray(u, dtype=np.float64)

@@ -111,16 +111,23 @@ struct LocalAssembly {
     }
     return b.data() + static_cast<size_t>(k) * nt;
   }
-  // Add w * phi_t[a] * phi_s[i] to B and w * phi_t[a] * phi_t[b] to M.
-  void add_point(double w, const double* phi_t, const int64_t* sdofs, const double* phi_s, int ns) {
+  // Quadrature point of weight w: block[i * nt + a] += w phi_s[i] phi_t[a] (the
+  // B block of one source element, see add_block) and M += w phi_t phi_t^T.
+  void add_point(double w, const double* phi_t, const double* phi_s, int ns, double* block) {
+    double wt[8];
+    for (int a = 0; a < nt; ++a) wt[a] = w * phi_t[a];
+    for (int i = 0; i < ns; ++i)
+      for (int a = 0; a < nt; ++a) block[i * nt + a] += phi_s[i] * wt[a];
+    for (int a = 0; a < nt; ++a)
+      for (int c = 0; c < nt; ++c) m[a * nt + c] += wt[a] * phi_t[c];
+    overlap += w;
+  }
+  // Add the block of one source element: vals[i * nt + a] = int phi_s[i] phi_t[a].
+  void add_block(const int64_t* sdofs, int ns, const double* vals) {
     for (int i = 0; i < ns; ++i) {
       double* row = row_of(sdofs[i]);
-      const double wi = w * phi_s[i];
-      for (int a = 0; a < nt; ++a) row[a] += wi * phi_t[a];
+      for (int a = 0; a < nt; ++a) row[a] += vals[i * nt + a];
     }
-    for (int a = 0; a < nt; ++a)
-      for (int c = 0; c < nt; ++c) m[a * nt + c] += w * phi_t[a] * phi_t[c];
-    overlap += w;
   }
   // A = diag(M 1) M^{-1} (row-major into `a`) by Gauss-Jordan elimination with
   // partial pivoting; false if M is singular.
@@ -151,13 +158,6 @@ struct LocalAssembly {
       for (int j = 0; j < nt; ++j) a[i * nt + j] = rowsum * w[i][nt + j];
     }
     return true;
-  }
-  // Add a block of integrals: vals[i * nt + a] = int phi_s[i] phi_t[a].
-  void add_block(const int64_t* sdofs, int ns, const double* vals) {
-    for (int i = 0; i < ns; ++i) {
-      double* row = row_of(sdofs[i]);
-      for (int a = 0; a < nt; ++a) row[a] += vals[i * nt + a];
-    }
   }
   // Emit the local rows into global triplets. `tdofs` are the target element's
   // dofs; with `use_dual` the rows are those of the dual basis (paper eq. 4),

@@ -414,7 +414,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
     std::vector<int64_t> cand;
     LocalAssembly la;
     int64_t tdofs[4], sdofs[4];
-    double phi_t[4], phi_s[4];
+    double phi_t[4], phi_s[4], block[16];
 
 #pragma omp for schedule(dynamic, 64)
     for (int64_t t = 0; t < tgt.ncells; ++t) {
@@ -544,6 +544,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
         if (!se.init()) continue;
         ++intersected;
         src.dofs(s, sdofs);
+        std::fill(block, block + nsb * nt, 0.0);
 
         // 5. Quadrature on the pieces: x = sum_k bary_k * corner_k, weight
         //    w_q * |piece|; B and M gain w phi^t_a phi^s_i and w phi^t_a phi^t_b.
@@ -559,7 +560,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
               phi_s[0] = 1.0;
             else
               se.eval(x, phi_s);
-            la.add_point(rule.weights[q] * piece_area, phi_t, sdofs, phi_s, nsb);
+            la.add_point(rule.weights[q] * piece_area, phi_t, phi_s, nsb, block);
           }
         };
         if (poly.n == 3) {
@@ -581,6 +582,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
             if (sub_area != 0.0) integrate(m, a, b, sub_area);
           }
         }
+        la.add_block(sdofs, nsb, block);
       }
 
       // 7. Emit; the dual basis (eq. 4) only on fully covered elements.
@@ -592,8 +594,8 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
 
   result.pairs_tested = tested;
   result.pairs_intersected = intersected;
-  result.B = to_csr(Bparts, n_tgt_dofs);
-  result.D = to_csr(Dparts, n_tgt_dofs);
+  result.B = to_csr(Bparts, n_tgt_dofs, nth);
+  result.D = to_csr(Dparts, n_tgt_dofs, nth);
   return result;
 }
 

@@ -143,12 +143,23 @@ struct Moments {
     for (int i = 0; i < 3; ++i)
       for (int j = i; j < 3; ++j) m2[i][j] += o.m2[i][j];
   }
-  // int (ca + ga.x)(cb + gb.x)
-  double product(double ca, const Vec3& ga, double cb, const Vec3& gb) const {
-    double q = 0.0;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) q += ga[i] * gb[j] * (i <= j ? m2[i][j] : m2[j][i]);
-    return ca * cb * m0 + ca * dot(gb, m1) + cb * dot(ga, m1) + q;
+  // Integrals int phi_a psi_i of two affine bases phi_a = c[a] + g[a].x (na
+  // functions) and psi_i = d[i] + h[i].x (ni functions) into out[i * na + a].
+  void products(int na, const double* c, const Vec3* g, int ni, const double* d, const Vec3* h,
+                double* out) const {
+    Vec3 mg[8];  // (int x x^T) g[a]
+    double m1g[8];
+    for (int a = 0; a < na; ++a) {
+      mg[a] = {m2[0][0] * g[a][0] + m2[0][1] * g[a][1] + m2[0][2] * g[a][2],
+               m2[0][1] * g[a][0] + m2[1][1] * g[a][1] + m2[1][2] * g[a][2],
+               m2[0][2] * g[a][0] + m2[1][2] * g[a][1] + m2[2][2] * g[a][2]};
+      m1g[a] = dot(m1, g[a]);
+    }
+    for (int i = 0; i < ni; ++i) {
+      const double m1h = dot(m1, h[i]);
+      for (int a = 0; a < na; ++a)
+        out[i * na + a] = c[a] * d[i] * m0 + c[a] * m1h + d[i] * m1g[a] + dot(h[i], mg[a]);
+    }
   }
 };
 
@@ -484,6 +495,7 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
           if (!any) {
             sev.build(src, sg);
             src.dofs(s, sdofs);
+            std::fill(block, block + ns * nt, 0.0);
             any = true;
           }
           if (exact) {
@@ -496,22 +508,20 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
             for (int k = 0; k < 4; ++k) x = add(x, scale(piece.v[k], l[k]));
             tev.eval(x, phi_t);
             sev.eval(x, phi_s);
-            la.add_point(rule.weights[q] * vol, phi_t, sdofs, phi_s, ns);
+            la.add_point(rule.weights[q] * vol, phi_t, phi_s, ns, block);
           }
         }
         if (!any) return;
         ++intersected;
         if (exact) {  // B block from the moments of the intersection
           sev.affine(origin, cs, gs);
-          for (int i = 0; i < ns; ++i)
-            for (int a = 0; a < nt; ++a) block[i * nt + a] = pair.product(cs[i], gs[i], ct[a], gt[a]);
-          la.add_block(sdofs, ns, block);
+          pair.products(nt, ct, gt, ns, cs, gs, block);
           total.merge(pair);
         }
+        la.add_block(sdofs, ns, block);
       });
       if (exact) {  // target mass over the overlap, from the summed moments
-        for (int a = 0; a < nt; ++a)
-          for (int b = 0; b < nt; ++b) la.m[a * nt + b] = total.product(ct[a], gt[a], ct[b], gt[b]);
+        total.products(nt, ct, gt, nt, ct, gt, la.m.data());
         la.overlap = total.m0;
       }
       result.measure[t] = tg.measure;
