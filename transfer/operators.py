@@ -33,7 +33,8 @@ from .spaces import FunctionSpace
 
 METHODS = ("l2", "pseudo_l2")
 
-#: a target dof counts as covered when this fraction of its support overlaps the source
+#: a target dof counts as covered when the integral of its basis function over the
+#: overlap exceeds this fraction of its integral
 COVERED_RTOL = 1e-10
 
 _KIND = {"tetra": _kernels.TET, "hexahedron": _kernels.HEX, "triangle": _kernels.TRI, "quad": _kernels.QUAD}
@@ -159,13 +160,15 @@ class Transfer:
         self.source, self.target, self.method = source, target, method
         self.B, self.D = coupling.B, coupling.D
         self.coupling = coupling
-        cells = target.cell_dofs
-        support = np.bincount(cells.ravel(), np.repeat(coupling.measure, cells.shape[1]), target.num_dofs)
-        covered_measure = np.bincount(cells.ravel(), np.repeat(coupling.overlap, cells.shape[1]),
-                                      target.num_dofs)
-        #: fraction of each target dof's support covered by the source
-        self.coverage = np.divide(covered_measure, support, out=np.zeros_like(support), where=support > 0)
-        self.covered = (self.coverage > COVERED_RTOL) & (self.D.diagonal() > 0)
+        cells, nb = target.cell_dofs, target.basis_per_cell
+        per_dof = lambda per_cell: np.bincount(cells.ravel(), np.repeat(per_cell, nb), target.num_dofs)
+        measure, overlap = per_dof(coupling.measure), per_dof(coupling.overlap)
+        #: fraction of the support of each target dof that the source covers
+        self.coverage = np.divide(overlap, measure, out=np.zeros_like(measure), where=measure > 0)
+        # A dof is covered when its basis function has weight over the overlap
+        # (int_overlap phi_j, the row sum of D, against about int phi_j).
+        weight = np.asarray(self.D.sum(axis=1)).ravel() / np.maximum(measure / nb, np.finfo(float).tiny)
+        self.covered = (weight > COVERED_RTOL) & (self.D.diagonal() > 0)
         self._index = np.flatnonzero(self.covered)
         Dc = self.D[self._index][:, self._index]
         self._solve = _DiagonalSolve(Dc.diagonal()) if method == "pseudo_l2" else _MassSolve(Dc)
@@ -259,9 +262,11 @@ class _MassSolve:
         z = r * d
         p = z.copy()
         rz = np.sum(r * z, axis=0)
-        target = self.rtol * np.sqrt(np.sum(b * b, axis=0)) + np.finfo(float).tiny
+        # Stop on the Jacobi-scaled residual: the unscaled one would accept large
+        # errors at dofs whose mass over the overlap is small.
+        target = self.rtol * np.sqrt(np.sum(b * b * d, axis=0)) + np.finfo(float).tiny
         for it in range(self.maxiter):
-            if np.all(np.sqrt(np.sum(r * r, axis=0)) <= 4 * target):
+            if np.all(np.sqrt(np.abs(rz)) <= 4 * target):
                 self.iterations = it
                 return x
             q = self.D @ p

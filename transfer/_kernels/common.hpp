@@ -81,6 +81,19 @@ struct CSR {
 // (duplicates added, columns sorted within each row).
 CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int nthreads = 1);
 
+// How a target element enters D (paper eqs. 3-4):
+// - covered entirely by the source (relative tolerance kFullCoverage on the
+//   measures): its mass matrix as integrated, or with the dual basis of eq. 4;
+// - cut by the edge of the overlap: the dual basis is not biorthogonal there,
+//   so the standard basis is used. On a small piece of an element the basis
+//   functions are nearly linearly dependent and the consistent mass over the
+//   overlap nearly singular (their values at the vertices are not determined
+//   by the data): where the Jacobi-scaled local mass has a Cholesky pivot below
+//   kMinPivot it is lumped, which keeps D positive definite and the integral
+//   over the overlap exact.
+constexpr double kFullCoverage = 1e-10;
+constexpr double kMinPivot = 1e-6;
+
 // Local accumulation for one target element with `nt` basis functions.
 // B_loc[s][a] = integral of (source basis of source dof s) * (target basis a);
 // M_loc[a][b] = integral over the overlap of target basis a * target basis b.
@@ -159,6 +172,31 @@ struct LocalAssembly {
     }
     return true;
   }
+  // Emit the element of measure `measure` by the policy above.
+  void finish(const int64_t* tdofs, double measure, bool dual, bool lump, Triplets& B, Triplets& D) const {
+    const bool full = overlap >= (1.0 - kFullCoverage) * measure;
+    emit(tdofs, dual && full, lump || (!full && !well_conditioned()), B, D);
+  }
+
+  // Smallest squared Cholesky pivot of the Jacobi-scaled local mass > kMinPivot.
+  bool well_conditioned() const {
+    double l[8][8];
+    for (int i = 0; i < nt; ++i)
+      if (!(m[i * nt + i] > 0.0)) return false;
+    for (int i = 0; i < nt; ++i)
+      for (int j = 0; j <= i; ++j) {
+        double v = m[i * nt + j] / std::sqrt(m[i * nt + i] * m[j * nt + j]);
+        for (int k = 0; k < j; ++k) v -= l[i][k] * l[j][k];
+        if (i == j) {
+          if (!(v > kMinPivot)) return false;
+          l[i][i] = std::sqrt(v);
+        } else {
+          l[i][j] = v / l[j][j];
+        }
+      }
+    return true;
+  }
+
   // Emit the local rows into global triplets. `tdofs` are the target element's
   // dofs; with `use_dual` the rows are those of the dual basis (paper eq. 4),
   // psi_a = sum_c A[a][c] phi_c with A = diag(M 1) M^{-1} from the element's
@@ -246,10 +284,6 @@ struct GridInfo {
   std::array<int64_t, 3> shape{};
 };
 
-// A target element uses the dual basis only when the source covers all of it
-// (relative tolerance on the measures); cut elements fall back to the standard
-// basis with a lumped mass, which keeps D diagonal and positive.
-constexpr double kFullCoverage = 1e-10;
 
 // Volume-volume (TET, HEX, BOX) by exact polyhedron clipping.
 // `rule` is a rule on the reference tetrahedron (4 barycentric coordinates).

@@ -436,7 +436,6 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
       const double nlen = norm(nraw);
       if (!(h > 0.0) || !(nlen > kGeomTol * h * h)) {
         // Degenerate target element: no measure, nothing couples.
-        la.emit(tdofs, false, lump, Bt, Dt);
         continue;
       }
       const Vec3 n_t = scale(nraw, 1.0 / nlen);
@@ -476,7 +475,6 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
       const double measure = 0.5 * tarea2;
       result.measure[t] = measure;
       if (!(measure > area_tol) || !te.init()) {
-        la.emit(tdofs, false, lump, Bt, Dt);
         continue;
       }
       P2 tmin{1e300, 1e300}, tmax{-1e300, -1e300};
@@ -587,8 +585,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
 
       // 7. Emit; the dual basis (eq. 4) only on fully covered elements.
       result.overlap[t] = la.overlap;
-      const bool full = la.overlap >= (1.0 - kFullCoverage) * measure;
-      la.emit(tdofs, dual && full, lump, Bt, Dt);
+      la.finish(tdofs, measure, dual, lump, Bt, Dt);
     }
   }
 

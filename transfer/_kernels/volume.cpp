@@ -526,8 +526,7 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
       }
       result.measure[t] = tg.measure;
       result.overlap[t] = la.overlap;
-      const bool full = la.overlap >= (1.0 - kFullCoverage) * tg.measure;
-      la.emit(tdofs, dual && full, lump, Bparts[tid], Dparts[tid]);
+      la.finish(tdofs, tg.measure, dual, lump, Bparts[tid], Dparts[tid]);
     }
   }
   result.pairs_tested = tested;

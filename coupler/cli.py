@@ -1,0 +1,171 @@
+"""The ``varcouple`` command line.
+
+    varcouple transfer SRC DST --field NAME -o OUT [--method l2|pseudo_l2]
+    varcouple run CASE [--output DIR]
+
+``main(argv)`` returns the exit code: 0 on success, 2 on a usage or input error
+(bad option, missing file or field, invalid scene, meshes that do not overlap),
+which is printed as one line ``varcouple: error: <message>`` on stderr, without
+a traceback. Anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+PROG = "varcouple"
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        ours = version("varcouple")
+    except PackageNotFoundError:
+        ours = "unknown"
+    py = ".".join(map(str, sys.version_info[:3]))
+    return f"{PROG} {ours} [Python {py}]"
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+# -- varcouple transfer ----------------------------------------------------------
+def _transfer_args(parser: argparse.ArgumentParser) -> None:
+    from transfer.operators import METHODS
+
+    parser.add_argument("source", metavar="SRC", help="source mesh file carrying the field (any format meshio reads)")
+    parser.add_argument("target", metavar="DST", help="target mesh file (any format meshio reads)")
+    parser.add_argument("--field", "-f", required=True, metavar="NAME",
+                        help="field of SRC to transfer: point data (-> P1/Q1) or cell data (-> P0/Q0)")
+    parser.add_argument("--output", "-o", required=True, metavar="OUT",
+                        help="output mesh file (DST's mesh with the field and 'covered'; format by extension)")
+    parser.add_argument("--method", "-m", choices=METHODS, default="l2",
+                        help="l2: full target mass matrix; pseudo_l2: dual basis, diagonal mass (default: l2)")
+    parser.add_argument("--quadrature-degree", "-q", type=_positive_int, default=None, metavar="N",
+                        help="quadrature degree on the intersections (default: exact for the bases)")
+    parser.add_argument("--threads", "-t", type=_positive_int, default=1, metavar="N",
+                        help="threads of the assembly kernel (default: 1)")
+
+
+def transfer(args: argparse.Namespace) -> int:
+    """Transfer one field from SRC to DST and write DST with it to OUT."""
+    import numpy as np
+
+    from .errors import CouplerError
+    from .meshfile import MeshFile, check_writable
+    from .projection import project
+
+    check_writable(args.output)
+    source = MeshFile.read(args.source)
+    target = MeshFile.read(args.target)
+    field = source.field(args.field)
+    if field.kind == "point" and args.field in source.raw.cell_data:
+        print(f"note: {args.field!r} is both point and cell data in {source.path}; using the point data")
+    if args.field == "covered":
+        raise CouplerError(f"{source.path}: field name 'covered' is reserved for the coverage mask of the "
+                           f"output; rename the field")
+    src_space, dst_space = source.space(field.kind), target.space(field.kind)
+    print(f"source  {source.path}: {source.describe()}; {field.describe()} -> {src_space.family}")
+    print(f"target  {target.path}: {target.describe()} -> {dst_space.family}")
+    p = project(field, src_space, dst_space, args.method, quadrature_degree=args.quadrature_degree,
+                threads=args.threads)
+    stats = p.operator.stats
+    quadrature = stats.get("quadrature_degree")
+    quadrature = "exact moments" if quadrature == "exact" else f"degree {quadrature}"
+    print(f"method  {args.method} (quadrature: {quadrature}; {args.threads} thread{'s' * (args.threads > 1)})")
+    print(f"assembly {p.assembly_seconds:.3f} s (intersection kernel {p.kernel_seconds:.3f} s; "
+          f"{stats.get('pairs_intersected', '?')} of {stats.get('pairs_tested', '?')} cell pairs intersect); "
+          f"apply {1e3 * p.apply_seconds:.1f} ms")
+    print(f"covered {100 * p.covered_fraction:.2f}% of {dst_space.num_dofs} target dofs "
+          f"({p.uncovered} uncovered, NaN in the output)")
+    print(f"conservation error {p.conservation_error:.2e} (relative difference of the integrals over the overlap)")
+    target.write(args.output, {field.name: (field.kind, p.values),
+                               "covered": (field.kind, p.covered.astype(np.uint8))})
+    print(f"wrote   {args.output}: {field.kind} data {field.name!r}, 'covered'")
+    return 0
+
+
+# -- varcouple run ---------------------------------------------------------------
+def _run_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("case", metavar="CASE", help="case directory holding scene.toml (or the scene file)")
+    parser.add_argument("--output", "-o", metavar="DIR", default=None,
+                        help="output directory (default: [output] directory of the scene, in the case)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Validate the scene of CASE, run it and write its outputs."""
+    from . import scene as scenes
+    from .transfer_case import run as run_transfer
+
+    start = time.perf_counter()
+    scene = scenes.load(args.case, output=args.output)
+
+    def log(line):
+        print(line, flush=True)
+
+    run_transfer(scene, log=log)
+    log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}")
+    return 0
+
+
+# -- main ----------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Partitioned multiphysics coupling through L2 / pseudo-L2 projections "
+                    "between non-matching meshes.",
+        formatter_class=argparse.RawTextHelpFormatter,
+    )
+    parser.add_argument("--version", "-v", action="version", version=_version(),
+                        help="display version information")
+    sub = parser.add_subparsers(title="subcommands", dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("transfer", help="transfer a field between two mesh files",
+                       description=transfer.__doc__)
+    _transfer_args(p)
+    p.set_defaults(func=transfer)
+
+    p = sub.add_parser("run", help="run a case (cases/NAME with its scene.toml)", description=run.__doc__)
+    _run_args(p)
+    p.set_defaults(func=run)
+    return parser
+
+
+def error(message: str) -> None:
+    print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error argparse has printed
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+
+    from transfer import TransferError
+
+    from .errors import CouplerError
+
+    try:
+        return args.func(args)
+    except (CouplerError, TransferError) as exc:
+        sys.stdout.flush()
+        error(str(exc))
+        return 2
+    except KeyboardInterrupt:
+        error("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,183 @@
+"""``varcouple run`` on a ``[transfer]`` scene: carry a field from a source mesh
+file to a target mesh file with each method, and write the results.
+
+Written to the output directory (and nowhere else; other files there are left
+alone): ``source.vtu``, ``target_<method>.vtu`` (the field, ``covered`` and,
+with ``exact``, ``error`` = transferred - exact at the target dofs),
+``transfer.png`` and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from transfer import TransferError
+
+from . import scene as scenes
+from .errors import CouplerError
+from .meshfile import MeshFile, family, one_line
+from .plots import transfer_figure
+from .projection import project
+
+SUMMARY = "summary.json"
+FIGURE = "transfer.png"
+
+#: warn when `exact` differs from the source field at the source dofs by more than this (relative)
+EXACT_MISMATCH_RTOL = 1e-6
+
+
+def _finite(x):
+    """A JSON-safe number: None for NaN/inf."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _mesh_summary(mf: MeshFile, kind: str) -> dict:
+    space = mf.space(kind)
+    return {"file": str(mf.path), "cell_type": mf.mesh.cell_type, "cells": mf.mesh.num_cells,
+            "points": mf.mesh.num_points, "space": space.family, "dofs": space.num_dofs}
+
+
+def _read(scene: scenes.TransferScene, key: str) -> MeshFile:
+    try:
+        return MeshFile.read(getattr(scene, key))
+    except (CouplerError, TransferError) as exc:
+        raise scene.error("transfer", key, str(exc)) from None
+
+
+def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict:
+    """Run the transfers of `scene`, write the outputs, return the summary."""
+    log(f"scene {scene.path}")
+    source = _read(scene, "source")
+    target = _read(scene, "target")
+    try:
+        field = source.field(scene.field)
+    except CouplerError as exc:
+        raise scene.error("transfer", "field", str(exc)) from None
+    kind = field.kind
+    try:
+        src_space, dst_space = source.space(kind), target.space(kind)
+    except TransferError as exc:
+        raise scene.error("transfer", "target", str(exc)) from None
+    log(f"source {source.path}: {source.describe()}; {field.describe()} -> {src_space.family}")
+    log(f"target {target.path}: {target.describe()} -> {dst_space.family}")
+
+    exact_fn = None
+    exact_info = None
+    if scene.exact is not None:
+        if field.values.ndim != 1:
+            raise scene.error("transfer", "exact", f"is a scalar expression but field {field.name!r} has "
+                                                   f"shape {field.values.shape[1:]} per {kind}")
+
+        def exact_fn(points):
+            return scenes.evaluate_expression(scene.exact, points)
+
+        try:
+            at_source = exact_fn(src_space.dof_coordinates)
+        except Exception as exc:  # noqa: BLE001 - e.g. sin(x, y): TypeError from numpy
+            raise scene.error("transfer", "exact", f"cannot evaluate {scene.exact!r}: {one_line(exc)}") from None
+        if not np.all(np.isfinite(at_source)):
+            raise scene.error("transfer", "exact", f"{scene.exact!r} is not finite at every source "
+                                                   f"{kind} (e.g. log or sqrt of a negative number)")
+        mismatch = float(np.max(np.abs(at_source - field.values)))
+        scale = max(float(np.max(np.abs(field.values))), np.finfo(float).tiny)
+        exact_info = {"expression": scene.exact, "source_max_difference": mismatch}
+        if kind == "point" and mismatch > EXACT_MISMATCH_RTOL * scale:
+            log(f"warning: exact differs from {field.name!r} at the source points by up to {mismatch:.3g}: "
+                f"the errors below are against exact, not against the source field")
+
+    results = []
+    for method in scene.methods:
+        p = project(field, src_space, dst_space, method, quadrature_degree=scene.quadrature_degree,
+                    threads=scene.threads)
+        entry = {"method": method, "values": p.values, "assembly_seconds": p.assembly_seconds,
+                 "kernel_seconds": p.kernel_seconds, "apply_seconds": p.apply_seconds,
+                 "covered_fraction": p.covered_fraction, "uncovered_dofs": p.uncovered,
+                 "conservation_error": p.conservation_error, "covered": p.covered,
+                 "quadrature": p.operator.stats.get("quadrature_degree")}
+        line = (f"[{method}] assembled in {p.assembly_seconds:.3f} s, applied in {1e3 * p.apply_seconds:.1f} ms; "
+                f"covered {100 * p.covered_fraction:.2f}% ({p.uncovered} uncovered); "
+                f"conservation error {p.conservation_error:.2e}")
+        if exact_fn is not None:
+            error = p.values - exact_fn(dst_space.dof_coordinates)
+            entry["error"] = error
+            covered_error = error[p.covered]
+            entry["max_error"] = float(np.max(np.abs(covered_error))) if covered_error.size else float("nan")
+            mass = dst_space.mass_matrix()[p.covered][:, p.covered]
+            exact_cov = (p.values - error)[p.covered]
+            norm = math.sqrt(max(float(exact_cov @ (mass @ exact_cov)), 0.0))
+            err_norm = math.sqrt(max(float(covered_error @ (mass @ covered_error)), 0.0))
+            entry["relative_l2_error"] = err_norm / norm if norm > 0 else float("nan")
+            line += f"; max error vs exact {entry['max_error']:.3e}"
+        log(line)
+        results.append(entry)
+
+    out = scene.output_dir
+    names = ["source.vtu", *(f"target_{r['method']}.vtu" for r in results), FIGURE, SUMMARY]
+    inputs = {Path(source.path).resolve(), Path(target.path).resolve(), scene.path.resolve()}
+    clash = [n for n in names if (out / n).resolve() in inputs]
+    if clash:
+        raise CouplerError(f"{out}: writing {clash[0]} there would overwrite an input of the scene; "
+                           f"choose another output directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CouplerError(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
+    written = []
+
+    def wrote(name):
+        written.append(name)
+        log(f"wrote {out / name}")
+
+    source.write(out / "source.vtu", {field.name: (kind, field.values)})
+    wrote("source.vtu")
+    for r in results:
+        name = f"target_{r['method']}.vtu"
+        data = {field.name: (kind, r["values"]), "covered": (kind, r["covered"].astype(np.uint8))}
+        if "error" in r:
+            data["error"] = (kind, r["error"])
+        target.write(out / name, data)
+        wrote(name)
+
+    try:
+        slice_z = transfer_figure(out / FIGURE, field=field.name, source=src_space,
+                                  source_values=field.values,
+                                  target=dst_space, results=results, exact=exact_fn, slice_z=scene.slice_z,
+                                  title=f"{scene.case_dir.resolve().name}: {Path(source.path).name} -> "
+                                        f"{Path(target.path).name}")
+    except OSError as exc:
+        raise CouplerError(f"{out / FIGURE}: cannot write: {exc.strerror or exc}") from None
+    wrote(FIGURE)
+
+    summary = {
+        "scene": str(scene.path),
+        "field": {"name": field.name, "kind": kind, "shape": list(field.values.shape[1:]),
+                  "source_space": family(source.mesh, kind), "target_space": family(target.mesh, kind)},
+        "source": _mesh_summary(source, kind),
+        "target": _mesh_summary(target, kind),
+        "methods": {
+            r["method"]: {k: (_finite(r[k]) if isinstance(r[k], float) else r[k])
+                          for k in ("assembly_seconds", "kernel_seconds", "apply_seconds", "covered_fraction",
+                                    "uncovered_dofs", "conservation_error", "max_error", "relative_l2_error",
+                                    "quadrature")
+                          if k in r} | {"output": f"target_{r['method']}.vtu"}
+            for r in results},
+        "exact": exact_info,
+        "threads": scene.threads,
+        "plot": {"file": FIGURE, "slice_z": slice_z},
+        "platform": {"python": platform.python_version(), "machine": platform.machine()},
+    }
+    written.append(SUMMARY)
+    summary["outputs"] = written
+    try:
+        (out / SUMMARY).write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    except OSError as exc:
+        raise CouplerError(f"{out / SUMMARY}: cannot write: {exc.strerror or exc}") from None
+    log(f"wrote {out / SUMMARY}")
+    return summary
