@@ -3,7 +3,9 @@
 Degree-0 spaces have one dof per cell (the cell index); degree-1 spaces one dof
 per mesh vertex (the vertex index), with the VTK vertex order as local order.
 Element mass matrices and the global mass matrix live here too: they are the
-``D`` of paper eq. 3 when the source covers the whole target.
+``D`` of paper eq. 3 when the source covers the whole target (for hexahedra
+with planar faces: the kernels integrate a warped hexahedron over its six
+tetrahedra, :data:`transfer.mesh.HEX_TETS`).
 """
 
 from __future__ import annotations

@@ -69,10 +69,13 @@ struct ElementGeometry {
   double measure = 0.0;
   int kind = TET;
 
-  void build(const ElementSet& e, int64_t c, bool with_measure = true) {
+  // Coordinates relative to `origin` (a vertex of the target element): the
+  // differences are exact for nearby points, so clipping and integration keep
+  // their accuracy for meshes far from 0.
+  void build(const ElementSet& e, int64_t c, const Vec3& origin, bool with_measure = true) {
     box = BBox{};
     for (int k = 0; k < e.nverts; ++k) {
-      verts[k] = e.vertex(c, k);
+      verts[k] = sub(e.vertex(c, k), origin);
       box.grow(verts[k]);
     }
     if (e.kind == TET) {
@@ -112,21 +115,20 @@ struct ElementGeometry {
   }
 };
 
-// Integrals of 1, x and x x^T over a union of tets, in coordinates relative to
-// an origin near the element (no cancellation for meshes far from 0). Products
-// of two affine functions are integrated exactly from them.
+// Integrals of 1, x and x x^T over a union of tets (coordinates relative to the
+// target element). Products of two affine functions are integrated exactly from
+// them; for badly shaped elements (large basis gradients) the expansion cancels,
+// and the kernel integrates by quadrature instead (see kSliverShape).
 struct Moments {
   double m0 = 0.0;
   Vec3 m1{0, 0, 0};
   double m2[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
 
-  void add_tet(const Tet& t, const Vec3& origin, double vol) {
+  void add_tet(const Tet& t, double vol) {
     // int_K x_i x_j = |K|/20 (sum_k v_k,i v_k,j + s_i s_j), s = sum_k v_k
-    Vec3 v[4], s{0, 0, 0};
-    for (int k = 0; k < 4; ++k) {
-      v[k] = sub(t.v[k], origin);
-      s = add(s, v[k]);
-    }
+    const Vec3* v = t.v;
+    Vec3 s{0, 0, 0};
+    for (int k = 0; k < 4; ++k) s = add(s, v[k]);
     m0 += vol;
     m1 = add(m1, scale(s, vol / 4.0));
     const double c = vol / 20.0;
@@ -165,6 +167,28 @@ struct Moments {
 
 bool is_affine(const ElementSet& e) { return e.degree == 0 || e.kind == TET; }
 
+// Above this size of h * |grad phi| (about 2 to 5 on shapely tets) moments lose
+// digits to cancellation; such pairs are integrated with kDegree2.
+constexpr double kSliverShape = 100.0;
+
+// The 4-point rule exact for degree 2 on a tetrahedron.
+const SimplexRule kDegree2 = [] {
+  SimplexRule r;
+  r.npts = 4;
+  r.nbary = 4;
+  const double a = 0.1381966011250105, b = 1.0 - 3.0 * a;
+  for (int q = 0; q < 4; ++q)
+    for (int k = 0; k < 4; ++k) r.bary.push_back(k == q ? b : a);
+  r.weights.assign(4, 0.25);
+  return r;
+}();
+
+double shape(const Vec3* g, int n, double h) {
+  double gmax = 0.0;
+  for (int a = 0; a < n; ++a) gmax = std::max(gmax, norm(g[a]));
+  return gmax * h;
+}
+
 // Basis functions of one element evaluated at physical points.
 struct Evaluator {
   int kind = TET, degree = 1;
@@ -196,14 +220,14 @@ struct Evaluator {
     }
   }
 
-  // Affine basis phi_a(x) = c[a] + g[a].(x - origin) (degree 0 or tetrahedra).
-  void affine(const Vec3& origin, double* c, Vec3* g) const {
+  // Affine basis phi_a(x) = c[a] + g[a].x (degree 0 or tetrahedra).
+  void affine(double* c, Vec3* g) const {
     if (degree == 0) {
       c[0] = 1.0;
       g[0] = {0, 0, 0};
       return;
     }
-    const Vec3 r = sub(origin, v0);
+    const Vec3 r = scale(v0, -1.0);
     c[0] = 1.0;
     g[0] = {0, 0, 0};
     for (int i = 0; i < 3; ++i) {
@@ -465,29 +489,31 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
 
 #pragma omp for schedule(dynamic, 64)
     for (int64_t t = 0; t < tgt.ncells; ++t) {
-      tg.build(tgt, t);
+      const Vec3 origin = tgt.vertex(t, 0);
+      tg.build(tgt, t, origin);
       tev.build(tgt, tg);
       tgt.dofs(t, tdofs);
       la.reset(nt, &slot);
       total = Moments{};
-      const Vec3 origin = tg.verts[0];
-      if (exact) tev.affine(origin, ct, gt);
       const double h = tg.box.diagonal();
       const double vmin = 1e-15 * tg.measure;
-      search.for_each(tg.box, 1e-10 * h, stamp, t, [&](int64_t s) {
+      if (exact) tev.affine(ct, gt);
+      const bool moments_t = exact && shape(gt, nt, h) <= kSliverShape;
+      const BBox search_box{add(tg.box.lo, origin), add(tg.box.hi, origin)};
+      search.for_each(search_box, 1e-10 * h, stamp, t, [&](int64_t s) {
         ++tested;
-        sg.build(src, s, false);
+        sg.build(src, s, origin, false);
         // Clip the tets of the element with fewer of them by the convex pieces
         // of the other (fewest tet-piece pairs).
         const bool clip_source = sg.ntets * tg.convex_count() <= tg.ntets * sg.convex_count();
         const ElementGeometry& subj = clip_source ? sg : tg;
         ElementGeometry& clipper = clip_source ? tg : sg;
         clipper.build_planes();
-        const double eps = 1e-12 * std::min(h, sg.box.diagonal()) +
-                           4 * DBL_EPSILON * std::max(norm(tg.box.hi), norm(tg.box.lo));
+        const double eps = 1e-12 * std::min(h, sg.box.diagonal()) + 4 * DBL_EPSILON * h;
         buf.pieces.clear();
         for (int c = 0; c < clipper.nconvex; ++c) clip_convex(subj.tets, subj.ntets, clipper.convex[c], eps, buf);
-        bool any = false;
+        bool any = false, moments = false;
+        const SimplexRule* q_rule = &rule;
         pair = Moments{};
         for (const Tet& piece : buf.pieces) {
           const double vol = tet_volume(piece);
@@ -496,33 +522,39 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
             sev.build(src, sg);
             src.dofs(s, sdofs);
             std::fill(block, block + ns * nt, 0.0);
+            if (exact) {
+              sev.affine(cs, gs);
+              moments = moments_t && shape(gs, ns, sg.box.diagonal()) <= kSliverShape;
+              if (!moments) q_rule = &kDegree2;
+            }
             any = true;
           }
-          if (exact) {
-            pair.add_tet(piece, origin, vol);
+          if (moments) {
+            pair.add_tet(piece, vol);
             continue;
           }
-          for (int q = 0; q < rule.npts; ++q) {
-            const double* l = &rule.bary[4 * q];
+          for (int q = 0; q < q_rule->npts; ++q) {
+            const double* l = &q_rule->bary[4 * q];
             Vec3 x{0, 0, 0};
             for (int k = 0; k < 4; ++k) x = add(x, scale(piece.v[k], l[k]));
             tev.eval(x, phi_t);
             sev.eval(x, phi_s);
-            la.add_point(rule.weights[q] * vol, phi_t, phi_s, ns, block);
+            la.add_point(q_rule->weights[q] * vol, phi_t, phi_s, ns, block);
           }
         }
         if (!any) return;
         ++intersected;
-        if (exact) {  // B block from the moments of the intersection
-          sev.affine(origin, cs, gs);
+        if (moments) {  // B block from the moments of the intersection
           pair.products(nt, ct, gt, ns, cs, gs, block);
           total.merge(pair);
         }
         la.add_block(sdofs, ns, block);
       });
-      if (exact) {  // target mass over the overlap, from the summed moments
-        total.products(nt, ct, gt, nt, ct, gt, la.m.data());
-        la.overlap = total.m0;
+      if (total.m0 > 0.0) {  // target mass over the overlap, from the summed moments
+        double mass[64];
+        total.products(nt, ct, gt, nt, ct, gt, mass);
+        for (int k = 0; k < nt * nt; ++k) la.m[k] += mass[k];
+        la.overlap += total.m0;
       }
       result.measure[t] = tg.measure;
       result.overlap[t] = la.overlap;

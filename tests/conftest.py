@@ -1,0 +1,59 @@
+"""Shared fixtures of the transfer tests: small non-matching meshes of the unit cube.
+
+Meshes are session-scoped (they are immutable) and small, so that the whole
+volume suite runs in seconds. Jittered boxes keep their boundary vertices on the
+box faces, so two jittered meshes of the same box cover exactly the same domain.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from transfer import FunctionSpace, StructuredGrid
+from transfer.generate import box_hexahedra, box_tetrahedra
+
+from vc_helpers import SHIFT
+
+
+@pytest.fixture(params=["l2", "pseudo_l2"])
+def method(request):
+    return request.param
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def src_tets():
+    """Source: 5x5x5 lattice, 750 tets, jittered."""
+    return box_tetrahedra((5, 5, 5), jitter=0.2, seed=1, name="src")
+
+
+@pytest.fixture(scope="session")
+def dst_tets():
+    """Target: a different, anisotropic resolution and seed; 432 tets."""
+    return box_tetrahedra((4, 6, 3), jitter=0.2, seed=2, name="dst")
+
+
+@pytest.fixture(scope="session")
+def shifted_tets():
+    """Target box [0,1]^3 + SHIFT: overlaps the unit cube only partly."""
+    return box_tetrahedra((4, 4, 4), lower=SHIFT, upper=1.0 + SHIFT, jitter=0.2, seed=3, name="shifted")
+
+
+@pytest.fixture(scope="session")
+def src_hexes():
+    return box_hexahedra((3, 4, 3), jitter=0.2, seed=4, name="hexes")
+
+
+@pytest.fixture(scope="session")
+def grid():
+    return StructuredGrid.from_bounds((0, 0, 0), (1, 1, 1), (3, 4, 5), name="grid")
+
+
+@pytest.fixture(scope="session")
+def spaces(src_tets, dst_tets):
+    return FunctionSpace(src_tets, "P1"), FunctionSpace(dst_tets, "P1")
