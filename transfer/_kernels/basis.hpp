@@ -82,28 +82,4 @@ inline Vec3 invert_hex(const Vec3* v, const Vec3& x) {
   return {xi[0], xi[1], xi[2]};
 }
 
-// Reference coordinates of a 2D point in a bilinear quadrilateral (Newton).
-inline void invert_quad(const double (*v)[2], const double* x, double* xi) {
-  xi[0] = 0.5;
-  xi[1] = 0.5;
-  for (int it = 0; it < 30; ++it) {
-    double phi[4], dx[4], dy[4];
-    q1_quad(xi[0], xi[1], phi);
-    q1_quad_grad(xi[0], xi[1], dx, dy);
-    double r0 = -x[0], r1 = -x[1], J00 = 0, J01 = 0, J10 = 0, J11 = 0;
-    for (int k = 0; k < 4; ++k) {
-      r0 += phi[k] * v[k][0];
-      r1 += phi[k] * v[k][1];
-      J00 += v[k][0] * dx[k]; J01 += v[k][0] * dy[k];
-      J10 += v[k][1] * dx[k]; J11 += v[k][1] * dy[k];
-    }
-    const double det = J00 * J11 - J01 * J10;
-    if (det == 0.0) break;
-    const double d0 = (J11 * r0 - J01 * r1) / det, d1 = (-J10 * r0 + J00 * r1) / det;
-    xi[0] -= d0;
-    xi[1] -= d1;
-    if (std::max(std::fabs(d0), std::fabs(d1)) < 1e-15) break;
-  }
-}
-
 }  // namespace vc

@@ -250,6 +250,12 @@ struct AssemblyResult {
   std::vector<double> measure;   // per target element: its own measure
   int64_t pairs_tested = 0;
   int64_t pairs_intersected = 0;
+
+  // Merge the per-thread triplets into B and D.
+  void collect(const std::vector<Triplets>& b, const std::vector<Triplets>& d, int64_t n_tgt_dofs, int nthreads) {
+    B = to_csr(b, n_tgt_dofs, nthreads);
+    D = to_csr(d, n_tgt_dofs, nthreads);
+  }
 };
 
 enum Kind : int { TET = 0, HEX = 1, BOX = 2, TRI = 3, QUAD = 4 };

@@ -591,8 +591,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
 
   result.pairs_tested = tested;
   result.pairs_intersected = intersected;
-  result.B = to_csr(Bparts, n_tgt_dofs, nth);
-  result.D = to_csr(Dparts, n_tgt_dofs, nth);
+  result.collect(Bparts, Dparts, n_tgt_dofs, nth);
   return result;
 }
 
