@@ -1,6 +1,7 @@
 """The ``varcouple`` command line.
 
     varcouple transfer SRC DST --field NAME -o OUT [--method l2|pseudo_l2]
+    varcouple check CASE
     varcouple run CASE [--output DIR]
 
 ``main(argv)`` returns the exit code: 0 on success, 2 on a usage or input error
@@ -95,6 +96,27 @@ def transfer(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- varcouple check -------------------------------------------------------------
+def check(args: argparse.Namespace) -> int:
+    """Validate the scene of CASE and print its plan: effects, participants to
+    start, fields that cross, transfer operators to build. Runs nothing."""
+    from . import scene as scenes
+
+    scene = scenes.load(args.case)
+    print(f"scene         {scene.path}: valid")
+    if isinstance(scene, scenes.TransferScene):
+        print(f"transfer      {scene.source.name} -> {scene.target.name}: field {scene.field!r}, "
+              f"methods {', '.join(scene.methods)}")
+        print("participants  none (a transfer runs in the coupler, no solver is started)")
+    else:
+        from .plan import make_plan
+
+        for line in make_plan(scene).lines():
+            print(line)
+    print(f"output        {scene.output_dir}")
+    return 0
+
+
 # -- varcouple run ---------------------------------------------------------------
 def _run_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("case", metavar="CASE", help="case directory holding scene.toml (or the scene file)")
@@ -134,6 +156,10 @@ def build_parser() -> argparse.ArgumentParser:
                        description=transfer.__doc__)
     _transfer_args(p)
     p.set_defaults(func=transfer)
+
+    p = sub.add_parser("check", help="validate a case's scene and print its plan", description=check.__doc__)
+    p.add_argument("case", metavar="CASE", help="case directory holding scene.toml (or the scene file)")
+    p.set_defaults(func=check)
 
     p = sub.add_parser("run", help="run a case (cases/NAME with its scene.toml)", description=run.__doc__)
     _run_args(p)

@@ -1,8 +1,9 @@
 """Scene files: ``cases/NAME/scene.toml`` read with tomllib and validated.
 
-For now a scene holds one ``[transfer]`` table (carry a field from a source
-mesh file to a target mesh file with one or more methods) and an ``[output]``
-table; cases/README.md documents every key. Every error names the scene file,
+A scene is either a transfer (a ``[transfer]`` table: carry a field from a
+source mesh file to a target mesh file with one or more methods, and an
+``[output]`` table) or a coupled case (a ``[physics]`` table, see
+:mod:`coupler.coupled_scene`); cases/README.md documents every key. Every error names the scene file,
 the table and key, and the reason::
 
     cases/x/scene.toml: [transfer] source: file 'a.vtu' not found
@@ -123,8 +124,9 @@ def evaluate_expression(text: str, points: np.ndarray) -> np.ndarray:
     return np.broadcast_to(np.asarray(value, dtype=np.float64), x.shape).copy()
 
 
-def load(case, output: str | Path | None = None) -> TransferScene:
-    """Read and validate the scene of `case` (a case directory or its scene.toml).
+def load(case, output: str | Path | None = None):
+    """Read and validate the scene of `case` (a case directory or its scene.toml):
+    a :class:`TransferScene` or a :class:`coupler.coupled_scene.CoupledScene`.
     `output` overrides ``[output] directory`` (relative to the working directory)."""
     path, case_dir = _scene_path(case)
     try:
@@ -134,14 +136,22 @@ def load(case, output: str | Path | None = None) -> TransferScene:
         raise SceneError(f"{path}: invalid TOML: {exc}") from None
     except OSError as exc:
         raise SceneError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if "physics" in data:
+        from .coupled_scene import parse
 
+        return parse(path, case_dir, data, output)
+    return _load_transfer(path, case_dir, data, output)
+
+
+def _load_transfer(path: Path, case_dir: Path, data: dict, output) -> TransferScene:
     for table, value in data.items():
         if table not in KEYS and not isinstance(value, dict):
             raise SceneError(f"{path}: {table}: unknown key; a scene holds the tables "
                              f"{', '.join(f'[{t}]' for t in KEYS)}")
         if table not in KEYS:
             raise SceneError(f"{path}: unknown table [{table}]; known tables: "
-                             f"{', '.join(f'[{t}]' for t in KEYS)}")
+                             f"{', '.join(f'[{t}]' for t in KEYS)} (a transfer scene) or [physics] "
+                             f"and the tables of a coupled scene")
         if not isinstance(value, dict):
             raise SceneError(f"{path}: [{table}] must be a table, got {value!r}")
         for key in value:

@@ -1,0 +1,378 @@
+"""Scenes of coupled cases: geometry, materials, loads, effects, solvers, coupling, outputs.
+
+A coupled scene (``cases/NAME/scene.toml`` with a ``[physics]`` table) is
+validated as a whole before anything runs; every error names the scene file,
+the table and key, and the reason (``<scene.toml>: [loads.3] boundary: ...``).
+cases/README.md documents every key. :mod:`coupler.plan` turns a scene into
+the participants to start and the fields that cross.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .errors import SceneError
+from .scene import check_expression
+
+#: effects a scene may ask for
+EFFECTS = {
+    "elasticity": "linear elastic deformation of the rock (solid participant)",
+    "dynamics": "inertia: elastodynamics with time steps (paper eq. 13)",
+    "fluid_pressure": "a static fluid pressure on fracture faces, applied as a load (no fluid solver)",
+    "flow": "fluid flow on a structured grid, coupled to the solid (fluid participant, paper 2.3)",
+    "contact": "contact between fracture faces (mortar coupling, paper 2.2)",
+}
+#: participant kinds -> the module started as ``python -m MODULE``
+SOLID_PARTICIPANTS = {"solid_fenicsx": "solid_fenicsx", "spring_solid": "coupler.standins"}
+FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "replay_fluid": "coupler.standins"}
+LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure")
+ACCELERATIONS = ("constant", "aitken", "iqn-ils")
+BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+
+_REQUIRED = object()
+
+
+class Table:
+    """One table of the scene: typed access to its keys, errors naming the key."""
+
+    def __init__(self, path: Path, name: str, data, keys: dict[str, str]):
+        self.path, self.name, self.keys = path, name, keys
+        if not isinstance(data, dict):
+            raise SceneError(f"{path}: [{name}] must be a table, got {data!r}")
+        self.data = data
+        for key in data:
+            if key not in keys:
+                raise SceneError(f"{self.where(key)}: unknown key; known keys: {', '.join(keys)}")
+
+    def where(self, key: str) -> str:
+        return f"{self.path}: [{self.name}] {key}"
+
+    def error(self, key: str, reason: str) -> SceneError:
+        return SceneError(f"{self.where(key)}: {reason}")
+
+    def _value(self, key, default):
+        if key in self.data:
+            return self.data[key]
+        if default is _REQUIRED:
+            raise self.error(key, f"missing ({self.keys[key]})")
+        return default
+
+    def string(self, key, default=_REQUIRED, choices=None):
+        value = self._value(key, default)
+        if value is None:
+            return None
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(key, f"must be a non-empty string, got {value!r}")
+        if choices is not None and value not in choices:
+            raise self.error(key, f"unknown value {value!r}; use one of {', '.join(map(repr, choices))}")
+        return value
+
+    def number(self, key, default=_REQUIRED, positive=False, minimum=None, maximum=None):
+        value = self._value(key, default)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(key, f"must be a number, got {value!r}")
+        value = float(value)
+        if positive and not value > 0:
+            raise self.error(key, f"must be positive, got {value!r}")
+        if minimum is not None and value < minimum or maximum is not None and value > maximum:
+            raise self.error(key, f"must lie in [{minimum}, {maximum}], got {value!r}")
+        return value
+
+    def integer(self, key, default=_REQUIRED, minimum=1):
+        value = self._value(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise self.error(key, f"must be an integer >= {minimum}, got {value!r}")
+        return value
+
+    def vector(self, key, default=_REQUIRED, length=3):
+        value = self._value(key, default)
+        if value is None:
+            return None
+        if (not isinstance(value, list) or len(value) != length
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
+            raise self.error(key, f"must be a list of {length} numbers, got {value!r}")
+        return [float(v) for v in value]
+
+    def strings(self, key, default=_REQUIRED, choices=None):
+        value = self._value(key, default)
+        if not isinstance(value, list) or any(not isinstance(v, str) for v in value):
+            raise self.error(key, f"must be a list of strings, got {value!r}")
+        for v in value:
+            if choices is not None and v not in choices:
+                raise self.error(key, f"unknown value {v!r}; use one of {', '.join(map(repr, choices))}")
+        if len(set(value)) != len(value):
+            raise self.error(key, f"a value is listed twice in {value!r}")
+        return list(value)
+
+    def boolean(self, key, default=_REQUIRED):
+        value = self._value(key, default)
+        if not isinstance(value, bool):
+            raise self.error(key, f"must be true or false, got {value!r}")
+        return value
+
+
+@dataclass
+class SolidGeometry:
+    mesh: Path | None  # a mesh file, or None for the box generator
+    box: dict | None  # lower, upper, shape, jitter, seed
+    boundaries: dict[str, str | int]  # name -> expression on facet midpoints, box face, or file tag
+
+
+@dataclass
+class FluidGeometry:
+    origin: list[float]
+    spacing: list[float]
+    shape: list[int]
+
+
+@dataclass
+class Load:
+    type: str
+    boundary: str | None
+    value: object  # float, [3 floats]
+    components: list[str] = field(default_factory=lambda: ["x", "y", "z"])
+
+
+@dataclass
+class CoupledScene:
+    path: Path
+    case_dir: Path
+    description: str
+    effects: list[str]
+    solid: SolidGeometry
+    fluid: FluidGeometry | None
+    material: dict  # E, nu, density
+    fluid_material: dict | None  # density, viscosity
+    loads: list[Load]
+    solvers: dict  # "solid": {...}, "fluid": {...}
+    time: dict  # dt, steps
+    coupling: dict
+    messaging: dict
+    output_dir: Path
+    output: dict
+
+    def error(self, table: str, key: str, reason: str) -> SceneError:
+        return SceneError(f"{self.path}: [{table}] {key}: {reason}")
+
+
+TABLES = {
+    "case": {"description": "one line on what the case shows"},
+    "physics": {"effects": f"list of effects: {', '.join(EFFECTS)}"},
+    "geometry": {"solid": "table: the rock mesh", "fluid": "table: the structured fluid grid"},
+    "materials": {"solid": "table: E, nu, density of the rock", "fluid": "table: density, viscosity"},
+    "loads": {},
+    "solvers": {"solid": "table: the solid participant", "fluid": "table: the fluid participant"},
+    "time": {"dt": "time step [s]", "steps": "number of time steps"},
+    "coupling": {"acceleration": f"one of {', '.join(ACCELERATIONS)}", "relaxation": "initial relaxation",
+                 "tolerance": "relative interface residual (mass-weighted L2)",
+                 "max_iterations": "per time step", "reuse": "IQN-ILS: past time windows reused"},
+    "messaging": {"mode": "zenoh mode: peer (default) or client", "connect": "zenoh endpoints to connect to",
+                  "timeout": "seconds to wait for a participant's answer"},
+    "output": {"directory": "output directory, relative to the case (default 'results')",
+               "every": "write fields every N steps (default 1)"},
+}
+SOLID_KEYS = {"mesh": "mesh file (any format meshio reads), relative to the case",
+              "lower": "box generator: lower corner", "upper": "box generator: upper corner",
+              "shape": "box generator: cells per axis", "jitter": "box generator: random vertex shift",
+              "seed": "box generator: random seed", "boundaries": "table: name -> boundary"}
+FLUID_KEYS = {"origin": "grid origin", "spacing": "grid spacing", "shape": "cells per axis",
+              "lower": "grid lower corner (instead of origin/spacing)", "upper": "grid upper corner"}
+LOAD_KEYS = {"type": f"one of {', '.join(LOAD_TYPES)}", "boundary": "a named boundary",
+             "value": "number (pressure, fixed value) or [x, y, z] (traction, body force)",
+             "components": "dirichlet: constrained components, subset of ['x', 'y', 'z']"}
+SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI ranks (default 1)",
+               "degree": "polynomial degree (solid: 1 or 2)", "linear_solver": "cg (CG + GAMG) or lu",
+               "rtol": "relative tolerance of the linear solver", "stiffness": "spring_solid: spring stiffness",
+               "pressure": "replay_fluid: uniform pressure served"}
+
+
+def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
+    """Validate the tables of a coupled scene (already read from TOML)."""
+    for name in data:
+        if name not in TABLES:
+            raise SceneError(f"{path}: unknown table [{name}]; known tables: {', '.join(f'[{t}]' for t in TABLES)}")
+    case = Table(path, "case", data.get("case", {}), TABLES["case"])
+    physics = Table(path, "physics", data["physics"], TABLES["physics"])
+    effects = physics.strings("effects", choices=list(EFFECTS))
+    if not effects:
+        raise physics.error("effects", "must name at least one effect")
+    if "elasticity" not in effects:
+        raise physics.error("effects", "every coupled scene needs 'elasticity' (the rock); "
+                                       f"got {effects!r}")
+
+    geometry = Table(path, "geometry", data.get("geometry", {}), TABLES["geometry"])
+    if "solid" not in geometry.data:
+        raise geometry.error("solid", "missing (the rock: a mesh file or a box)")
+    solid = _solid_geometry(path, case_dir, geometry.data["solid"])
+    fluid = None
+    if "fluid" in geometry.data:
+        fluid = _fluid_geometry(path, geometry.data["fluid"])
+    if "flow" in effects and fluid is None:
+        raise geometry.error("fluid", "missing: the scene asks for 'flow' but has no fluid domain (a grid)")
+
+    materials = Table(path, "materials", data.get("materials", {}), TABLES["materials"])
+    if "solid" not in materials.data:
+        raise materials.error("solid", "missing (E, nu, density of the rock)")
+    rock = Table(path, "materials.solid", materials.data["solid"],
+                 {"E": "Young's modulus [Pa]", "nu": "Poisson ratio", "density": "[kg/m^3]"})
+    material = {"E": rock.number("E", positive=True), "nu": rock.number("nu", minimum=-0.99, maximum=0.4999999),
+                "density": rock.number("density", default=2600.0, positive=True)}
+    fluid_material = None
+    if "fluid" in materials.data:
+        water = Table(path, "materials.fluid", materials.data["fluid"],
+                      {"density": "[kg/m^3]", "viscosity": "dynamic viscosity [Pa s]"})
+        fluid_material = {"density": water.number("density", default=1000.0, positive=True),
+                          "viscosity": water.number("viscosity", default=1e-3, positive=True)}
+
+    loads = _loads(path, data.get("loads", []), solid, effects)
+
+    solvers = Table(path, "solvers", data.get("solvers", {}), TABLES["solvers"])
+    solver_cfg = {"solid": _solver(path, "solid", solvers.data.get("solid", {}), SOLID_PARTICIPANTS, "solid_fenicsx")}
+    if "flow" in effects:
+        solver_cfg["fluid"] = _solver(path, "fluid", solvers.data.get("fluid", {}), FLUID_PARTICIPANTS, "openfoam")
+
+    time = Table(path, "time", data.get("time", {}), TABLES["time"])
+    dynamic = "dynamics" in effects or "flow" in effects
+    time_cfg = {"dt": time.number("dt", default=_REQUIRED if dynamic else 1.0, positive=True),
+                "steps": time.integer("steps", default=_REQUIRED if dynamic else 1)}
+
+    coupling = Table(path, "coupling", data.get("coupling", {}), TABLES["coupling"])
+    coupling_cfg = {"acceleration": coupling.string("acceleration", "iqn-ils", ACCELERATIONS),
+                    "relaxation": coupling.number("relaxation", 0.5, minimum=1e-6, maximum=1.0),
+                    "tolerance": coupling.number("tolerance", 1e-6, positive=True),
+                    "max_iterations": coupling.integer("max_iterations", 50),
+                    "reuse": coupling.integer("reuse", 8, minimum=0)}
+
+    messaging = Table(path, "messaging", data.get("messaging", {}), TABLES["messaging"])
+    messaging_cfg = {"mode": messaging.string("mode", "peer", ("peer", "client")),
+                     "connect": messaging.strings("connect", []),
+                     "timeout": messaging.number("timeout", 300.0, positive=True)}
+
+    out = Table(path, "output", data.get("output", {}), TABLES["output"])
+    output_dir = Path(output) if output is not None else case_dir / out.string("directory", "results")
+    if output_dir.exists() and not output_dir.is_dir():
+        raise SceneError(f"{output if output is not None else out.where('directory')}: "
+                         f"{str(output_dir)!r} exists and is not a directory")
+    return CoupledScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
+                        effects=effects, solid=solid, fluid=fluid, material=material,
+                        fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
+                        coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
+                        output={"every": out.integer("every", 1)})
+
+
+def _solid_geometry(path, case_dir, data) -> SolidGeometry:
+    t = Table(path, "geometry.solid", data, SOLID_KEYS)
+    mesh = t.string("mesh", None)
+    box = None
+    if mesh is not None:
+        if any(k in t.data for k in ("lower", "upper", "shape", "jitter", "seed")):
+            raise t.error("mesh", "give either a mesh file or the box keys (lower, upper, shape), not both")
+        file = case_dir / mesh
+        if not file.is_file():
+            raise t.error("mesh", f"file {mesh!r} not found")
+        mesh = file
+    else:
+        if "lower" not in t.data and "upper" not in t.data:
+            raise t.error("mesh", "missing: give a mesh file, or a box with lower, upper and shape")
+        lower, upper = t.vector("lower"), t.vector("upper")
+        if any(u <= lo for lo, u in zip(lower, upper)):
+            raise t.error("upper", f"must exceed lower in every coordinate, got {lower} .. {upper}")
+        shape = t._value("shape", _REQUIRED)
+        if not isinstance(shape, list) or len(shape) != 3 or any(
+                isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in shape):
+            raise t.error("shape", f"must be a list of 3 positive integers, got {shape!r}")
+        box = {"lower": lower, "upper": upper, "shape": shape,
+               "jitter": t.number("jitter", 0.0, minimum=0.0, maximum=0.24), "seed": t.integer("seed", 0, minimum=0)}
+    boundaries = {}
+    b = t.data.get("boundaries", {})
+    if not isinstance(b, dict):
+        raise t.error("boundaries", f"must be a table name -> boundary, got {b!r}")
+    for name, spec in b.items():
+        where = f"{path}: [geometry.solid.boundaries] {name}"
+        if isinstance(spec, bool) or not isinstance(spec, (str, int)):
+            raise SceneError(f"{where}: must be a box face ({', '.join(BOX_FACES)}), an expression in x, y, z "
+                             f"true on the boundary's facets, or a tag number of the mesh file; got {spec!r}")
+        if isinstance(spec, str) and spec not in BOX_FACES:
+            check_expression(spec, where)
+        if isinstance(spec, int) and box is not None:
+            raise SceneError(f"{where}: tag numbers need a mesh file; the box has faces {', '.join(BOX_FACES)}")
+        boundaries[name] = spec
+    if box is not None:
+        for face in BOX_FACES:
+            boundaries.setdefault(face, face)
+    return SolidGeometry(mesh=mesh, box=box, boundaries=boundaries)
+
+
+def _fluid_geometry(path, data) -> FluidGeometry:
+    t = Table(path, "geometry.fluid", data, FLUID_KEYS)
+    shape = t._value("shape", _REQUIRED)
+    if not isinstance(shape, list) or len(shape) != 3 or any(
+            isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in shape):
+        raise t.error("shape", f"must be a list of 3 positive integers, got {shape!r}")
+    if "lower" in t.data or "upper" in t.data:
+        lower, upper = t.vector("lower"), t.vector("upper")
+        if any(u <= lo for lo, u in zip(lower, upper)):
+            raise t.error("upper", f"must exceed lower in every coordinate, got {lower} .. {upper}")
+        return FluidGeometry(lower, [(u - lo) / n for lo, u, n in zip(lower, upper, shape)], shape)
+    spacing = t.vector("spacing")
+    if any(h <= 0 for h in spacing):
+        raise t.error("spacing", f"must be positive, got {spacing}")
+    return FluidGeometry(t.vector("origin"), spacing, shape)
+
+
+def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
+    if not isinstance(data, list):
+        raise SceneError(f"{path}: loads must be an array of tables ([[loads]]), got {data!r}")
+    loads = []
+    for i, entry in enumerate(data, start=1):
+        t = Table(path, f"loads.{i}", entry, LOAD_KEYS)
+        kind = t.string("type", choices=LOAD_TYPES)
+        boundary = None
+        if kind != "body_force":
+            boundary = t.string("boundary")
+            if boundary not in solid.boundaries:
+                raise t.error("boundary", f"unknown boundary {boundary!r}; named boundaries: "
+                                          f"{', '.join(solid.boundaries) or 'none'}")
+        elif "boundary" in t.data:
+            raise t.error("boundary", "a body force acts on the volume, not on a boundary")
+        if kind in ("traction", "body_force"):
+            value = t.vector("value")
+        elif kind == "dirichlet":
+            value = t.number("value", 0.0)
+        else:
+            value = t.number("value")
+        components = ["x", "y", "z"]
+        if kind == "dirichlet":
+            components = t.strings("components", components, choices=["x", "y", "z"])
+        elif "components" in t.data:
+            raise t.error("components", "only dirichlet loads constrain components")
+        if kind == "fluid_pressure" and "fluid_pressure" not in effects:
+            raise t.error("type", "a fluid_pressure load needs the effect 'fluid_pressure' in [physics] effects")
+        loads.append(Load(kind, boundary, value, components))
+    if "fluid_pressure" in effects and not any(load.type == "fluid_pressure" for load in loads):
+        raise SceneError(f"{path}: [physics] effects: 'fluid_pressure' asks for a [[loads]] entry with "
+                         f"type = \"fluid_pressure\" (the pressure and the fracture faces it acts on)")
+    if not any(load.type == "dirichlet" for load in loads):
+        raise SceneError(f"{path}: [[loads]]: no dirichlet load: the rock needs supports against rigid motion")
+    return loads
+
+
+def _solver(path, part, data, participants, default) -> dict:
+    t = Table(path, f"solvers.{part}", data, SOLVER_KEYS)
+    cfg = {"participant": t.string("participant", default, tuple(participants)),
+           "ranks": t.integer("ranks", 1)}
+    cfg["module"] = participants[cfg["participant"]]
+    if part == "solid":
+        cfg["degree"] = t.integer("degree", 1)
+        if cfg["degree"] > 2:
+            raise t.error("degree", f"must be 1 or 2, got {cfg['degree']}")
+        cfg["linear_solver"] = t.string("linear_solver", "cg", ("cg", "lu"))
+        cfg["rtol"] = t.number("rtol", 1e-10, positive=True)
+        if cfg["participant"] == "spring_solid":
+            cfg["stiffness"] = t.number("stiffness", positive=True)
+    if part == "fluid" and cfg["participant"] == "replay_fluid":
+        cfg["pressure"] = t.number("pressure", 0.0)
+    return cfg
