@@ -1,0 +1,258 @@
+"""Stand-in participants: light processes that speak the protocol (docs/protocol.md) like
+the real solvers, so that tests exercise the coupler, the messaging and solver swapping
+without dolfinx or OpenFOAM.
+
+``python -m coupler.standins KIND --run-id R --name NAME --connect ENDPOINT`` (or
+``--kind KIND`` anywhere, as :class:`coupler.launch.Launcher` extra arguments) with KIND:
+
+``replay_fluid``
+    Serves prescribed fields on a structured grid. Config::
+
+        {"grid": {"origin": [x, y, z], "spacing": [hx, hy, hz], "shape": [nx, ny, nz]},
+         "location": "points",          # or "cells": Q1 (grid points) or Q0 (cells) fields
+         "pressure": 1.0e6,             # uniform pressure (Pa), default 0
+         "velocity": [0, 0, 0],         # uniform velocity (m/s), default 0
+         "npz": "path.npz"}             # optional: arrays "pressure" (W, n) and/or
+                                        # "velocity" (W, n, 3), row w served in window w
+                                        # (the last row once w >= W)
+
+    Grid points and cells are numbered x fastest (as :class:`transfer.StructuredGrid`).
+    Accepts ``solid_velocity`` and ``solid_fraction`` (checked for their size, unused).
+
+``spring_solid``
+    A linear spring at every point of a point set: ``displacement = traction / k`` and
+    ``velocity = (displacement - displacement at the start of the window) / dt``. Config::
+
+        {"points": [[x, y, z], ...]}    # or
+        {"box": {"lower": [...], "upper": [...], "shape": [nx, ny, nz]}}  # (nx+1)(ny+1)(nz+1) points
+        "k": 1.0e9                      # stiffness (Pa/m), default 1
+
+    ``save_state``/``restore_state`` keep the displacement per window, so repeating a
+    window after ``restore_state`` gives identical fields.
+
+``echo``
+    Returns its inputs unchanged (for benchmarks and tests). Config: ``{"reply": "same"}``
+    (default) or ``"empty"`` (reply without arrays: one-way timing), ``"delay": s``
+    (sleep in ``advance``), ``"fail": "message"`` (``advance`` raises it).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+
+import numpy as np
+
+from .participant import Participant, main
+from .protocol import Field
+
+log = logging.getLogger("varcouple.standins")
+
+
+def _grid_points(origin, spacing, shape) -> np.ndarray:
+    axes = [origin[d] + spacing[d] * np.arange(shape[d] + 1) for d in range(3)]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    return np.ascontiguousarray(np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1))
+
+
+def _vec3(value, what) -> np.ndarray:
+    v = np.asarray(value, dtype=np.float64).reshape(-1)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{what} must be 3 finite numbers, got {value!r}")
+    return v
+
+
+class ReplayFluid(Participant):
+    """Prescribed pressure and velocity on a structured grid (see module doc)."""
+
+    kind = "replay_fluid"
+
+    def __init__(self):
+        self.grid = None
+        self.n = 0
+        self.pressure = self.velocity = None
+        self.replay: dict[str, np.ndarray] = {}
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": ["pressure", "velocity"],
+                "accepts": ["solid_velocity", "solid_fraction"]}
+
+    def configure(self, config: dict) -> None:
+        g = config.get("grid")
+        if not isinstance(g, dict):
+            raise ValueError("replay_fluid needs config 'grid' = {origin, spacing, shape}")
+        origin, spacing = _vec3(g.get("origin"), "grid.origin"), _vec3(g.get("spacing"), "grid.spacing")
+        shape = [int(s) for s in np.asarray(g.get("shape")).reshape(-1)]
+        if len(shape) != 3 or min(shape) < 1 or np.any(spacing <= 0):
+            raise ValueError(f"grid shape must be 3 positive cell counts and spacing positive, got {g!r}")
+        self.grid = {"origin": origin.tolist(), "spacing": spacing.tolist(), "shape": shape}
+        self.location = config.get("location", "points")
+        if self.location not in ("points", "cells"):
+            raise ValueError(f"location must be 'points' or 'cells', got {self.location!r}")
+        self.n = int(np.prod([s + 1 for s in shape]) if self.location == "points" else np.prod(shape))
+        self.pressure = np.full(self.n, float(config.get("pressure", 0.0)))
+        self.velocity = np.tile(_vec3(config.get("velocity", [0, 0, 0]), "velocity"), (self.n, 1))
+        self.replay = {}
+        if config.get("npz"):
+            with np.load(config["npz"]) as data:
+                for name, tail in (("pressure", (self.n,)), ("velocity", (self.n, 3))):
+                    if name in data:
+                        arr = np.asarray(data[name], dtype=np.float64)
+                        if arr.shape[1:] != tail:
+                            raise ValueError(f"{config['npz']}: {name} has shape {arr.shape}, expected (W, {', '.join(map(str, tail))})")
+                        self.replay[name] = arr
+        log.info("replay_fluid: grid %s, %d %s values, replayed %s", shape, self.n, self.location, sorted(self.replay))
+
+    def geometry(self):
+        if self.grid is None:
+            raise RuntimeError("geometry before configure")
+        return {"grid": self.grid, "location": self.location}, None
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.grid is None:
+            raise RuntimeError("advance before configure")
+        for name, f in inputs.items():
+            if f.data.shape[:1] != (self.n,):
+                raise ValueError(f"input {name!r} has shape {f.data.shape}, expected {self.n} values first")
+        out = {}
+        for name, default, units in (("pressure", self.pressure, "Pa"), ("velocity", self.velocity, "m/s")):
+            rows = self.replay.get(name)
+            data = default if rows is None else rows[min(max(int(window), 0), len(rows) - 1)]
+            out[name] = Field(name, data, units)
+        return out
+
+    def save_state(self, window):
+        pass  # stateless
+
+    def restore_state(self, window):
+        pass
+
+
+class SpringSolid(Participant):
+    """Linear springs on a point set: displacement = traction / k (see module doc)."""
+
+    kind = "spring_solid"
+
+    def __init__(self):
+        self.points = None
+        self.k = 1.0
+        self.displacement = None
+        self.checkpoints: dict[int, np.ndarray] = {}
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": ["displacement", "velocity"], "accepts": ["traction"]}
+
+    def configure(self, config: dict) -> None:
+        if "points" in config:
+            pts = np.asarray(config["points"], dtype=np.float64)
+        elif "box" in config:
+            b = config["box"]
+            lower, upper = _vec3(b["lower"], "box.lower"), _vec3(b["upper"], "box.upper")
+            shape = np.asarray(b.get("shape", [1, 1, 1]), dtype=int).reshape(3)
+            if np.any(shape < 1) or np.any(upper <= lower):
+                raise ValueError(f"box needs upper > lower and shape >= 1, got {b!r}")
+            pts = _grid_points(lower, (upper - lower) / shape, shape)
+        else:
+            raise ValueError("spring_solid needs config 'points' or 'box'")
+        if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
+            raise ValueError(f"points must be finite, of shape (n, 3), got {pts.shape}")
+        k = float(config.get("k", 1.0))
+        if not np.isfinite(k) or k <= 0:
+            raise ValueError(f"stiffness k must be positive, got {config.get('k')!r}")
+        self.points, self.k = pts, k
+        self.displacement = np.zeros_like(pts)
+        self.checkpoints = {}
+        log.info("spring_solid: %d points, k = %g", len(pts), k)
+
+    def geometry(self):
+        if self.points is None:
+            raise RuntimeError("geometry before configure")
+        n = len(self.points)
+        return ({"cell_type": "vertex", "boundaries": {}},
+                {"points": Field("points", self.points, "m"),
+                 "cells": Field("cells", np.arange(n, dtype=np.int64).reshape(n, 1))})
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.points is None:
+            raise RuntimeError("advance before configure")
+        if "traction" not in inputs:
+            raise ValueError(f"advance needs input 'traction', got {sorted(inputs)}")
+        traction = inputs["traction"].data
+        if traction.shape != self.points.shape:
+            raise ValueError(f"traction has shape {traction.shape}, expected {self.points.shape}")
+        if not dt > 0:
+            raise ValueError(f"dt must be positive, got {dt!r}")
+        d = traction / self.k
+        v = (d - self.displacement) / dt
+        self.displacement = d
+        return {"displacement": Field("displacement", d, "m"), "velocity": Field("velocity", v, "m/s")}
+
+    def save_state(self, window):
+        self.checkpoints[int(window)] = self.displacement.copy()
+        for w in [w for w in self.checkpoints if w < int(window) - 1]:
+            del self.checkpoints[w]  # keep the last two windows only
+
+    def restore_state(self, window):
+        if int(window) not in self.checkpoints:
+            raise KeyError(f"no state saved for window {window} (saved: {sorted(self.checkpoints)})")
+        self.displacement = self.checkpoints[int(window)].copy()
+
+
+class Echo(Participant):
+    """Returns its inputs (see module doc)."""
+
+    kind = "echo"
+
+    def __init__(self):
+        self.config = {}
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": ["*"], "accepts": ["*"]}
+
+    def configure(self, config: dict) -> None:
+        if config.get("reply", "same") not in ("same", "empty"):
+            raise ValueError(f"echo: reply must be 'same' or 'empty', got {config.get('reply')!r}")
+        self.config = dict(config)
+
+    def geometry(self):
+        return {}, None
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.config.get("delay"):
+            time.sleep(float(self.config["delay"]))
+        if self.config.get("fail"):
+            raise RuntimeError(str(self.config["fail"]))
+        return {} if self.config.get("reply") == "empty" else inputs
+
+    def save_state(self, window):
+        pass
+
+    def restore_state(self, window):
+        pass
+
+
+STANDINS = {"replay_fluid": ReplayFluid, "spring_solid": SpringSolid, "echo": Echo}
+
+
+def cli(argv=None):
+    """``python -m coupler.standins KIND ...`` or ``... --kind KIND`` (as the launcher's
+    extra arguments)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    kind = None
+    if argv and argv[0] in STANDINS:
+        kind = argv.pop(0)
+    elif "--kind" in argv[:-1]:
+        i = argv.index("--kind")
+        kind = argv[i + 1]
+        del argv[i:i + 2]
+    if kind not in STANDINS:
+        print(f"usage: python -m coupler.standins {{{','.join(STANDINS)}}} --run-id R --name NAME --connect ENDPOINT\n"
+              f"   or: python -m coupler.standins --kind KIND --run-id R ...  (unknown kind {kind!r})",
+              file=sys.stderr)
+        raise SystemExit(2)
+    main(STANDINS[kind], argv, prog=f"python -m coupler.standins {kind}")
+
+
+if __name__ == "__main__":
+    cli()
