@@ -127,7 +127,6 @@ def _run_args(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Validate the scene of CASE, run it and write its outputs."""
     from . import scene as scenes
-    from .transfer_case import run as run_transfer
 
     start = time.perf_counter()
     scene = scenes.load(args.case, output=args.output)
@@ -135,7 +134,14 @@ def run(args: argparse.Namespace) -> int:
     def log(line):
         print(line, flush=True)
 
-    run_transfer(scene, log=log)
+    if isinstance(scene, scenes.TransferScene):
+        from .transfer_case import run as run_transfer
+
+        run_transfer(scene, log=log)
+    else:
+        from .coupled_run import run as run_coupled_case
+
+        run_coupled_case(scene, log=log)
     log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}")
     return 0
 

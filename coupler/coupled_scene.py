@@ -186,7 +186,8 @@ LOAD_KEYS = {"type": f"one of {', '.join(LOAD_TYPES)}", "boundary": "a named bou
 SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI ranks (default 1)",
                "degree": "polynomial degree (solid: 1 or 2)", "linear_solver": "cg (CG + GAMG) or lu",
                "rtol": "relative tolerance of the linear solver", "stiffness": "spring_solid: spring stiffness",
-               "pressure": "replay_fluid: uniform pressure served"}
+               "pressure": "replay_fluid: uniform pressure served",
+               "feedback": "replay_fluid: pressure drop per unit mean solid velocity [Pa s/m]"}
 
 
 def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
@@ -375,4 +376,5 @@ def _solver(path, part, data, participants, default) -> dict:
             cfg["stiffness"] = t.number("stiffness", positive=True)
     if part == "fluid" and cfg["participant"] == "replay_fluid":
         cfg["pressure"] = t.number("pressure", 0.0)
+        cfg["feedback"] = t.number("feedback", 0.0)
     return cfg

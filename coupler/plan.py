@@ -94,7 +94,7 @@ def make_plan(scene: CoupledScene) -> Plan:
             PlannedCoupling("fluid.pressure", "solid.traction",
                             "Q0 (fluid grid) -> P1 (solid mesh), pseudo_l2", "steps 2-3"),
             PlannedCoupling("solid.velocity", "fluid.solid_velocity",
-                            "P1 (solid mesh) -> Q1 (fluid grid), pseudo_l2", "step 6"),
+                            "P1 (solid mesh) -> Q0 (fluid cells), pseudo_l2", "step 6"),
         ]
         c = scene.coupling
         iteration = (f"{scene.time['steps']} time steps of {scene.time['dt']:g} s; implicit fixed point per "

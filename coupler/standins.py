@@ -17,7 +17,11 @@ without dolfinx or OpenFOAM.
                                         # (the last row once w >= W)
 
     Grid points and cells are numbered x fastest (as :class:`transfer.StructuredGrid`).
-    Accepts ``solid_velocity`` and ``solid_fraction`` (checked for their size, unused).
+    Accepts ``solid_velocity`` and ``solid_fraction`` (checked for their size). With
+    ``"feedback": c`` (Pa s/m, default 0) the served pressure reacts to the solid:
+    ``p = pressure - c * <v_z>``, ``<v_z>`` the fraction-weighted mean of the solid
+    velocity's z component: a linear fixed point whose gain the coupling tests set
+    (above 1 the plain iteration diverges, IQN-ILS still converges).
 
 ``spring_solid``
     A linear spring at every point of a point set: ``displacement = traction / k`` and
@@ -48,12 +52,6 @@ from .participant import Participant, main
 from .protocol import Field
 
 log = logging.getLogger("varcouple.standins")
-
-
-def _grid_points(origin, spacing, shape) -> np.ndarray:
-    axes = [origin[d] + spacing[d] * np.arange(shape[d] + 1) for d in range(3)]
-    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-    return np.ascontiguousarray(np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1))
 
 
 def _vec3(value, what) -> np.ndarray:
@@ -92,6 +90,7 @@ class ReplayFluid(Participant):
             raise ValueError(f"location must be 'points' or 'cells', got {self.location!r}")
         self.n = int(np.prod([s + 1 for s in shape]) if self.location == "points" else np.prod(shape))
         self.pressure = np.full(self.n, float(config.get("pressure", 0.0)))
+        self.feedback = float(config.get("feedback", 0.0))
         self.velocity = np.tile(_vec3(config.get("velocity", [0, 0, 0]), "velocity"), (self.n, 1))
         self.replay = {}
         if config.get("npz"):
@@ -120,6 +119,11 @@ class ReplayFluid(Participant):
             rows = self.replay.get(name)
             data = default if rows is None else rows[min(max(int(window), 0), len(rows) - 1)]
             out[name] = Field(name, data, units)
+        if self.feedback and "solid_velocity" in inputs and "solid_fraction" in inputs:
+            w = inputs["solid_fraction"].data
+            vz = inputs["solid_velocity"].data[:, 2]
+            mean_vz = float(w @ vz / w.sum()) if w.sum() > 0 else 0.0
+            out["pressure"] = Field("pressure", out["pressure"].data - self.feedback * mean_vz, "Pa")
         return out
 
     def save_state(self, window):
@@ -135,13 +139,13 @@ class SpringSolid(Participant):
     kind = "spring_solid"
 
     def __init__(self):
-        self.points = None
+        self.points = self.tets = None
         self.k = 1.0
-        self.displacement = None
+        self.displacement = self.start = None
         self.checkpoints: dict[int, np.ndarray] = {}
 
     def announce(self) -> dict:
-        return {"kind": self.kind, "provides": ["displacement", "velocity"], "accepts": ["traction"]}
+        return {"kind": self.kind, "provides": ["displacement", "velocity"], "accepts": ["traction", "pressure"]}
 
     def configure(self, config: dict) -> None:
         if "points" in config:
@@ -152,7 +156,10 @@ class SpringSolid(Participant):
             shape = np.asarray(b.get("shape", [1, 1, 1]), dtype=int).reshape(3)
             if np.any(shape < 1) or np.any(upper <= lower):
                 raise ValueError(f"box needs upper > lower and shape >= 1, got {b!r}")
-            pts = _grid_points(lower, (upper - lower) / shape, shape)
+            from transfer.generate import box_tetrahedra
+
+            box = box_tetrahedra(shape, lower, upper, jitter=float(b.get("jitter", 0.0)), seed=int(b.get("seed", 0)))
+            pts, self.tets = box.points, box.cells
         else:
             raise ValueError("spring_solid needs config 'points' or 'box'")
         if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
@@ -169,6 +176,9 @@ class SpringSolid(Participant):
         if self.points is None:
             raise RuntimeError("geometry before configure")
         n = len(self.points)
+        if self.tets is not None:
+            return ({"cell_type": "tetra", "boundaries": {}},
+                    {"points": Field("points", self.points, "m"), "cells": Field("cells", self.tets)})
         return ({"cell_type": "vertex", "boundaries": {}},
                 {"points": Field("points", self.points, "m"),
                  "cells": Field("cells", np.arange(n, dtype=np.int64).reshape(n, 1))})
@@ -176,15 +186,23 @@ class SpringSolid(Participant):
     def advance(self, window, iteration, t, dt, inputs):
         if self.points is None:
             raise RuntimeError("advance before configure")
-        if "traction" not in inputs:
-            raise ValueError(f"advance needs input 'traction', got {sorted(inputs)}")
-        traction = inputs["traction"].data
+        if "traction" in inputs:
+            traction = inputs["traction"].data
+        elif "pressure" in inputs:
+            p = inputs["pressure"].data
+            if p.shape != self.points.shape[:1]:
+                raise ValueError(f"pressure has shape {p.shape}, expected ({len(self.points)},)")
+            traction = np.outer(p, [0.0, 0.0, 1.0])
+        else:
+            raise ValueError(f"advance needs input 'traction' or 'pressure', got {sorted(inputs)}")
         if traction.shape != self.points.shape:
             raise ValueError(f"traction has shape {traction.shape}, expected {self.points.shape}")
         if not dt > 0:
             raise ValueError(f"dt must be positive, got {dt!r}")
+        if iteration == 0 or self.start is None:
+            self.start = self.displacement.copy()  # the state the window starts from
         d = traction / self.k
-        v = (d - self.displacement) / dt
+        v = (d - self.start) / dt
         self.displacement = d
         return {"displacement": Field("displacement", d, "m"), "velocity": Field("velocity", v, "m/s")}
 

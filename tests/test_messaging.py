@@ -97,16 +97,17 @@ def test_spring_solid_speaks_the_protocol(run):
     solid = run.start("solid", "spring_solid")
     info = solid.announce()
     assert info["kind"] == "spring_solid" and info["name"] == "solid" and info["ranks"] == 1
-    assert info["accepts"] == ["traction"] and info["provides"] == ["displacement", "velocity"]
+    assert info["accepts"] == ["traction", "pressure"] and info["provides"] == ["displacement", "velocity"]
     assert info["pid"] == run.launcher.processes["solid"].pid
 
     solid.configure(BOX)
     header, geo = solid.geometry()
-    assert header["cell_type"] == "vertex"
+    assert header["cell_type"] == "tetra"
     points = geo["points"].data
     assert points.shape == (N_BOX, 3) and geo["points"].units == "m"
     assert points.min(axis=0).tolist() == [0, 0, 0] and points.max(axis=0).tolist() == [1, 2, 3]
-    assert geo["cells"].data.dtype == np.int64 and geo["cells"].data.shape == (N_BOX, 1)
+    cells = geo["cells"].data
+    assert cells.dtype == np.int64 and cells.shape[1] == 4 and cells.max() == N_BOX - 1
 
     f = traction(N_BOX)
     solid.save_state(0)

@@ -1,0 +1,281 @@
+"""``varcouple run`` on a coupled scene: the participants of the plan as processes,
+the transfer operators built once, the time loop of paper 2.3, the results.
+
+Per time step with flow (Steps 1-6): the fluid advances with the solid's
+velocity and volume fraction on its grid; its pressure is projected to the solid
+mesh (T_s<-f) and loads the solid's wetted boundary; the solid advances; its
+velocity is projected back to the grid (T_f<-s). The interface value of the
+fixed point is the pressure on the solid's vertices, accelerated as the scene
+says. A scene without flow advances the solid once per step: no fluid process
+is ever started.
+
+Written to the output directory: ``solid_NNNN.vtu`` (and ``fluid_NNNN.vtu``)
+per output step with ``solid.pvd`` / ``fluid.pvd`` time series for ParaView,
+``summary.json`` (plan, per-step iterations and residuals, wall time per phase;
+rewritten after every step, so a failed run keeps what it did), ``residuals.png``
+for coupled runs, and ``logs/`` with each participant's output.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+from transfer import FunctionSpace, Mesh, StructuredGrid, Transfer
+
+from .acceleration import make_accelerator
+from .coupled_scene import CoupledScene
+from .errors import CouplerError
+from .launch import Launcher
+from .loop import run_coupled
+from .messaging import CouplerSession, new_run_id
+from .plan import Plan, make_plan
+from .progress import ProgressBar
+from .protocol import Field
+
+SUMMARY = "summary.json"
+
+
+class Phases:
+    """Wall time per phase (solver, transfer, messaging, output)."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+
+    def add(self, phase: str, seconds: float) -> None:
+        self.seconds[phase] = self.seconds.get(phase, 0.0) + seconds
+
+    def timed(self, phase: str, fn, *args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self.add(phase, time.perf_counter() - start)
+
+
+def participant_config(scene: CoupledScene, name: str) -> dict:
+    """The part of the scene participant `name` needs (JSON)."""
+    if name == "solid":
+        solver = scene.solvers["solid"]
+        geometry = {"mesh": str(scene.solid.mesh.resolve())} if scene.solid.mesh else {"box": scene.solid.box}
+        loads = [{"type": "pressure" if load.type == "fluid_pressure" else load.type,
+                  "boundary": load.boundary, "value": load.value, "components": load.components}
+                 for load in scene.loads]
+        config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material,
+                  "loads": loads, "degree": solver["degree"], "linear_solver": solver["linear_solver"],
+                  "rtol": solver["rtol"], "dynamic": "dynamics" in scene.effects,
+                  "fluid_density": (scene.fluid_material or {}).get("density", 0.0) if "flow" in scene.effects else 0.0}
+        if solver["participant"] == "spring_solid":
+            config["k"] = solver["stiffness"]
+        return config
+    solver = scene.solvers["fluid"]
+    g = scene.fluid
+    config = {"grid": {"origin": g.origin, "spacing": g.spacing, "shape": g.shape}, "location": "cells",
+              "material": scene.fluid_material or {}}
+    if solver["participant"] == "replay_fluid":
+        config.update(pressure=solver["pressure"], feedback=solver["feedback"])
+    return config
+
+
+def _mesh_of(name: str, header: dict, fields: dict):
+    if "grid" in header:
+        g = header["grid"]
+        return StructuredGrid(g["origin"], g["spacing"], g["shape"], name=f"{name} grid")
+    if header.get("cell_type") != "tetra":
+        raise CouplerError(f"participant {name!r} gave cells of type {header.get('cell_type')!r}; "
+                           f"the coupler needs a tetrahedral mesh or a structured grid")
+    return Mesh(np.array(fields["points"].data), np.array(fields["cells"].data), "tetra", name=f"{name} mesh")
+
+
+class Series:
+    """VTU files per output step and a .pvd collection for ParaView."""
+
+    def __init__(self, directory: Path, name: str, mesh):
+        self.directory, self.name, self.mesh = directory, name, mesh
+        self.entries: list[tuple[float, str]] = []
+
+    def write(self, step: int, t: float, point_data=None, cell_data=None) -> Path:
+        file = f"{self.name}_{step:04d}.vtu"
+        cell_type = "hexahedron" if isinstance(self.mesh, StructuredGrid) else self.mesh.cell_type
+        meshio.write(self.directory / file, meshio.Mesh(
+            self.mesh.points, [(cell_type, self.mesh.cells)], point_data=point_data or {},
+            cell_data={k: [v] for k, v in (cell_data or {}).items()}))
+        self.entries.append((t, file))
+        rows = "\n".join(f'    <DataSet timestep="{t:.9g}" file="{f}"/>' for t, f in self.entries)
+        (self.directory / f"{self.name}.pvd").write_text(
+            f'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n{rows}\n'
+            f'  </Collection>\n</VTKFile>\n')
+        return self.directory / file
+
+
+def _as_arrays(fields: dict) -> dict:
+    return {k: np.asarray(f.data if isinstance(f, Field) else f) for k, f in fields.items()}
+
+
+def _write_summary(out: Path, summary: dict) -> None:
+    tmp = out / (SUMMARY + ".tmp")
+    tmp.write_text(json.dumps(summary, indent=2, default=float))
+    tmp.replace(out / SUMMARY)
+
+
+def run(scene: CoupledScene, log=print, progress: bool | None = None) -> dict:
+    """Run the coupled `scene`; return its summary (also in ``summary.json``)."""
+    plan = make_plan(scene)
+    out = Path(scene.output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for note in plan.notes:
+        log(f"warning: {note}")
+    run_id = new_run_id()
+    phases = Phases()
+    summary = {"case": str(scene.case_dir), "scene": str(scene.path), "run_id": run_id,
+               **plan.as_dict(), "status": "running", "steps": [], "phases_seconds": phases.seconds}
+    _write_summary(out, summary)
+    start = time.perf_counter()
+    try:
+        with CouplerSession(run_id, mode=scene.messaging["mode"], connect=scene.messaging["connect"]) as session, \
+                Launcher(run_id, out, session.endpoints) as launcher:
+            result = _run(scene, plan, session, launcher, out, phases, summary, log, progress)
+        summary.update(result, status="completed")
+    except BaseException as exc:
+        summary["status"] = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
+        summary["error"] = f"{type(exc).__name__}: {exc}"
+        raise
+    finally:
+        summary["wall_seconds"] = time.perf_counter() - start
+        _write_summary(out, summary)
+    return summary
+
+
+def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progress) -> dict:
+    timeout = scene.messaging["timeout"]
+    clients = {}
+    for p in plan.participants:
+        extra = ["--kind", p.kind] if p.module == "coupler.standins" else []
+        launcher.start(p.name, p.module, ranks=p.ranks, extra_args=extra)
+        clients[p.name] = session.client(p.name, timeout=timeout,
+                                         process_check=lambda name=p.name: launcher.check(name))
+        log(f"started {p.name}: {p.kind} ({p.ranks} rank{'s' * (p.ranks > 1)}), log in {launcher.log_dir / p.name}.log")
+    meshes, announced = {}, {}
+    for name, client in clients.items():
+        phases.timed("start", client.wait_alive, timeout)
+        announced[name] = client.announce()
+        phases.timed(f"{name} setup", client.configure, participant_config(scene, name))
+        header, fields = phases.timed(f"{name} setup", client.geometry)
+        meshes[name] = _mesh_of(name, header, fields)
+        log(f"{name}: {announced[name].get('kind')} on {meshes[name].num_cells} cells")
+    summary["participants_announced"] = announced
+
+    solid = clients["solid"]
+    series = {name: Series(out, name, mesh) for name, mesh in meshes.items()}
+    steps, dt = scene.time["steps"], scene.time["dt"]
+    coupled = "fluid" in clients
+    every = scene.output["every"]
+    last = {}
+
+    if coupled:
+        fluid = clients["fluid"]
+        S, G = meshes["solid"], meshes["fluid"]
+        start = time.perf_counter()
+        to_solid = Transfer.assemble(FunctionSpace(G, "Q0"), FunctionSpace(S, "P1"), "pseudo_l2")
+        to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(G, "Q0"), "pseudo_l2")
+        fraction = np.asarray(to_fluid.D.diagonal()) / G.cell_measures()  # solid volume per cell / cell volume
+        phases.add("transfer", time.perf_counter() - start)
+        if not np.all(to_solid.covered):
+            raise CouplerError(f"{scene.path}: [geometry.fluid]: the fluid grid does not cover the solid "
+                               f"({to_solid.uncovered.size} solid vertices outside it)")
+        weights = np.asarray(to_solid.D.diagonal())  # lumped solid mass: the M-norm of the residual
+        log(f"transfers: {to_solid.stats['pairs_intersected']} cell pairs; solid fills "
+            f"{np.count_nonzero(fraction > 0)} fluid cells")
+
+        def iterate(window, iteration, pressure):
+            solid_out = _as_arrays(phases.timed("solid", solid.advance, window.index, iteration, window.t_start,
+                                                window.dt, {"pressure": Field("pressure", pressure, "Pa")}))
+            velocity = phases.timed("transfer", to_fluid.apply, solid_out["velocity"], fill=0.0)
+            fluid_in = {"solid_velocity": Field("solid_velocity", velocity, "m/s"),
+                        "solid_fraction": Field("solid_fraction", fraction, "1")}
+            fluid_out = _as_arrays(phases.timed("fluid", fluid.advance, window.index, iteration, window.t_start,
+                                                window.dt, fluid_in))
+            last.update(solid=solid_out, fluid=fluid_out, fluid_in=velocity)
+            return phases.timed("transfer", to_solid.apply, fluid_out["pressure"])
+
+        class Checkpoint:
+            def save(self, window):
+                for c in clients.values():
+                    phases.timed("checkpoint", c.save_state, window.index)
+
+            def restore(self, window):
+                for c in clients.values():
+                    phases.timed("checkpoint", c.restore_state, window.index)
+
+        x0 = np.zeros(S.num_points)
+        c = scene.coupling
+        accelerator = make_accelerator(c["acceleration"], relaxation=c["relaxation"], reuse=c["reuse"])
+        mode, checkpoint = "implicit", Checkpoint()
+    else:
+        weights, x0, accelerator, mode, checkpoint = None, np.zeros(0), None, "explicit", None
+
+        def iterate(window, iteration, x):
+            last["solid"] = _as_arrays(phases.timed("solid", solid.advance, window.index, iteration,
+                                                    window.t_start, window.dt, {}))
+            return x
+
+    def on_converged(window, x):
+        record = {"step": window.index, "t": window.t_end}
+        if window.index % every == 0 or window.index == steps - 1:
+            start = time.perf_counter()
+            solid_fields = dict(last["solid"])
+            if coupled:
+                solid_fields["pressure"] = x
+                series["fluid"].write(window.index, window.t_end,
+                                      cell_data={"pressure": last["fluid"]["pressure"], "solid_fraction": fraction,
+                                                 "solid_velocity": last["fluid_in"]})
+            series["solid"].write(window.index, window.t_end, point_data=solid_fields)
+            phases.add("output", time.perf_counter() - start)
+        u = last["solid"].get("displacement")
+        if u is not None:
+            record["max_displacement"] = float(np.max(np.linalg.norm(u, axis=1)))
+        summary["steps"].append(record)
+        _write_summary(out, summary)
+
+    bar = ProgressBar(steps, label=scene.case_dir.name, enabled=progress)
+    try:
+        result = run_coupled(steps, dt, iterate, x0, accelerator, tolerance=scene.coupling["tolerance"],
+                             max_iterations=scene.coupling["max_iterations"], checkpoint=checkpoint,
+                             on_converged=on_converged, progress=bar, weights=weights, coupling=mode)
+    finally:
+        bar.close()
+    for record, step in zip(summary["steps"], result.steps):
+        record.update(iterations=step.iterations, residuals=list(step.residuals), converged=step.converged)
+    for name, client in clients.items():
+        client.finish()
+        launcher.wait(name, timeout=30)
+        stats = client.stats
+        phases.add("messaging", max(stats["seconds"] - stats["remote_seconds"], 0.0))
+    if coupled:
+        _residual_plot(out / "residuals.png", result)
+    log(f"{steps} step{'s' * (steps > 1)} done; results in {out}")
+    return {"iterations": result.iterations, "converged": result.converged}
+
+
+def _residual_plot(path: Path, result) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for step in result.steps:
+        ax.semilogy(range(1, len(step.residuals) + 1), step.residuals, marker="o", ms=3,
+                    label=f"step {step.window}" if len(result.steps) <= 10 else None)
+    ax.axhline(result.tolerance, color="k", ls="--", lw=0.8, label="tolerance")
+    ax.set_xlabel("coupling iteration")
+    ax.set_ylabel("relative interface residual (mass-weighted L2)")
+    ax.set_title(f"fixed-point residuals ({result.accelerator.get('name', '')})")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,110 @@
+"""End to end: `varcouple run` on coupled scenes with stand-in participants, as
+real processes talking zenoh (paper 2.3, Steps 1-6)."""
+
+import json
+import os
+import shutil
+import signal
+import threading
+import time
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from coupler.cli import main
+
+CASE = Path(__file__).resolve().parent.parent / "cases" / "standin_flow"
+
+
+def case_copy(tmp_path, replace):
+    """The stand-in case in tmp_path, with the text replacements {old: new} in its scene."""
+    case = tmp_path / "case"
+    shutil.copytree(CASE, case, ignore=shutil.ignore_patterns("results"))
+    scene = (case / "scene.toml").read_text()
+    for old, new in replace.items():
+        assert old in scene
+        scene = scene.replace(old, new)
+    (case / "scene.toml").write_text(scene)
+    return case
+
+
+def summary(out):
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_implicit_loop_converges_with_iqn_ils(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(CASE), "--output", str(out)]) == 0, capsys.readouterr().err
+    s = summary(out)
+    assert s["status"] == "completed"
+    assert [p["name"] for p in s["participants"]] == ["solid", "fluid"]
+    assert {"participants", "effects", "couplings", "phases_seconds", "steps"} <= set(s)
+    # the fixed point has gain 3 (plain iteration diverges); IQN-ILS needs a few iterations
+    assert all(s["converged"]) and max(s["iterations"]) <= 4
+    for step in s["steps"]:
+        assert step["residuals"][-1] <= 1e-8
+    # the stand-ins: p = p0 - c v with v = (p - p_previous) / (k dt) (spring opening
+    # p / k), so p_n = (p0 + g p_{n-1}) / (1 + g) with the gain g = c / (k dt) = 3
+    g, p = 3e4 / (1e6 * 0.01), 0.0
+    for n in range(4):
+        p = (1e5 + g * p) / (1 + g)
+        step = meshio.read(out / f"solid_{n:04d}.vtu")
+        np.testing.assert_allclose(step.point_data["pressure"], p, rtol=1e-7)
+        np.testing.assert_allclose(step.point_data["displacement"][:, 2], p / 1e6, rtol=1e-7)
+    for phase in ("solid", "fluid", "transfer", "messaging"):
+        assert s["phases_seconds"][phase] > 0
+    assert (out / "solid.pvd").is_file() and (out / "fluid.pvd").is_file() and (out / "residuals.png").is_file()
+
+
+def test_constant_relaxation_diverges_with_a_clear_error(tmp_path, capsys):
+    case = case_copy(tmp_path, {'acceleration = "iqn-ils"': 'acceleration = "constant"\nrelaxation = 1.0'})
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--output", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("varcouple: error: ") and "time step 0" in err and "Traceback" not in err
+    s = summary(out)
+    assert s["status"] == "failed" and "CouplingDiverged" in s["error"]
+
+
+def test_aitken_converges_too(tmp_path, capsys):
+    case = case_copy(tmp_path, {'acceleration = "iqn-ils"': 'acceleration = "aitken"'})
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err
+    s = summary(out)
+    assert all(s["converged"])
+
+
+def test_killed_participant_ends_the_run_cleanly(tmp_path, capsys):
+    case = case_copy(tmp_path, {"steps = 4": "steps = 100000"})
+    out = tmp_path / "out"
+
+    def kill_fluid():
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                s = summary(out)
+            except (OSError, ValueError):
+                s = {}
+            if s.get("steps"):
+                os.kill(s["participants_announced"]["fluid"]["pid"], signal.SIGKILL)
+                return
+            time.sleep(0.05)
+
+    killer = threading.Thread(target=kill_fluid)
+    killer.start()
+    start = time.monotonic()
+    code = main(["run", str(case), "--output", str(out)])
+    killer.join()
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "fluid" in err and "Traceback" not in err
+    assert time.monotonic() - start < 60
+    s = summary(out)
+    assert s["status"] == "failed" and len(s["steps"]) >= 1  # what was done is kept
+    pids = [p["pid"] for p in s["participants_announced"].values()]
+    time.sleep(0.5)
+    for pid in pids:  # every process has ended
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
