@@ -1,0 +1,30 @@
+"""solid_fenicsx: the solid participant of varcouple on dolfinx 0.5.2.
+
+Linear elasticity on tetrahedra (Hooke's law, paper eq. 5; boundary value
+problem eq. 7 without contact), static and dynamic with the effective density
+of an immersed solid (eq. 13), P1 or P2, PETSc CG + GAMG, MPI-parallel.
+
+>>> from solid_fenicsx import box_mesh, Elasticity
+>>> solid = box_mesh(upper=(1, 1, 1), shape=(8, 8, 8))          # faces xmin..zmax
+>>> s = Elasticity(solid, E=1e9, nu=0.3)
+>>> s.add_dirichlet("zmin", 0.0, components="z"); s.add_pressure("zmax", 1e6)
+>>> u = s.solve_static()
+
+Modules: :mod:`.mesh` (meshes and boundary tags), :mod:`.constitutive`
+(material, stress), :mod:`.timestepping` (Newmark, generalized-alpha),
+:mod:`.linear_solver` (KSP set-up), :mod:`.elasticity` (the solver),
+:mod:`.vertex_io` (arrays for the coupler), :mod:`.output` (XDMF, VTU),
+:mod:`.cases` (block compression, penny crack, bar, cantilever).
+"""
+
+from .constitutive import LockingWarning, Material
+from .elasticity import Elasticity, evaluate
+from .linear_solver import LinearSolveError, SolverOptions
+from .mesh import SolidMesh, SolidMeshError, box_mesh, from_arrays, graded_nodes, read_mesh
+from .output import VTUSeries, XDMFSeries
+from .timestepping import Scheme, make_scheme
+from .vertex_io import VertexIO, write_vtu
+
+__all__ = ["Elasticity", "LinearSolveError", "LockingWarning", "Material", "Scheme", "SolidMesh", "SolidMeshError",
+           "SolverOptions", "VTUSeries", "VertexIO", "XDMFSeries", "box_mesh", "evaluate", "from_arrays",
+           "graded_nodes", "make_scheme", "read_mesh", "write_vtu"]

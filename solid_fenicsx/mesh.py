@@ -1,0 +1,375 @@
+"""Distributed tetrahedral meshes with named boundaries for the solid participant.
+
+The solid of paper section 2.2 (eq. 7) is split into boundary parts (Dirichlet
+``Gamma_D``, Neumann ``Gamma_N``, and, for fluid coupling, the wetted surface).
+This module turns a tetrahedral mesh, given as arrays or read from a file with
+meshio, into a dolfinx mesh distributed over an MPI communicator plus one facet
+:class:`MeshTags` and a ``name -> tag`` dictionary, so that loads can be given
+per named boundary.
+
+Boundary facets get their tags from two sources, in this order:
+
+1. triangle blocks of the input with integer cell data (``gmsh:physical`` or a
+   named cell-data array); gmsh physical names (``field_data``) name the tags,
+   tags without a name are named by their value (``"3"``);
+2. geometric predicates given by the caller, evaluated on the midpoints of the
+   exterior facets, e.g. ``{"top": lambda x: np.isclose(x[2], 1.0)}`` (``x``
+   has shape ``(3, n)``, dolfinx's convention). A predicate overrides earlier
+   tags on the facets it selects (a facet carries one tag).
+
+Vertex numbering: the vertices of the input, compacted to those used by a cell,
+in input order, are the "input numbering" that :mod:`solid_fenicsx.vertex_io`
+gathers fields in. ``SolidMesh.point_map`` (root rank) gives, for each of them,
+its index in the original point array.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+import dolfinx
+import dolfinx.cpp
+
+#: tetrahedra splitting a VTK-ordered hexahedron along its 0-6 diagonal; every
+#: hexahedron of a lattice split alike gives a conforming tet mesh
+HEX_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])
+
+#: names of the six faces of a box, in the order (axis, side)
+BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+
+Predicate = Callable[[np.ndarray], np.ndarray]
+
+
+class SolidMeshError(ValueError):
+    """A mesh that cannot be used by the solid (no tetrahedra, bad tags, ...)."""
+
+
+@dataclass
+class SolidMesh:
+    """A distributed dolfinx tet mesh with its boundary tags.
+
+    Attributes
+    ----------
+    mesh : dolfinx.mesh.Mesh, P1 geometry, distributed over ``mesh.comm``
+    facet_tags : facet MeshTags (local facets, one integer tag each)
+    boundaries : name -> integer tag (the same on every rank)
+    num_points, num_cells : global counts of input vertices and tetrahedra
+    point_map : on the root rank, input-numbering index -> index in the
+        original point array (points not used by any cell were dropped); None elsewhere
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    facet_tags: object
+    boundaries: dict[str, int]
+    num_points: int
+    num_cells: int
+    point_map: np.ndarray | None = None
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.mesh.comm
+
+    def tags_of(self, boundary: str | int | Sequence[str | int]) -> tuple[int, ...]:
+        """Integer tags of a boundary given by name, tag, or a list of them."""
+        items = [boundary] if isinstance(boundary, (str, int, np.integer)) else list(boundary)
+        tags = []
+        for item in items:
+            if isinstance(item, str):
+                if item not in self.boundaries:
+                    raise SolidMeshError(f"unknown boundary {item!r}; known: {sorted(self.boundaries)}")
+                tags.append(self.boundaries[item])
+            else:
+                tags.append(int(item))
+        return tuple(tags)
+
+    def facets(self, boundary) -> np.ndarray:
+        """Local indices of the facets of a boundary (name, tag or list of them)."""
+        tags = self.tags_of(boundary)
+        mask = np.isin(self.facet_tags.values, tags)
+        return np.asarray(self.facet_tags.indices[mask], dtype=np.int32)
+
+
+# -- construction from arrays -------------------------------------------------
+def _tet_domain() -> ufl.Mesh:
+    return ufl.Mesh(ufl.VectorElement("Lagrange", ufl.tetrahedron, 1))
+
+
+def _compact(points: np.ndarray, tets: np.ndarray, triangles: np.ndarray | None):
+    """Drop points no tetrahedron uses; renumber cells and triangles."""
+    used = np.zeros(len(points), bool)
+    used[tets.ravel()] = True
+    point_map = np.flatnonzero(used)
+    new_index = np.full(len(points), -1, np.int64)
+    new_index[point_map] = np.arange(len(point_map))
+    tris = None
+    if triangles is not None and len(triangles):
+        tris = new_index[triangles]
+        if (tris < 0).any():
+            raise SolidMeshError("boundary triangles use points that belong to no tetrahedron")
+    elif triangles is not None:
+        tris = np.empty((0, 3), np.int64)
+    return points[point_map], new_index[tets], tris, point_map
+
+
+def _check_arrays(points, tets):
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise SolidMeshError(f"points must have shape (n, 3), got {points.shape}")
+    if tets.ndim != 2 or tets.shape[1] != 4:
+        raise SolidMeshError(f"cells must be tetrahedra, shape (m, 4), got {tets.shape}")
+    if len(tets) == 0:
+        raise SolidMeshError("the mesh has no tetrahedra")
+    if tets.min() < 0 or tets.max() >= len(points):
+        raise SolidMeshError("cell vertex index out of range")
+    if not np.isfinite(points).all():
+        raise SolidMeshError("points contain NaN or infinite coordinates")
+    p = points[tets]
+    vol = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+    scale = np.max(np.linalg.norm(p - p[:, :1], axis=2), axis=1) ** 3
+    if (np.abs(vol) <= 1e-14 * scale).any():
+        raise SolidMeshError(f"{int((np.abs(vol) <= 1e-14 * scale).sum())} degenerate tetrahedra")
+
+
+def _prepare(points, cells, triangles, triangle_tags):
+    """Validate and compact the root's arrays."""
+    points = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
+    if points.ndim == 2 and points.shape[1] == 2:
+        points = np.hstack([points, np.zeros((len(points), 1))])
+    tets = np.asarray(cells, dtype=np.int64)
+    _check_arrays(points, tets)
+    tris = None if triangles is None else np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    vals = None
+    if tris is not None:
+        vals = np.asarray(triangle_tags, dtype=np.int32).ravel()
+        if len(vals) != len(tris):
+            raise SolidMeshError(f"{len(tris)} triangles but {len(vals)} triangle tags")
+    points, tets, tris, point_map = _compact(points, tets, tris)
+    return points, tets, tris, vals, point_map
+
+
+def from_arrays(points=None, cells=None, triangles=None, triangle_tags=None,
+                tag_names: Mapping[str, int] | None = None,
+                boundaries: Mapping[str, Predicate] | None = None,
+                comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
+    """Distribute a tet mesh given as arrays on the ``root`` rank.
+
+    Parameters
+    ----------
+    points : (n, 3) float array, cells : (m, 4) int array (VTK/dolfinx vertex order);
+        read on ``root`` only (other ranks may pass None)
+    triangles, triangle_tags : optional tagged boundary triangles (k, 3) and (k,)
+        (vertex indices into ``points``); only exterior facets keep their tag
+    tag_names : name -> tag for the triangle tags (others are named ``str(tag)``); read on ``root``
+    boundaries : name -> predicate on facet midpoints, ``x`` of shape (3, n)
+    """
+    rank = comm.rank
+    payload, error = None, None
+    points_, tets, tris, vals, point_map = np.empty((0, 3)), np.empty((0, 4), np.int64), None, None, None
+    if rank == root:
+        try:
+            points_, tets, tris, vals, point_map = _prepare(points, cells, triangles, triangle_tags)
+            file_tags = sorted(set(vals.tolist())) if vals is not None else []
+            payload = (len(points_), len(tets), tris is not None, file_tags, dict(tag_names or {}))
+        except SolidMeshError as exc:
+            error = str(exc)
+    error = comm.bcast(error, root=root)
+    if error:
+        raise SolidMeshError(error)
+    num_points, num_cells, has_tris, file_tags, tag_names = comm.bcast(payload, root=root)
+    points = points_
+    mesh = dolfinx.mesh.create_mesh(comm, tets, points, _tet_domain())
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    mesh.topology.create_connectivity(tdim - 1, 0)
+
+    indices = np.empty(0, np.int32)
+    values = np.empty(0, np.int32)
+    names: dict[str, int] = {}
+    if has_tris:
+        if rank != root:
+            tris, vals = np.empty((0, 3), np.int64), np.empty(0, np.int32)
+        local_entities, local_values = dolfinx.cpp.io.distribute_entity_data(mesh._mesh, tdim - 1, tris, vals)
+        adj = dolfinx.cpp.graph.AdjacencyList_int32(np.asarray(local_entities, dtype=np.int32))
+        ft = dolfinx.cpp.mesh.create_meshtags(mesh._mesh, tdim - 1, adj, np.asarray(local_values, np.int32))
+        exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+        keep = np.isin(ft.indices, exterior)
+        indices, values = np.asarray(ft.indices[keep], np.int32), np.asarray(ft.values[keep], np.int32)
+        by_tag = {int(v): k for k, v in (tag_names or {}).items()}
+        for t in file_tags:
+            names[by_tag.get(int(t), str(int(t)))] = int(t)
+    return _finish(mesh, indices, values, names, boundaries, num_points, num_cells, point_map)
+
+
+def _finish(mesh, indices, values, names, boundaries, num_points, num_cells, point_map) -> SolidMesh:
+    """Add predicate boundaries to the file tags and build the MeshTags."""
+    tdim = mesh.topology.dim
+    tags = dict(zip(indices.tolist(), values.tolist()))
+    if boundaries:
+        exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+        mid = dolfinx.mesh.compute_midpoints(mesh, tdim - 1, exterior).T  # (3, n)
+        next_tag = max(list(names.values()) + [0]) + 1
+        for name, predicate in boundaries.items():
+            if name in names:
+                raise SolidMeshError(f"boundary {name!r} is both in the mesh file and given as a predicate")
+            selected = exterior[np.asarray(predicate(mid), dtype=bool).reshape(-1)] if len(exterior) else exterior
+            for f in selected.tolist():
+                tags[f] = next_tag
+            names[name] = next_tag
+            next_tag += 1
+    order = np.array(sorted(tags), dtype=np.int32)
+    vals = np.array([tags[i] for i in order.tolist()], dtype=np.int32)
+    facet_tags = dolfinx.mesh.meshtags(mesh, tdim - 1, order, vals)
+    facet_tags.name = "boundaries"
+    # warn about named boundaries without any facet (typo in a predicate, overridden tag)
+    counts = mesh.comm.allreduce(np.array([np.count_nonzero(vals == t) for t in names.values()], np.int64)
+                                 if names else np.zeros(0, np.int64), op=MPI.SUM)
+    for (name, _), n in zip(names.items(), counts):
+        if n == 0:
+            warnings.warn(f"boundary {name!r} has no facets", stacklevel=3)
+    return SolidMesh(mesh, facet_tags, names, num_points, num_cells, point_map)
+
+
+# -- files --------------------------------------------------------------------
+_TAG_KEYS = ("gmsh:physical", "medit:ref", "boundary", "tags", "CellEntityIds")
+
+
+def read_mesh(path, boundaries: Mapping[str, Predicate] | None = None, tag_key: str | None = None,
+              comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
+    """Read a tet mesh with meshio (gmsh .msh, VTU, XDMF, ...) on ``root`` and distribute it.
+
+    Facet tags come from the triangle blocks' integer cell data ``tag_key``
+    (default: the first of ``gmsh:physical``, ``medit:ref``, ``boundary``,
+    ``tags``, ``CellEntityIds`` present); gmsh physical names of dimension 2
+    name them. Second-order tetrahedra are reduced to their corner vertices.
+    """
+    args = {}
+    error = None
+    if comm.rank == root:
+        try:
+            args = _read_on_root(str(path), tag_key)
+        except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
+            error = f"{path}: {exc}"
+    error = comm.bcast(error, root=root)
+    if error:
+        raise SolidMeshError(error)
+    return from_arrays(comm=comm, root=root, boundaries=boundaries, **args)
+
+
+def _read_on_root(path: str, tag_key: str | None) -> dict:
+    import meshio
+
+    m = meshio.read(path)
+    tets = [b.data[:, :4] for b in m.cells if b.type in ("tetra", "tetra10")]
+    if not tets:
+        raise SolidMeshError(f"no tetrahedra (cell blocks: {[b.type for b in m.cells]})")
+    tri_blocks = [(i, b) for i, b in enumerate(m.cells) if b.type in ("triangle", "triangle6")]
+    out = {"points": m.points[:, :3] if m.points.shape[1] >= 3 else m.points, "cells": np.concatenate(tets)}
+    if tri_blocks:
+        key = tag_key
+        if key is None:
+            key = next((k for k in _TAG_KEYS if k in m.cell_data), None)
+        if key is None:
+            ints = [k for k, v in m.cell_data.items()
+                    if all(np.issubdtype(np.asarray(v[i]).dtype, np.integer) for i, _ in tri_blocks)]
+            key = ints[0] if ints else None
+        if key is not None:
+            if key not in m.cell_data:
+                raise SolidMeshError(f"no cell data {key!r} (have {sorted(m.cell_data)})")
+            out["triangles"] = np.concatenate([b.data[:, :3] for _, b in tri_blocks])
+            out["triangle_tags"] = np.concatenate([np.asarray(m.cell_data[key][i]).ravel() for i, _ in tri_blocks])
+            names = {}
+            for name, data in (m.field_data or {}).items():
+                data = np.atleast_1d(data)
+                if len(data) >= 2 and int(data[1]) == 2:
+                    names[name] = int(data[0])
+            out["tag_names"] = names
+    return out
+
+
+# -- boxes --------------------------------------------------------------------
+def graded_nodes(start: float, stop: float, h_fine: float, fine_length: float = 0.0,
+                 growth: float = 1.25) -> np.ndarray:
+    """Node coordinates on [start, stop]: spacing about ``h_fine`` over the first
+    ``fine_length`` from ``start``, then cells growing geometrically by a ratio
+    of at most ``growth`` (chosen so the last node lands on ``stop``). Pass
+    start > stop to refine toward the upper end (the nodes then run from start
+    to stop; :func:`box_mesh` sorts its axes)."""
+    length = abs(stop - start)
+    if h_fine <= 0 or length <= 0 or growth < 1:
+        raise SolidMeshError("graded_nodes needs h_fine > 0, start != stop and growth >= 1")
+    fine_length = min(max(fine_length, 0.0), length)
+    n_fine = int(round(fine_length / h_fine))
+    fine = np.linspace(0.0, fine_length, n_fine + 1) if n_fine else np.zeros(1)
+    h = fine_length / n_fine if n_fine else h_fine
+    rest = length - fine[-1]
+    if rest <= 1e-12 * length:
+        x = fine
+    elif growth == 1.0 or rest <= h * growth * 1.5:
+        n = max(1, int(round(rest / h)))
+        x = np.concatenate([fine, fine[-1] + np.linspace(0, rest, n + 1)[1:]])
+    else:
+        k0 = 1 if n_fine else 0  # first coarse cell: h * r (after fine cells) or h
+        n = 1
+        while h * sum(growth ** k for k in range(k0, k0 + n)) < rest:
+            n += 1
+        lo, hi = 1.0, growth  # ratio r with h * (r^k0 + ... + r^(k0+n-1)) = rest
+        for _ in range(100):
+            r = 0.5 * (lo + hi)
+            lo, hi = (r, hi) if h * sum(r ** k for k in range(k0, k0 + n)) < rest else (lo, r)
+        steps = h * r ** np.arange(k0, k0 + n)
+        steps *= rest / steps.sum()
+        x = np.concatenate([fine, fine[-1] + np.cumsum(steps)])
+    x[-1] = length
+    return start + np.sign(stop - start) * x
+
+
+def box_arrays(axes: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Points and tetrahedra of a lattice with node coordinates ``axes`` = (xs, ys, zs)
+    (each increasing); every lattice hexahedron is split into six tets."""
+    xs, ys, zs = (np.asarray(a, float) for a in axes)
+    for a in (xs, ys, zs):
+        if len(a) < 2 or np.any(np.diff(a) <= 0):
+            raise SolidMeshError("box node coordinates must be increasing, at least two per axis")
+    nx, ny, nz = len(xs) - 1, len(ys) - 1, len(zs) - 1
+    Z, Y, X = np.meshgrid(zs, ys, xs, indexing="ij")
+    points = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])  # x fastest
+    px, py = nx + 1, ny + 1
+    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    base = (i + px * (j + py * k)).ravel()
+    hexes = base[:, None] + np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
+    return points, hexes[:, HEX_TETS].reshape(-1, 4)
+
+
+def box_mesh(lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), shape=(4, 4, 4), axes=None,
+             boundaries: Mapping[str, Predicate] | None = None,
+             transform: Callable[[np.ndarray], np.ndarray] | None = None,
+             comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
+    """A structured tet mesh of a box, faces named ``xmin, xmax, ymin, ymax, zmin, zmax``.
+
+    Either ``lower``/``upper``/``shape`` (uniform), or ``axes`` = three increasing
+    arrays of node coordinates (e.g. from :func:`graded_nodes`, to refine toward
+    a crack). ``boundaries`` add named predicates that override the face names
+    on the facets they select (e.g. a crack disk on ``zmin``). ``transform``
+    maps the (n, 3) lattice points before the mesh is built (e.g. to fit a
+    curved crack front); it must keep each box face in its plane.
+    """
+    if axes is None:
+        axes = [np.linspace(lower[d], upper[d], int(shape[d]) + 1) for d in range(3)]
+    axes = [np.unique(np.asarray(a, float)) for a in axes]
+    lo = [a[0] for a in axes]
+    hi = [a[-1] for a in axes]
+    tol = [1e-10 * (h - l) for l, h in zip(lo, hi)]
+    faces = {}
+    for d in range(3):
+        faces[BOX_FACES[2 * d]] = (lambda x, d=d: np.abs(x[d] - lo[d]) <= tol[d])
+        faces[BOX_FACES[2 * d + 1]] = (lambda x, d=d: np.abs(x[d] - hi[d]) <= tol[d])
+    faces.update(boundaries or {})
+    points, cells = box_arrays(axes) if comm.rank == root else (None, None)
+    if transform is not None and comm.rank == root:
+        points = np.asarray(transform(points), dtype=np.float64)
+    return from_arrays(points, cells, boundaries=faces, comm=comm, root=root)

@@ -1,0 +1,135 @@
+"""solid_fenicsx.elasticity: static linear elasticity (paper eq. 5, 7): exact
+solutions, loads as constants and as vertex fields, stress, locking."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+pytest.importorskip("dolfinx")
+
+from mpi4py import MPI  # noqa: E402
+
+from solid_fenicsx import Elasticity, LockingWarning, box_mesh  # noqa: E402
+from solid_fenicsx.cases import block_compression, block_exact, cantilever  # noqa: E402
+
+E, NU, P = 1e9, 0.3, 1e6
+
+
+@pytest.fixture(scope="module")
+def cube():
+    return box_mesh(upper=(1.0, 1.0, 1.0), shape=(4, 4, 4))
+
+
+def _rollers(s):
+    s.add_dirichlet("zmin", 0.0, components="z")
+    s.add_dirichlet("xmin", 0.0, components="x")
+    s.add_dirichlet("ymin", 0.0, components="y")
+
+
+@pytest.mark.parametrize("solver,degree", [("cg", 1), ("lu", 1), ("cg", 2)])
+def test_block_compression_exact(cube, solver, degree):
+    result = block_compression(E, NU, P, solid=cube, degree=degree, solver=solver, rtol=1e-12)
+    assert result.error < 1e-6, result.error
+    # the gathered vertex field agrees too (input numbering)
+    s = result.solver
+    pts, u = s.vertices.points(), s.vertex_values("displacement")
+    if MPI.COMM_WORLD.rank == 0:
+        exact = block_exact(pts, E, NU, P)
+        assert np.abs(u - exact).max() <= 1e-6 * np.abs(exact).max()
+
+
+def test_von_mises_uniaxial(cube):
+    s = block_compression(E, NU, P, solid=cube).solver
+    for kind in ("DG0", "P1"):
+        vm = s.von_mises(kind).x.array
+        assert np.allclose(vm, P, rtol=1e-8), kind
+    sig = s.evaluate([[0.3, 0.6, 0.2]], s.von_mises("DG0"))
+    assert np.isclose(sig[0, 0], P, rtol=1e-8)
+
+
+def test_vertex_fields_equal_constant_loads(cube):
+    """A pressure field, a traction field and the constant pressure give one solution."""
+    ref = block_compression(E, NU, P, solid=cube).solver.u.x.array
+    n = cube.num_points
+    root = MPI.COMM_WORLD.rank == 0
+    for kind in ("pressure", "traction"):
+        s = Elasticity(cube, E=E, nu=NU, rtol=1e-12)
+        _rollers(s)
+        if kind == "pressure":
+            s.add_pressure_field("zmax", name="p")
+            s.set_vertex_field("p", np.full(n, P) if root else None)
+        else:
+            s.add_traction_field("zmax", name="p")
+            s.set_vertex_field("p", np.tile([0.0, 0.0, -P], (n, 1)) if root else None)
+        s.solve_static()
+        assert np.allclose(s.u.x.array, ref, rtol=0, atol=1e-9 * np.abs(ref).max()), kind
+
+
+def test_body_force_and_prescribed_component_p2():
+    """Column under gravity: quadratic exact solution, reproduced by P2; the
+    bottom carries the exact u_z as a callable Dirichlet value on one component."""
+    rho_g, H = 2e4, 1.0
+
+    def exact(x):
+        return np.stack([NU * rho_g * (H - x[2]) * x[0] / E, NU * rho_g * (H - x[2]) * x[1] / E,
+                         -rho_g / E * (H * x[2] - x[2] ** 2 / 2) + NU * rho_g * (x[0] ** 2 + x[1] ** 2) / (2 * E)])
+
+    solid = box_mesh(upper=(1.0, 1.0, H), shape=(2, 2, 3))
+    s = Elasticity(solid, E=E, nu=NU, degree=2, solver="lu")
+    s.add_dirichlet("zmin", exact, components="z")
+    s.add_dirichlet("xmin", 0.0, components="x")
+    s.add_dirichlet("ymin", 0.0, components="y")
+    s.add_body_force((0.0, 0.0, -rho_g))
+    s.solve_static()
+    x = s.V.tabulate_dof_coordinates()
+    ref = exact(x.T).T
+    err = MPI.COMM_WORLD.allreduce(np.abs(s.u.x.array.reshape(-1, 3) - ref).max(), op=MPI.MAX)
+    assert err < 1e-9 * np.abs(ref).max()
+
+
+def test_prescribed_vector_displacement_and_constant_update(cube):
+    s = Elasticity(cube, E=E, nu=NU, rtol=1e-12)
+    g = s.add_dirichlet(["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"], (1e-3, 2e-3, 0.0))
+    s.solve_static()
+    assert np.allclose(s.u.x.array.reshape(-1, 3), [1e-3, 2e-3, 0.0], atol=1e-14)
+    g.value[:] = (0.0, 0.0, -5e-4)  # a new value, same matrix
+    s.solve_static()
+    assert np.allclose(s.u.x.array.reshape(-1, 3), [0.0, 0.0, -5e-4], atol=1e-14)
+    assert np.allclose(s.von_mises("DG0").x.array, 0.0, atol=1e-3)
+
+
+def test_evaluate_outside_is_nan(cube):
+    s = block_compression(E, NU, P, solid=cube).solver
+    values = s.evaluate([[0.5, 0.5, 0.5], [2.0, 0.0, 0.0]])
+    assert np.allclose(values[0], block_exact([0.5, 0.5, 0.5], E, NU, P)[0])
+    assert np.isnan(values[1]).all()
+
+
+def test_locking_warning_and_p2_locking_free(cube):
+    with pytest.warns(LockingWarning, match="nearly incompressible"):
+        Elasticity(cube, E=E, nu=0.499)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LockingWarning)
+        s = Elasticity(cube, E=E, nu=0.499, locking_free=True)
+    assert s.degree == 2
+    # cantilever, 20x2x2 lattice: P1 locks at nu = 0.499, P2 does not
+    p1_free, beam_free = cantilever(0.3, degree=1)
+    p1, beam = cantilever(0.499, degree=1)
+    p2, _ = cantilever(0.499, locking_free=True)
+    assert p1 / beam < 0.1 < 0.4 < p1_free / beam_free  # locked: 2 % of the beam deflection
+    assert p2 / beam > 0.9
+
+
+def test_bad_parameters():
+    solid = box_mesh(shape=(1, 1, 1))
+    with pytest.raises(ValueError, match="Poisson"):
+        Elasticity(solid, E=E, nu=0.5)
+    with pytest.raises(ValueError, match="rho_s - rho_f"):
+        Elasticity(solid, E=E, nu=NU, density=1000.0, fluid_density=1000.0, scheme="newmark", dt=1.0)
+    with pytest.raises(RuntimeError, match="static"):
+        Elasticity(solid, E=E, nu=NU).step(1.0)
+    with pytest.raises(ValueError, match="components"):
+        Elasticity(solid, E=E, nu=NU).add_dirichlet("zmin", 0.0, components=[3])
