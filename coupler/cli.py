@@ -141,7 +141,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         from .coupled_run import run as run_coupled_case
 
-        run_coupled_case(scene, log=log)
+        summary = run_coupled_case(scene, log=log)
+        if not summary.get("check", {}).get("passed", True):
+            log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}; the [check] FAILED")
+            return 1
     log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}")
     return 0
 

@@ -68,7 +68,8 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
         config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material,
                   "loads": loads, "degree": solver["degree"], "linear_solver": solver["linear_solver"],
                   "rtol": solver["rtol"], "dynamic": "dynamics" in scene.effects,
-                  "fluid_density": (scene.fluid_material or {}).get("density", 0.0) if "flow" in scene.effects else 0.0}
+                  "fluid_density": (scene.fluid_material or {}).get("density", 0.0) if "flow" in scene.effects else 0.0,
+                  "wetted": scene.coupling["interface"]}
         if solver["participant"] == "spring_solid":
             config["k"] = solver["stiffness"]
         return config
@@ -258,7 +259,34 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
     if coupled:
         _residual_plot(out / "residuals.png", result)
     log(f"{steps} step{'s' * (steps > 1)} done; results in {out}")
-    return {"iterations": result.iterations, "converged": result.converged}
+    done = {"iterations": result.iterations, "converged": result.converged}
+    if scene.check:
+        done["check"] = check_displacement(scene.check, meshes["solid"].points, last["solid"]["displacement"])
+        c = done["check"]
+        log(f"check: displacement error {c['error']:.3e} relative on {c['vertices']} vertices "
+            f"(tolerance {c['tolerance']:g}): {'PASS' if c['passed'] else 'FAIL'}")
+    return done
+
+
+def check_displacement(check: dict, points: np.ndarray, u: np.ndarray) -> dict:
+    """Compare the displacement with the scene's expected one ([check]): the largest
+    error over the selected vertices relative to the largest expected value."""
+    from .scene import evaluate_expression
+
+    selected = np.ones(len(points), bool)
+    if "where" in check:
+        selected = evaluate_expression(check["where"], points) > 0.5
+    if not selected.any():
+        raise CouplerError(f"[check] where: {check['where']!r} selects no vertex of the solid")
+    error = scale = 0.0
+    for axis, c in enumerate("xyz"):
+        if c in check:
+            exact = evaluate_expression(check[c], points[selected])
+            error = max(error, float(np.max(np.abs(u[selected, axis] - exact))))
+            scale = max(scale, float(np.max(np.abs(exact))))
+    relative = error / scale if scale > 0 else error
+    return {"error": relative, "absolute_error": error, "tolerance": check["tolerance"],
+            "passed": bool(relative <= check["tolerance"]), "vertices": int(selected.sum())}
 
 
 def _residual_plot(path: Path, result) -> None:

@@ -153,6 +153,7 @@ class CoupledScene:
     messaging: dict
     output_dir: Path
     output: dict
+    check: dict | None = None  # expected displacement: {"x"|"y"|"z": expr, "where": expr, "tolerance": float}
 
     def error(self, table: str, key: str, reason: str) -> SceneError:
         return SceneError(f"{self.path}: [{table}] {key}: {reason}")
@@ -168,11 +169,15 @@ TABLES = {
     "time": {"dt": "time step [s]", "steps": "number of time steps"},
     "coupling": {"acceleration": f"one of {', '.join(ACCELERATIONS)}", "relaxation": "initial relaxation",
                  "tolerance": "relative interface residual (mass-weighted L2)",
-                 "max_iterations": "per time step", "reuse": "IQN-ILS: past time windows reused"},
+                 "max_iterations": "per time step", "reuse": "IQN-ILS: past time windows reused",
+                 "interface": "the solid boundary the fluid pressure acts on (flow)"},
     "messaging": {"mode": "zenoh mode: peer (default) or client", "connect": "zenoh endpoints to connect to",
                   "timeout": "seconds to wait for a participant's answer"},
     "output": {"directory": "output directory, relative to the case (default 'results')",
                "every": "write fields every N steps (default 1)"},
+    "check": {"x": "expected x displacement (expression in x, y, z)", "y": "expected y displacement",
+              "z": "expected z displacement", "where": "expression selecting the vertices compared (default all)",
+              "tolerance": "largest relative error accepted"},
 }
 SOLID_KEYS = {"mesh": "mesh file (any format meshio reads), relative to the case",
               "lower": "box generator: lower corner", "upper": "box generator: upper corner",
@@ -245,12 +250,29 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                     "relaxation": coupling.number("relaxation", 0.5, minimum=1e-6, maximum=1.0),
                     "tolerance": coupling.number("tolerance", 1e-6, positive=True),
                     "max_iterations": coupling.integer("max_iterations", 50),
-                    "reuse": coupling.integer("reuse", 8, minimum=0)}
+                    "reuse": coupling.integer("reuse", 8, minimum=0),
+                    "interface": coupling.string("interface", None)}
+    if "flow" in effects:
+        if coupling_cfg["interface"] is None:
+            raise coupling.error("interface", "missing: the solid boundary the fluid pressure acts on")
+        if coupling_cfg["interface"] not in solid.boundaries:
+            raise coupling.error("interface", f"unknown boundary {coupling_cfg['interface']!r}; named boundaries: "
+                                              f"{', '.join(solid.boundaries)}")
 
     messaging = Table(path, "messaging", data.get("messaging", {}), TABLES["messaging"])
     messaging_cfg = {"mode": messaging.string("mode", "peer", ("peer", "client")),
                      "connect": messaging.strings("connect", []),
                      "timeout": messaging.number("timeout", 300.0, positive=True)}
+
+    check = None
+    if "check" in data:
+        t = Table(path, "check", data["check"], TABLES["check"])
+        check = {c: t.string(c, None) for c in ("x", "y", "z", "where") if c in t.data}
+        for key, expression in check.items():
+            check_expression(expression, t.where(key))
+        if not set(check) & {"x", "y", "z"}:
+            raise t.error("z", "give the expected displacement of at least one component (x, y or z)")
+        check["tolerance"] = t.number("tolerance", positive=True)
 
     out = Table(path, "output", data.get("output", {}), TABLES["output"])
     output_dir = Path(output) if output is not None else case_dir / out.string("directory", "results")
@@ -261,7 +283,7 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                         effects=effects, solid=solid, fluid=fluid, material=material,
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
-                        output={"every": out.integer("every", 1)})
+                        output={"every": out.integer("every", 1)}, check=check)
 
 
 def _solid_geometry(path, case_dir, data) -> SolidGeometry:

@@ -22,7 +22,7 @@ from mpi4py import MPI
 
 from .constitutive import Material
 from .elasticity import Elasticity
-from .mesh import SolidMesh, box_mesh, graded_nodes
+from .mesh import SolidMesh, box_arrays, box_mesh, from_arrays, graded_nodes
 
 
 def _rel_max(err_local: float, ref_local: float, comm: MPI.Comm) -> float:
@@ -73,11 +73,10 @@ def sneddon_opening(r, a: float, E: float, nu: float, p: float) -> np.ndarray:
     return 8.0 * (1.0 - nu ** 2) * p * a / (np.pi * E) * np.sqrt(np.clip(1.0 - (r / a) ** 2, 0.0, None))
 
 
-def penny_crack_mesh(a: float = 0.1, extent: float = 8.0, h_tip: float | None = None, growth: float = 1.3,
-                     comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
-    """Quarter model [0, L]^2 x [0, H] (L = H = extent * a) of a penny crack of
-    radius ``a`` in the plane z = 0, boundaries ``crack`` (z = 0, r < a),
-    ``zmin`` (z = 0, r > a), ``xmin``, ``ymin``, ``xmax``, ``ymax``, ``zmax``.
+def penny_crack_arrays(a: float = 0.1, extent: float = 8.0, h_tip: float | None = None,
+                       growth: float = 1.3) -> tuple[np.ndarray, np.ndarray]:
+    """Points and tets of the quarter model [0, L]^2 x [0, H] (L = H = extent * a)
+    of a penny crack of radius ``a`` in the plane z = 0.
 
     A lattice graded toward x = a, y = a (spacing ``h_tip``, default a/32,
     growing by ``growth`` toward 0 and L) and toward z = 0 is morphed in the
@@ -90,22 +89,30 @@ def penny_crack_mesh(a: float = 0.1, extent: float = 8.0, h_tip: float | None = 
     axis = np.unique(np.concatenate([graded_nodes(a, 0.0, h, 0.0, growth), graded_nodes(a, L, h, 0.0, growth)]))
     zs = graded_nodes(0.0, L, h, 0.0, growth)
     r1, r2 = a + 2.0 * h, 2.0 * a
+    points, cells = box_arrays([axis, axis, zs])
+    x, y = points[:, 0], points[:, 1]
+    rho, r = np.maximum(x, y), np.hypot(x, y)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        to_circle = np.where(r > 0, rho / r, 1.0)
+    w = np.clip((r2 - rho) / (r2 - r1), 0.0, 1.0)
+    scale = w * to_circle + (1.0 - w)
+    points[:, 0] *= scale
+    points[:, 1] *= scale
+    return points, cells
 
-    def morph(points: np.ndarray) -> np.ndarray:
-        x, y = points[:, 0], points[:, 1]
-        rho, r = np.maximum(x, y), np.hypot(x, y)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            to_circle = np.where(r > 0, rho / r, 1.0)
-        w = np.clip((r2 - rho) / (r2 - r1), 0.0, 1.0)
-        scale = w * to_circle + (1.0 - w)
-        out = points.copy()
-        out[:, 0] *= scale
-        out[:, 1] *= scale
-        return out
 
-    tol = 1e-9 * a
-    crack = {"crack": lambda x: (np.abs(x[2]) <= tol) & (x[0] ** 2 + x[1] ** 2 < a * a)}
-    return box_mesh(axes=[axis, axis, zs], transform=morph, boundaries=crack, comm=comm)
+def penny_crack_mesh(a: float = 0.1, extent: float = 8.0, h_tip: float | None = None, growth: float = 1.3,
+                     comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
+    """:func:`penny_crack_arrays` as a distributed mesh with the boundaries ``crack``
+    (z = 0, r < a), ``zmin`` (z = 0, r > a), ``xmin``, ``ymin``, ``xmax``, ``ymax``, ``zmax``."""
+    points, cells = penny_crack_arrays(a, extent, h_tip, growth) if comm.rank == 0 else (None, None)
+    L, tol = extent * a, 1e-9 * a
+    faces = {}
+    for d, name in enumerate("xyz"):
+        faces[f"{name}min"] = (lambda x, d=d: np.abs(x[d]) <= tol)
+        faces[f"{name}max"] = (lambda x, d=d: np.abs(x[d] - L) <= tol)
+    faces["crack"] = lambda x: (np.abs(x[2]) <= tol) & (x[0] ** 2 + x[1] ** 2 < a * a)
+    return from_arrays(points, cells, boundaries=faces, comm=comm)
 
 
 @dataclass

@@ -108,3 +108,17 @@ def test_killed_participant_ends_the_run_cleanly(tmp_path, capsys):
     for pid in pids:  # every process has ended
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_swapping_the_solid_is_one_line(tmp_path, capsys):
+    """The same coupled scene with dolfinx instead of the spring stand-in."""
+    case = case_copy(tmp_path, {'participant = "spring_solid"': 'participant = "solid_fenicsx"'})
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err
+    s = summary(out)
+    assert s["participants_announced"]["solid"]["kind"] == "solid_fenicsx" and all(s["converged"])
+    last = meshio.read(out / "solid_0003.vtu")
+    # the pressure pushes the top face down (static solve: no velocity, so the stand-in
+    # fluid's pressure is the prescribed one)
+    np.testing.assert_allclose(last.point_data["pressure"], 1e5, rtol=1e-9)
+    assert last.point_data["displacement"][:, 2].min() < 0

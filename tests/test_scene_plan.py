@@ -53,6 +53,9 @@ steps = 3
 
 [solvers.fluid]
 participant = "replay_fluid"
+
+[coupling]
+interface = "crack"
 """
 FLUID_PRESSURE = """
 [[loads]]
@@ -112,6 +115,8 @@ BAD = [
     ('["elasticity"]', '\n[solvers.solid]\nparticipant = "abaqus"\n', "[solvers.solid] participant",
      "unknown value 'abaqus'"),
     ('["elasticity"]', '\n[coupling]\nacceleration = "newton"\n', "[coupling] acceleration", "unknown value"),
+    ('["elasticity", "flow"]', FLUID.replace('interface = "crack"', 'interface = "roof"'), "[coupling] interface",
+     "unknown boundary 'roof'"),
     ('["elasticity"]', '\n[time]\ndt = -1.0\n', "[time] dt", "must be positive"),
     ('["elasticity"]', '\n[weather]\nrain = 1\n', "unknown table [weather]", ""),
     ('["elasticity", "dynamics"]', "", "[time] dt", "missing"),

@@ -1,0 +1,135 @@
+"""The solid participant: :class:`Elasticity` behind the protocol of docs/protocol.md.
+
+Started by the coupler as ``[mpirun -n N] python -m solid_fenicsx --run-id R
+--name solid --connect ENDPOINT``. ``configure`` receives the solid's part of the
+scene (:func:`coupler.coupled_run.participant_config`): the mesh (a file or a
+box), named boundaries (box faces, expressions in x, y, z on facet midpoints,
+or tags of the file), the material, the loads, the solver and whether the
+problem is dynamic (paper eq. 13). ``advance`` solves one step (static: one
+solve) with the coupler's inputs (``pressure`` at the vertices, applied on the
+wetted boundary) and returns the displacement, velocity and von Mises stress
+at the vertices, in the numbering of ``geometry``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from coupler.participant import Participant
+from coupler.protocol import Field
+from coupler.scene import evaluate_expression
+
+from .elasticity import Elasticity
+from .mesh import BOX_FACES, from_arrays, read_mesh
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def _face_predicate(face: str, lower, upper):
+    axis, side = BOX_FACES.index(face) // 2, BOX_FACES.index(face) % 2
+    value = (upper if side else lower)[axis]
+    tol = 1e-9 * (np.asarray(upper) - np.asarray(lower)).max()
+    return lambda x: np.abs(x[axis] - value) <= tol
+
+
+def _expression_predicate(text: str):
+    return lambda x: evaluate_expression(text, x.T) > 0.5
+
+
+class SolidParticipant(Participant):
+    """Linear elasticity on dolfinx (see :mod:`solid_fenicsx.elasticity`)."""
+
+    kind = "solid_fenicsx"
+
+    def __init__(self):
+        self.solver: Elasticity | None = None
+        self.states: dict[int, dict] = {}
+        self.dynamic = False
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": ["displacement", "velocity", "von_mises"],
+                "accepts": ["pressure"]}
+
+    def configure(self, config: dict) -> None:
+        comm = self.comm or MPI.COMM_WORLD
+        boundaries, tags = {}, {}
+        box = config.get("box")
+        for name, spec in config.get("boundaries", {}).items():
+            if isinstance(spec, int):
+                tags[name] = spec
+            elif spec in BOX_FACES and box is not None:
+                boundaries[name] = _face_predicate(spec, box["lower"], box["upper"])
+            else:
+                boundaries[name] = _expression_predicate(spec)
+        if box is not None:
+            from transfer.generate import box_tetrahedra
+
+            mesh = box_tetrahedra(box["shape"], box["lower"], box["upper"], jitter=box.get("jitter", 0.0),
+                                  seed=box.get("seed", 0)) if comm.rank == 0 else None
+            solid = from_arrays(mesh.points if mesh else None, mesh.cells if mesh else None,
+                                boundaries=boundaries, comm=comm)
+        else:
+            solid = read_mesh(config["mesh"], boundaries=boundaries, comm=comm)
+        for name, tag in tags.items():
+            if tag not in solid.boundaries.values():
+                raise ValueError(f"boundary {name!r}: tag {tag} is not in {config['mesh']} "
+                                 f"(tags: {sorted(solid.boundaries.values())})")
+        material = config["material"]
+        self.dynamic = bool(config.get("dynamic"))
+        s = Elasticity(solid, E=material["E"], nu=material["nu"], density=material.get("density", 0.0),
+                       degree=int(config.get("degree", 1)), scheme="newmark" if self.dynamic else None,
+                       fluid_density=float(config.get("fluid_density", 0.0)),
+                       solver=config.get("linear_solver", "cg"), rtol=float(config.get("rtol", 1e-10)))
+
+        def where(name):
+            return tags.get(name, name)
+
+        for load in config.get("loads", []):
+            kind, value = load["type"], load.get("value")
+            if kind == "dirichlet":
+                s.add_dirichlet(where(load["boundary"]), value, components=[_AXES[c] for c in load["components"]])
+            elif kind == "pressure":
+                s.add_pressure(where(load["boundary"]), value)
+            elif kind == "traction":
+                s.add_traction(where(load["boundary"]), value)
+            elif kind == "body_force":
+                s.add_body_force(value)
+            else:
+                raise ValueError(f"unknown load type {kind!r}")
+        self.wetted = config.get("wetted")
+        if self.wetted is not None:
+            s.add_pressure_field(where(self.wetted), "pressure")
+        self.solver, self.states = s, {}
+
+    def geometry(self):
+        io = self.solver.vertices
+        points, cells = io.points(), io.tetrahedra()
+        if self.rank != 0:
+            return {}, None
+        return ({"cell_type": "tetra", "boundaries": dict(self.solver.solid.boundaries)},
+                {"points": Field("points", points, "m"), "cells": Field("cells", np.asarray(cells, np.int64))})
+
+    def advance(self, window, iteration, t, dt, inputs):
+        s = self.solver
+        if "pressure" in inputs:
+            if self.wetted is None:
+                raise ValueError("input 'pressure' needs a wetted boundary (config 'wetted')")
+            s.set_vertex_field("pressure", inputs["pressure"].data if self.rank == 0 else None)
+        if self.dynamic:
+            s.step(dt)
+        else:
+            s.solve_static()
+        out = {what: s.vertex_values(what) for what in ("displacement", "velocity", "von_mises")}
+        if self.rank != 0:
+            return {}
+        units = {"displacement": "m", "velocity": "m/s", "von_mises": "Pa"}
+        return {k: Field(k, v, units[k]) for k, v in out.items()}
+
+    def save_state(self, window):
+        self.states[int(window)] = self.solver.save_state()
+        for w in [w for w in self.states if w < int(window) - 1]:
+            del self.states[w]
+
+    def restore_state(self, window):
+        self.solver.restore_state(self.states[int(window)])
