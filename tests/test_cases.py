@@ -77,3 +77,25 @@ def test_nearly_incompressible_rock_warns(tmp_path, capsys):
     assert "nearly incompressible" in capsys.readouterr().out
     log = (tmp_path / "out" / "logs" / "solid.log").read_text()
     assert "LockingWarning" in log
+
+
+def test_dynamic_block_steps_in_time(tmp_path):
+    """With the effect 'dynamics' the solid steps in time (Newmark): the suddenly
+    loaded block moves, with a velocity, and overshoots the static displacement."""
+    scene_changes = {'effects = ["elasticity"]': 'effects = ["elasticity", "dynamics"]',
+                     "[output]": "[time]\ndt = 2e-5\nsteps = 6\n\n[output]"}
+    case = tmp_path / "block"
+    shutil.copytree(CASES / "block_compression", case, ignore=shutil.ignore_patterns("results"))
+    scene = (case / "scene.toml").read_text().split("# uniaxial stress")[0]
+    for old, new in scene_changes.items():
+        scene = scene.replace(old, new)
+    (case / "scene.toml").write_text(scene)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--output", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert len(s["steps"]) == 6
+    moved = [step["max_displacement"] for step in s["steps"]]
+    assert moved[0] > 0 and max(moved) > moved[0]
+    m = meshio.read(out / "solid_0002.vtu")
+    assert np.abs(m.point_data["velocity"]).max() > 0
+    assert (out / "solid.pvd").read_text().count("<DataSet") == 6
