@@ -4,7 +4,7 @@ quadrature, and threads. Prints a table and writes every figure to JSON.
 
     .venv/bin/python bench/transfer.py                  # small: 48k x 83k tets
     .venv/bin/python bench/transfer.py --sizes all --threads 1 2
-    .venv/bin/python bench/transfer.py --quick -o /tmp/t.json   # smoke run (seconds)
+    .venv/bin/python bench/transfer.py --quick -o t.json        # smoke run (seconds)
 
 Every figure is measured in the same run, on the same machine: the baselines (a P1 mass
 matrix on the target mesh, with our vectorised assembly and with dolfinx) and, when the
