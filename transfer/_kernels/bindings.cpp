@@ -7,6 +7,7 @@
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/array.h>
 
+#include <climits>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -28,6 +29,11 @@ nb::ndarray<nb::numpy, T, nb::ndim<1>> to_numpy(std::vector<T>&& v) {
   auto* heap = new std::vector<T>(std::move(v));
   nb::capsule owner(heap, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
   return nb::ndarray<nb::numpy, T, nb::ndim<1>>(heap->data(), {heap->size()}, owner);
+}
+
+void check_dofs(int64_t n_src_dofs, int64_t n_tgt_dofs) {
+  if (n_src_dofs > INT32_MAX || n_tgt_dofs > INT32_MAX)
+    throw std::invalid_argument("more than 2^31 dofs in one process: partition the meshes");
 }
 
 vc::ElementSet element_set(const Points& pts, const Cells& cells, int kind, int degree) {
@@ -76,6 +82,7 @@ NB_MODULE(_kernels, m) {
       [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
          int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,
          int64_t ntd, std::optional<Grid> grid, int nthreads) {
+        check_dofs(nsd, ntd);
         auto src = element_set(sp, sc, skind, sdeg);
         auto tgt = element_set(tp, tc, tkind, tdeg);
         auto rule = simplex_rule(bary, w);
@@ -101,6 +108,7 @@ NB_MODULE(_kernels, m) {
       [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
          int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,
          int64_t ntd, double search_distance, double min_normal_cos, int nthreads) {
+        check_dofs(nsd, ntd);
         auto src = element_set(sp, sc, skind, sdeg);
         auto tgt = element_set(tp, tc, tkind, tdeg);
         auto rule = simplex_rule(bary, w);

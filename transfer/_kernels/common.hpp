@@ -56,9 +56,13 @@ struct SimplexRule {
   std::vector<double> weights;
 };
 
+// Matrix indices: 32 bits (dofs per process < 2^31, checked by the bindings),
+// which halves the memory traffic of assembly.
+using Index = int32_t;
+
 // COO triplets of one thread; merged into CSR by to_csr (sparse.cpp).
 struct Triplets {
-  std::vector<int64_t> rows, cols;
+  std::vector<Index> rows, cols;
   std::vector<double> vals;
   void reserve(size_t n) {
     rows.reserve(n);
@@ -66,14 +70,15 @@ struct Triplets {
     vals.reserve(n);
   }
   void add(int64_t r, int64_t c, double v) {
-    rows.push_back(r);
-    cols.push_back(c);
+    rows.push_back(static_cast<Index>(r));
+    cols.push_back(static_cast<Index>(c));
     vals.push_back(v);
   }
 };
 
 struct CSR {
-  std::vector<int64_t> indptr, indices;
+  std::vector<int64_t> indptr;
+  std::vector<Index> indices;
   std::vector<double> data;
 };
 

@@ -9,8 +9,8 @@ namespace vc {
 
 namespace {
 struct Entry {
-  int64_t col;
   double val;
+  Index col;
 };
 }  // namespace
 
@@ -18,13 +18,13 @@ CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int nthreads) {
   nthreads = std::max(1, nthreads);
   std::vector<int64_t> start(nrows + 1, 0);
   for (const auto& p : parts)
-    for (int64_t r : p.rows) ++start[r + 1];
+    for (Index r : p.rows) ++start[r + 1];
   std::partial_sum(start.begin(), start.end(), start.begin());
   std::vector<Entry> entries(start[nrows]);
   {
     std::vector<int64_t> next(start.begin(), start.end() - 1);
     for (const auto& p : parts)
-      for (size_t k = 0; k < p.rows.size(); ++k) entries[next[p.rows[k]]++] = {p.cols[k], p.vals[k]};
+      for (size_t k = 0; k < p.rows.size(); ++k) entries[next[p.rows[k]]++] = {p.vals[k], p.cols[k]};
   }
   std::vector<int64_t> unique(nrows + 1, 0);
 #pragma omp parallel for schedule(dynamic, 1024) num_threads(nthreads)
