@@ -1,0 +1,322 @@
+"""Write an OpenFOAM (v1912, ESI) case for an axis-aligned structured grid from Python.
+
+Grid: ``origin``, ``spacing``, ``shape`` (cells); one blockMesh block, so the cells are
+numbered x fastest, then y, then z, as :class:`transfer.StructuredGrid`. Every face of
+the box is its own patch, named ``xmin xmax ymin ymax zmin zmax``.
+
+Boundary description (the fluid's part of the scene, JSON-like)::
+
+    {"inlet":  {"velocity": [1, 0, 0]}   # at xmin: fixed velocity (m/s), p zeroGradient
+               or {"pressure": 1.0e3},   #          fixed pressure (Pa), U zeroGradient
+     "outlet": {"pressure": 0.0},        # at xmax: fixed pressure (Pa), U zeroGradient
+     "walls": "wall",                    # every other face (default no-slip wall)
+     "boundaries": {"zmin": "empty", "zmax": "empty"}}   # per-face override
+
+A face condition is ``"wall"`` (no slip), ``"slip"``, ``"symmetry"`` (symmetryPlane),
+``"empty"`` (2D: both faces of the direction with one cell), ``{"velocity": [u, v, w]}``
+or ``{"pressure": p}``.
+
+Units. The case is incompressible (simpleFoam): ``nu = mu / rho`` (m^2/s) in
+constant/transportProperties, and OpenFOAM's ``p`` is the *kinematic* pressure p/rho
+(m^2/s^2). Pressures given here in Pa are divided by ``rho`` when written; the participant
+multiplies the solver's ``p`` by ``rho`` to return Pa.
+
+Immersed solid (volume penalization): the volScalarField ``solid`` (solid volume fraction
+per cell, 0..1) is loaded by a ``readFields`` function object and drives an
+``explicitPorositySource`` fvOption with the ``solidification`` porosity model
+(``T solid;``) over the cellZone ``allCells`` (all cells, made once by topoSet
+``boxToCell`` + ``setToCellZone``). The model adds ``-D(solid) U`` to the kinematic
+momentum equation (implicitly, on the diagonal); ``D`` is a table linear in the
+fraction, from 0 at fraction 0 to ``drag`` (1/s) at fraction 1.
+
+Drag. Default ``drag = 1e4 * max(nu / h_min^2, 1 / dt, U_ref / h_min)``: ``nu/h^2`` is the
+viscous relaxation rate of one cell, ``1/dt`` the time-step rate (transient solvers),
+``U_ref/h`` the advective rate (``U_ref`` the inlet speed, if given). A fully solid cell
+then carries a velocity about 1e-4 of its fluid neighbours'. It is a diagonal term, so a
+large value does not hurt the linear solvers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+# vertex numbering of the block: 0 (x0,y0,z0) 1 (x1,y0,z0) 2 (x1,y1,z0) 3 (x0,y1,z0), 4-7 at z1
+_FACE_VERTS = {"xmin": (0, 4, 7, 3), "xmax": (2, 6, 5, 1), "ymin": (1, 5, 4, 0),
+               "ymax": (3, 7, 6, 2), "zmin": (0, 3, 2, 1), "zmax": (4, 5, 6, 7)}
+
+ZONE = "allCells"
+
+
+def _header(cls: str, obj: str, location: str | None = None, fmt: str = "ascii") -> str:
+    loc = f'    location    "{location}";\n' if location else ""
+    return ("FoamFile\n{\n    version     2.0;\n    format      " + fmt + ";\n"
+            f"    class       {cls};\n{loc}    object      {obj};\n}}\n\n")
+
+
+def _vec(v) -> str:
+    return "(" + " ".join(repr(float(x)) for x in v) + ")"
+
+
+@dataclass
+class Grid:
+    origin: np.ndarray
+    spacing: np.ndarray
+    shape: tuple[int, int, int]
+
+    @classmethod
+    def from_config(cls, g: dict) -> "Grid":
+        if not isinstance(g, dict):
+            raise ValueError("fluid config needs 'grid' = {origin, spacing, shape}")
+        origin = np.asarray(g.get("origin"), dtype=float).reshape(-1)
+        spacing = np.asarray(g.get("spacing"), dtype=float).reshape(-1)
+        shape = tuple(int(s) for s in np.asarray(g.get("shape")).reshape(-1))
+        if origin.shape != (3,) or spacing.shape != (3,) or len(shape) != 3:
+            raise ValueError(f"grid origin, spacing, shape must have 3 entries each, got {g!r}")
+        if np.any(spacing <= 0) or min(shape) < 1 or not np.all(np.isfinite(origin)):
+            raise ValueError(f"grid spacing must be positive and shape >= 1, got {g!r}")
+        return cls(origin, spacing, shape)
+
+    @property
+    def n_cells(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def upper(self) -> np.ndarray:
+        return self.origin + self.spacing * np.asarray(self.shape)
+
+    def to_json(self) -> dict:
+        return {"origin": self.origin.tolist(), "spacing": self.spacing.tolist(), "shape": list(self.shape)}
+
+    def cell_centres(self) -> np.ndarray:
+        """(n, 3), x fastest."""
+        idx = [np.arange(n) for n in self.shape]
+        k, j, i = np.meshgrid(idx[2], idx[1], idx[0], indexing="ij")
+        ijk = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1)
+        return self.origin + (ijk + 0.5) * self.spacing
+
+
+def _face_condition(spec) -> dict:
+    """Normalize a face condition to {"kind": wall|slip|symmetry|empty|velocity|pressure, "value"}."""
+    if isinstance(spec, str):
+        if spec not in ("wall", "slip", "symmetry", "empty"):
+            raise ValueError(f"unknown face condition {spec!r} (wall, slip, symmetry, empty, "
+                             "{'velocity': [u,v,w]}, {'pressure': p})")
+        return {"kind": spec}
+    if isinstance(spec, dict) and len(spec) == 1 and "velocity" in spec:
+        v = np.asarray(spec["velocity"], dtype=float).reshape(-1)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise ValueError(f"velocity must be 3 finite numbers, got {spec!r}")
+        return {"kind": "velocity", "value": v}
+    if isinstance(spec, dict) and len(spec) == 1 and "pressure" in spec:
+        p = float(spec["pressure"])
+        if not np.isfinite(p):
+            raise ValueError(f"pressure must be finite, got {spec!r}")
+        return {"kind": "pressure", "value": p}
+    raise ValueError(f"bad face condition {spec!r}")
+
+
+def face_conditions(config: dict) -> dict[str, dict]:
+    """Condition per box face from the fluid config (see module doc)."""
+    walls = config.get("walls", "wall")
+    out = {f: _face_condition(walls) for f in FACES}
+    out["xmin"] = _face_condition(config.get("inlet", {"velocity": [1.0, 0.0, 0.0]}))
+    out["xmax"] = _face_condition(config.get("outlet", {"pressure": 0.0}))
+    for face, spec in (config.get("boundaries") or {}).items():
+        if face not in FACES:
+            raise ValueError(f"unknown face {face!r} in boundaries (faces: {', '.join(FACES)})")
+        out[face] = _face_condition(spec)
+    return out
+
+
+@dataclass
+class CaseSpec:
+    grid: Grid
+    faces: dict[str, dict]
+    rho: float = 1000.0
+    mu: float = 1.0e-3
+    drag: float | None = None          # 1/s, see module doc
+    drag_table: list | None = None     # [[fraction, D], ...] overriding the linear table
+    max_iterations: int = 2000         # simpleFoam iterations per advance
+    tolerance: float = 1.0e-7          # residualControl for p and U
+    dt: float = 1.0
+    n_correctors: int = 0
+    write_binary: bool = True
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def nu(self) -> float:
+        return self.mu / self.rho
+
+    def drag_value(self) -> float:
+        if self.drag is not None:
+            return float(self.drag)
+        h = float(self.grid.spacing.min())
+        u_ref = max((float(np.linalg.norm(c["value"])) for c in self.faces.values()
+                     if c["kind"] == "velocity"), default=0.0)
+        return 1.0e4 * max(self.nu / h ** 2, 1.0 / self.dt if self.dt > 0 else 0.0, u_ref / h)
+
+    def table(self) -> list:
+        if self.drag_table is not None:
+            return [[float(a), float(b)] for a, b in self.drag_table]
+        return [[0.0, 0.0], [1.0, self.drag_value()]]
+
+    @classmethod
+    def from_config(cls, config: dict) -> "CaseSpec":
+        grid = Grid.from_config(config.get("grid"))
+        faces = face_conditions(config)
+        for d, (a, b) in enumerate((("xmin", "xmax"), ("ymin", "ymax"), ("zmin", "zmax"))):
+            ea, eb = faces[a]["kind"] == "empty", faces[b]["kind"] == "empty"
+            if ea != eb or (ea and grid.shape[d] != 1):
+                raise ValueError(f"'empty' needs both {a} and {b} and one cell in that direction")
+        spec = cls(grid, faces,
+                   rho=float(config.get("rho", 1000.0)), mu=float(config.get("mu", 1.0e-3)),
+                   drag=config.get("drag"), drag_table=config.get("drag_table"),
+                   max_iterations=int(config.get("max_iterations", 2000)),
+                   tolerance=float(config.get("tolerance", 1.0e-7)),
+                   dt=float(config.get("dt", 1.0)))
+        if spec.rho <= 0 or spec.mu <= 0:
+            raise ValueError(f"rho and mu must be positive, got {spec.rho}, {spec.mu}")
+        return spec
+
+
+# ------------------------------------------------------------------ dictionaries
+
+def block_mesh_dict(grid: Grid, faces: dict) -> str:
+    (x0, y0, z0), (x1, y1, z1) = grid.origin, grid.upper
+    verts = [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0),
+             (x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)]
+    nx, ny, nz = grid.shape
+    mesh_type = {"wall": "wall", "slip": "patch", "symmetry": "symmetryPlane", "empty": "empty",
+                 "velocity": "patch", "pressure": "patch"}
+    bnd = []
+    for f in FACES:
+        bnd.append(f"    {f}\n    {{\n        type {mesh_type[faces[f]['kind']]};\n"
+                   f"        faces ( ({' '.join(map(str, _FACE_VERTS[f]))}) );\n    }}")
+    return (_header("dictionary", "blockMeshDict", "system")
+            + "convertToMeters 1;\n\nvertices\n(\n"
+            + "".join(f"    {_vec(v)}\n" for v in verts)
+            + f");\n\nblocks\n(\n    hex (0 1 2 3 4 5 6 7) ({nx} {ny} {nz}) simpleGrading (1 1 1)\n);\n\n"
+            + "edges\n(\n);\n\nboundary\n(\n" + "\n".join(bnd) + "\n);\n\nmergePatchPairs\n(\n);\n")
+
+
+def boundary_u(faces: dict) -> str:
+    out = []
+    for f in FACES:
+        c = faces[f]
+        body = {"wall": "type noSlip;", "slip": "type slip;", "symmetry": "type symmetryPlane;",
+                "empty": "type empty;", "pressure": "type zeroGradient;"}.get(c["kind"])
+        if c["kind"] == "velocity":
+            body = f"type fixedValue; value uniform {_vec(c['value'])};"
+        out.append(f"    {f} {{ {body} }}")
+    return "\n".join(out)
+
+
+def boundary_p(faces: dict, rho: float) -> str:
+    out = []
+    for f in FACES:
+        c = faces[f]
+        body = {"symmetry": "type symmetryPlane;", "empty": "type empty;"}.get(c["kind"], "type zeroGradient;")
+        if c["kind"] == "pressure":
+            body = f"type fixedValue; value uniform {c['value'] / rho!r};"
+        out.append(f"    {f} {{ {body} }}")
+    return "\n".join(out)
+
+
+def boundary_scalar_passive(faces: dict) -> str:
+    """boundaryField of the ``solid`` field (zero gradient wherever a value is allowed)."""
+    out = []
+    for f in FACES:
+        body = {"symmetry": "type symmetryPlane;", "empty": "type empty;"}.get(faces[f]["kind"], "type zeroGradient;")
+        out.append(f"    {f} {{ {body} }}")
+    return "\n".join(out)
+
+
+def control_dict(start: float, end: float, write_binary: bool = True, application: str = "simpleFoam") -> str:
+    return (_header("dictionary", "controlDict", "system")
+            + f"application     {application};\nstartFrom       startTime;\nstartTime       {start:g};\n"
+            f"stopAt          endTime;\nendTime         {end:g};\ndeltaT          1;\n"
+            "writeControl    timeStep;\nwriteInterval   100000000;\npurgeWrite      0;\n"
+            f"writeFormat     {'binary' if write_binary else 'ascii'};\nwritePrecision  17;\n"
+            "writeCompression off;\ntimeFormat      general;\ntimePrecision   12;\n"
+            "runTimeModifiable false;\n\n"
+            "functions\n{\n    readSolid\n    {\n        type            readFields;\n"
+            '        libs            ("libfieldFunctionObjects.so");\n        fields          (solid);\n'
+            "    }\n}\n")
+
+
+def fv_schemes() -> str:
+    return (_header("dictionary", "fvSchemes", "system")
+            + "ddtSchemes { default steadyState; }\n"
+            "gradSchemes { default Gauss linear; }\n"
+            "divSchemes\n{\n    default none;\n    div(phi,U) bounded Gauss linearUpwind grad(U);\n"
+            "    div((nuEff*dev2(T(grad(U))))) Gauss linear;\n}\n"
+            "laplacianSchemes { default Gauss linear corrected; }\n"
+            "interpolationSchemes { default linear; }\n"
+            "snGradSchemes { default corrected; }\n")
+
+
+def fv_solution(tolerance: float, needs_ref: bool) -> str:
+    ref = "    pRefCell 0;\n    pRefValue 0;\n" if needs_ref else ""
+    return (_header("dictionary", "fvSolution", "system")
+            + "solvers\n{\n"
+            "    p { solver GAMG; smoother GaussSeidel; tolerance 1e-12; relTol 0.01; }\n"
+            "    U { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-14; relTol 0.01; }\n"
+            "}\n\nSIMPLE\n{\n    nNonOrthogonalCorrectors 0;\n    consistent yes;\n" + ref
+            + f"    residualControl {{ p {tolerance:g}; U {tolerance:g}; }}\n}}\n\n"
+            "relaxationFactors\n{\n    equations { U 0.95; \".*\" 0.95; }\n}\n")
+
+
+def fv_options(table: list) -> str:
+    rows = " ".join(f"({a!r} {b!r})" for a, b in table)
+    return (_header("dictionary", "fvOptions", "constant")
+            + "immersedSolid\n{\n    type            explicitPorositySource;\n    active          yes;\n\n"
+            "    explicitPorositySourceCoeffs\n    {\n        selectionMode   cellZone;\n"
+            f"        cellZone        {ZONE};\n        type            solidification;\n\n"
+            "        solidificationCoeffs\n        {\n            T   solid;\n"
+            f"            D   table ( {rows} );\n"
+            "            coordinateSystem\n            {\n                origin  (0 0 0);\n"
+            "                e1      (1 0 0);\n                e2      (0 1 0);\n            }\n"
+            "        }\n    }\n}\n")
+
+
+def topo_set_dict(grid: Grid) -> str:
+    pad = grid.spacing * 0.5
+    lo, hi = grid.origin - pad, grid.upper + pad
+    return (_header("dictionary", "topoSetDict", "system")
+            + "actions\n(\n"
+            f"    {{ name {ZONE}Set; type cellSet; action new; source boxToCell; box {_vec(lo)} {_vec(hi)}; }}\n"
+            f"    {{ name {ZONE}; type cellZoneSet; action new; source setToCellZone; set {ZONE}Set; }}\n);\n")
+
+
+def write_case(case_dir, spec: CaseSpec) -> Path:
+    """Write system/, constant/ and 0/ (U, p, solid = 0). Returns the case directory."""
+    case = Path(case_dir)
+    for d in ("system", "constant", "0"):
+        (case / d).mkdir(parents=True, exist_ok=True)
+    faces = spec.faces
+    needs_ref = not any(c["kind"] == "pressure" for c in faces.values())
+    files = {
+        "system/blockMeshDict": block_mesh_dict(spec.grid, faces),
+        "system/controlDict": control_dict(0, spec.max_iterations, spec.write_binary),
+        "system/fvSchemes": fv_schemes(),
+        "system/fvSolution": fv_solution(spec.tolerance, needs_ref),
+        "system/topoSetDict": topo_set_dict(spec.grid),
+        "constant/transportProperties": _header("dictionary", "transportProperties", "constant")
+        + f"transportModel  Newtonian;\n\nnu              {spec.nu!r};\n",
+        "constant/turbulenceProperties": _header("dictionary", "turbulenceProperties", "constant")
+        + "simulationType  laminar;\n",
+        "constant/fvOptions": fv_options(spec.table()),
+        "0/U": _header("volVectorField", "U", "0") + "dimensions      [0 1 -1 0 0 0 0];\n\n"
+        "internalField   uniform (0 0 0);\n\nboundaryField\n{\n" + boundary_u(faces) + "\n}\n",
+        "0/p": _header("volScalarField", "p", "0") + "dimensions      [0 2 -2 0 0 0 0];\n\n"
+        "internalField   uniform 0;\n\nboundaryField\n{\n" + boundary_p(faces, spec.rho) + "\n}\n",
+        "0/solid": _header("volScalarField", "solid", "0") + "dimensions      [0 0 0 0 0 0 0];\n\n"
+        "internalField   uniform 0;\n\nboundaryField\n{\n" + boundary_scalar_passive(faces) + "\n}\n",
+    }
+    for rel, text in files.items():
+        (case / rel).write_text(text)
+    return case

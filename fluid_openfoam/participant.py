@@ -1,0 +1,121 @@
+"""``FluidParticipant``: the OpenFOAM fluid as a protocol participant (docs/protocol.md).
+
+Config (the fluid's part of the scene; same grid conventions as
+``coupler.standins.ReplayFluid`` with ``"location": "cells"``)::
+
+    {"grid": {"origin": [x, y, z], "spacing": [hx, hy, hz], "shape": [nx, ny, nz]},
+     "location": "cells",                 # only cells (Q0) is supported
+     "rho": 1000.0, "mu": 1.0e-3,         # kg/m^3, Pa s (nu = mu/rho)
+     "inlet": {"velocity": [1, 0, 0]},    # xmin, or {"pressure": Pa}
+     "outlet": {"pressure": 0.0},         # xmax, Pa
+     "walls": "wall",                     # other faces; "boundaries": {face: cond} overrides
+     "drag": null,                        # 1/s, maximum penalization (default: see case.py)
+     "max_iterations": 2000, "tolerance": 1e-7,   # simpleFoam per advance
+     "case_dir": null}                    # default: a fresh temporary directory
+
+Inputs of ``advance``: ``solid_fraction`` (n_cells,) in [0, 1] (clipped), and
+``solid_velocity`` (n_cells, 3), accepted for the protocol but *not applied*: the stock
+penalization drives the velocity in the solid to zero (no per-cell target velocity in
+stock v1912; a quasi-static solid is assumed). Outputs: ``pressure`` (n_cells,) in Pa
+(OpenFOAM's kinematic p times rho) and ``velocity`` (n_cells, 3) in m/s, at cell
+centres, x fastest.
+
+State: the time directory simpleFoam starts from. Each ``advance`` starts from the current
+one (a warm start) and makes its result current; ``save_state(w)`` remembers it,
+``restore_state(w)`` goes back to it, so a repeated window gives identical outputs.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from coupler.participant import Participant
+from coupler.protocol import Field
+
+from .case import CaseSpec
+from .solver import OpenFOAMSolver
+
+log = logging.getLogger("varcouple.fluid_openfoam")
+
+
+class FluidParticipant(Participant):
+    kind = "openfoam_fluid"
+
+    def __init__(self):
+        self.solver: OpenFOAMSolver | None = None
+        self.spec: CaseSpec | None = None
+        self.saved: dict[int, str] = {}
+        self.fraction: np.ndarray | None = None
+        self._tmp: str | None = None
+        self._warned_velocity = False
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": ["pressure", "velocity"],
+                "accepts": ["solid_fraction", "solid_velocity"], "location": "cells"}
+
+    def configure(self, config: dict) -> None:
+        if config.get("location", "cells") != "cells":
+            raise ValueError(f"fluid_openfoam serves cell values only (location 'cells'), got {config.get('location')!r}")
+        spec = CaseSpec.from_config(config)
+        case_dir = config.get("case_dir")
+        if case_dir is None:
+            self._cleanup()
+            self._tmp = tempfile.mkdtemp(prefix=f"varcouple-{self.name or 'fluid'}-")
+            case_dir = Path(self._tmp) / "case"
+        self.spec = spec
+        self.solver = OpenFOAMSolver(case_dir, spec)
+        self.solver.setup()
+        self.saved = {}
+        self.fraction = np.zeros(spec.grid.n_cells)
+        log.info("fluid_openfoam: grid %s (%d cells), nu %g, drag %g 1/s, case %s", spec.grid.shape,
+                 spec.grid.n_cells, spec.nu, spec.drag_value(), case_dir)
+
+    def geometry(self):
+        if self.spec is None:
+            raise RuntimeError("geometry before configure")
+        return {"grid": self.spec.grid.to_json(), "location": "cells"}, None
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.solver is None:
+            raise RuntimeError("advance before configure")
+        n = self.spec.grid.n_cells
+        for name, f in inputs.items():
+            want = (n,) if name == "solid_fraction" else (n, 3)
+            if name in ("solid_fraction", "solid_velocity") and f.data.shape != want:
+                raise ValueError(f"input {name!r} has shape {f.data.shape}, expected {want}")
+        if "solid_fraction" in inputs:
+            self.fraction = np.array(inputs["solid_fraction"].data, dtype=np.float64)
+        if "solid_velocity" in inputs and not self._warned_velocity and np.any(inputs["solid_velocity"].data != 0):
+            log.warning("fluid_openfoam: solid_velocity is not applied (the solid is penalized towards rest)")
+            self._warned_velocity = True
+        U, p = self.solver.solve(self.fraction)
+        self.solver.prune(set(self.saved.values()))
+        log.info("window %d iteration %d: %s", window, iteration, self.solver.last_run)
+        return {"pressure": Field("pressure", p * self.spec.rho, "Pa"),
+                "velocity": Field("velocity", U, "m/s")}
+
+    def save_state(self, window):
+        if self.solver is None:
+            raise RuntimeError("save_state before configure")
+        self.saved[int(window)] = self.solver.start
+        for w in [w for w in self.saved if w < int(window) - 1]:
+            del self.saved[w]  # keep the last two windows
+        self.solver.prune(set(self.saved.values()))
+
+    def restore_state(self, window):
+        if int(window) not in self.saved:
+            raise KeyError(f"no state saved for window {window} (saved: {sorted(self.saved)})")
+        self.solver.start = self.saved[int(window)]
+
+    def _cleanup(self):
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            self._tmp = None
+
+    def finish(self):
+        self._cleanup()
