@@ -95,7 +95,9 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
     the intersection pieces.
 
     Volume meshes (tetra, hexahedron, structured grid) are intersected exactly;
-    surface meshes (triangle, quad in 3D) by mortar segmentation: elements within
+    a surface target inside a volume source gets the trace of the volume field
+    (its surface elements clipped by the source cells); surface meshes (triangle,
+    quad in 3D) are paired by mortar segmentation: elements within
     `search_distance` along the target normal and with normals within
     `max_normal_angle` degrees (either orientation) are projected on the target
     element's plane, clipped and integrated.
@@ -103,20 +105,22 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
     if method not in METHODS:
         raise TransferError(f"unknown method {method!r}; use one of {METHODS}")
     smesh, tmesh = source.mesh, target.mesh
-    if smesh.tdim != tmesh.tdim:
-        raise TransferError(f"{smesh.name} ({smesh.cell_type}) and {tmesh.name} ({tmesh.cell_type}) "
-                            f"have different dimensions; transfer is volume-volume or surface-surface")
+    if smesh.tdim < tmesh.tdim:
+        raise TransferError(f"{smesh.name} ({smesh.cell_type}) -> {tmesh.name} ({tmesh.cell_type}): a surface "
+                            f"field cannot be projected onto a volume; transfer is volume-volume, "
+                            f"surface-surface or volume-surface")
     surface = smesh.tdim == 2
+    trace = smesh.tdim == 3 and tmesh.tdim == 2
     if search_distance is None:
         search_distance = 0.5 * _mean_edge(tmesh) if surface else 0.0
     if not _bounding_boxes_overlap(smesh, tmesh) and not surface:
         raise NoOverlapError(_no_overlap_message(smesh, tmesh))
-    if quadrature_degree is None and not surface and _is_affine(source) and _is_affine(target):
+    if quadrature_degree is None and smesh.tdim == tmesh.tdim == 3 and _is_affine(source) and _is_affine(target):
         qdeg = "exact"  # products of affine bases integrated from moments of the intersection
         bary, weights = np.empty((0, 4)), np.empty(0)
     else:
         qdeg = quadrature_degree or default_quadrature_degree(source, target)
-        bary, weights = simplex_rule(smesh.tdim, qdeg)
+        bary, weights = simplex_rule(tmesh.tdim, qdeg)
     dual = method == "pseudo_l2" and target.degree > 0  # the dual of P0/Q0 is itself
     args = (smesh.points, smesh.cells, _kind(smesh), source.degree,
             tmesh.points, tmesh.cells, _kind(tmesh), target.degree,
@@ -129,7 +133,8 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
         grid = None
         if isinstance(smesh, StructuredGrid):
             grid = (tuple(smesh.origin), tuple(smesh.spacing), tuple(smesh.shape))
-        raw = _kernels.assemble_volume(*args, grid, nthreads)
+        assemble = _kernels.assemble_trace if trace else _kernels.assemble_volume
+        raw = assemble(*args, grid, nthreads)
     seconds = time.perf_counter() - start
     shape_b = (target.num_dofs, source.num_dofs)
     B = sp.csr_matrix((raw["B"][2], raw["B"][1], raw["B"][0]), shape=shape_b)

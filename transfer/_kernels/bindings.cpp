@@ -104,6 +104,32 @@ NB_MODULE(_kernels, m) {
       "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
       "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1);
   m.def(
+      "assemble_trace",
+      [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
+         int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,
+         int64_t ntd, std::optional<Grid> grid, int nthreads) {
+        check_dofs(nsd, ntd);
+        auto src = element_set(sp, sc, skind, sdeg);
+        auto tgt = element_set(tp, tc, tkind, tdeg);
+        auto rule = simplex_rule(bary, w);
+        if (rule.nbary != 3) throw std::invalid_argument("trace rule needs 3 barycentric coordinates");
+        vc::GridInfo g;
+        if (grid) {
+          g.origin = std::get<0>(*grid);
+          g.spacing = std::get<1>(*grid);
+          g.shape = std::get<2>(*grid);
+        }
+        vc::AssemblyResult r;
+        {
+          nb::gil_scoped_release release;
+          r = vc::assemble_trace(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads);
+        }
+        return to_dict(std::move(r));
+      },
+      "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
+      "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
+      "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1);
+  m.def(
       "assemble_surface",
       [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
          int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,

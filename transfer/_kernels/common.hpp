@@ -303,6 +303,13 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
                                const GridInfo* src_grid, int nthreads);
 
+// Volume-surface: source TET/HEX/BOX cells, target TRI/QUAD surface elements
+// inside the volume (the trace of the source on the surface). `rule` is on the
+// reference triangle.
+AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule, bool dual,
+                              bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs, const GridInfo* src_grid,
+                              int nthreads);
+
 // Surface-surface (TRI, QUAD embedded in 3D) by mortar segmentation: pair by
 // proximity along the target normal, project on the target element's plane,
 // clip, integrate. `rule` is on the reference triangle (3 barycentric coords).
