@@ -55,6 +55,33 @@ def test_a_surface_in_the_faces_of_the_volume_cells_is_counted_once(volume):
     assert np.abs(T(S.interpolate(linear)) - W.interpolate(linear)).max() < 1e-12
 
 
+@pytest.mark.parametrize("z", [0.0, 1.0])
+@pytest.mark.parametrize("volume", VOLUMES)
+def test_a_surface_on_the_boundary_of_the_volume_is_covered(volume, z):
+    """On the outer faces of the volume mesh the only cell there owns the piece."""
+    S = VOLUMES[volume]()
+    flat = rectangle((3, 3), lower=(0.1, 0.1), upper=(0.9, 0.9), jitter=0.2, seed=1, height=lambda x, y: 0 * x + z)
+    W = FunctionSpace(flat, "P1")
+    T = Transfer.assemble(S, W, "l2")
+    assert T.covered_fraction == 1.0
+    np.testing.assert_allclose(T.B.sum(), flat.cell_measures().sum(), rtol=1e-13)
+
+
+@pytest.mark.parametrize("volume", ["tets", "hexes"])
+def test_a_surface_in_the_inner_faces_of_split_cells_is_counted_once(volume):
+    """The plane x = y holds faces between the tets of each lattice cube (and of
+    the six tets the kernels cut a hexahedron into)."""
+    from transfer import Mesh
+
+    S = FunctionSpace((box_tetrahedra if volume == "tets" else box_hexahedra)((3, 3, 3)), "P1" if volume == "tets" else "Q1")
+    sheet = rectangle((4, 4), lower=(0.05, 0.1), upper=(0.95, 0.9))
+    points = np.column_stack([sheet.points[:, 0], sheet.points[:, 0], sheet.points[:, 1]])
+    W = FunctionSpace(Mesh(points, sheet.cells, "triangle"), "P1")
+    T = Transfer.assemble(S, W, "l2")
+    np.testing.assert_allclose(T.B.sum(), W.mesh.cell_measures().sum(), rtol=1e-13)
+    assert np.abs(T(S.interpolate(linear)) - W.interpolate(linear)).max() < 1e-12
+
+
 def test_grid_faces_exactly_on_a_cell_face_q0():
     """Q0 (cell values, like OpenFOAM's): a surface on the plane between two cell
     layers takes the values of one layer, never the sum of both."""

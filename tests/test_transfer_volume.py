@@ -185,5 +185,5 @@ def test_mixed_dimensions_are_rejected(src_tets):
     from transfer.generate import rectangle
 
     surf = FunctionSpace(rectangle((2, 2)), "P1")
-    with pytest.raises(TransferError, match="different dimensions"):
-        Transfer.assemble(FunctionSpace(src_tets, "P1"), surf)
+    with pytest.raises(TransferError, match="surface field cannot be projected onto a volume"):
+        Transfer.assemble(surf, FunctionSpace(src_tets, "P1"))

@@ -9,10 +9,10 @@
 // box, the six tets of a hexahedron); the pieces are planar polygons, split
 // into triangles from their first vertex and integrated with the triangle
 // rule. Target basis functions are evaluated in the element's own plane, the
-// source ones at the 3D quadrature points. A piece lying in a face shared by
-// two source cells belongs to the cell whose outward normal points along
-// kTieBreak, so it is counted once (on the boundary of the source mesh such a
-// piece is kept only on the faces facing kTieBreak).
+// source ones at the 3D quadrature points. A piece lying in a face of a source
+// cell belongs to the cell that contains the points just beside it along
+// kTieBreak, or, on the boundary of the source mesh where there is none, to
+// the cell itself: a face shared by two cells is counted once.
 #include <algorithm>
 #include <cfloat>
 
@@ -37,9 +37,13 @@ struct Poly3 {
   }
 };
 
-// Keep the part of the planar polygon P in n.x <= d (Sutherland-Hodgman in 3D);
-// false when nothing is left.
-bool clip_half_space(Poly3& P, const Plane& pl, double eps) {
+enum class Clip { kept, empty, in_face };
+
+// Keep the part of the planar polygon P in n.x <= d (Sutherland-Hodgman in 3D).
+// A polygon lying in the plane itself is `in_face` when the points beside it
+// along kTieBreak are outside this cell (the neighbour across the face, if
+// any, owns it) and kept otherwise.
+Clip clip_half_space(Poly3& P, const Plane& pl, double eps) {
   double s[kMaxPoly3];
   bool all_in = true, all_on = true, all_out = true;
   for (int i = 0; i < P.n; ++i) {
@@ -48,15 +52,11 @@ bool clip_half_space(Poly3& P, const Plane& pl, double eps) {
     all_on = all_on && std::fabs(s[i]) <= eps;
     all_out = all_out && s[i] > eps;
   }
-  if (all_on) {  // in the face: owned by one of the two cells sharing it
-    if (dot(pl.n, kTieBreak) > 0) return true;
-    P.n = 0;
-    return false;
-  }
-  if (all_in) return true;
+  if (all_on) return dot(pl.n, kTieBreak) > 0 ? Clip::in_face : Clip::kept;
+  if (all_in) return Clip::kept;
   if (all_out) {
     P.n = 0;
-    return false;
+    return Clip::empty;
   }
   Poly3 out;
   for (int i = 0; i < P.n; ++i) {
@@ -69,7 +69,16 @@ bool clip_half_space(Poly3& P, const Plane& pl, double eps) {
     }
   }
   P = out;
-  return P.n >= 3;
+  return P.n >= 3 ? Clip::kept : Clip::empty;
+}
+
+bool inside(const ElementGeometry& g, const Vec3& x, double eps) {
+  for (int c = 0; c < g.nconvex; ++c) {
+    bool in = true;
+    for (int p = 0; p < g.convex[c].nplanes && in; ++p) in = dot(g.convex[c].p[p].n, x) - g.convex[c].p[p].d <= eps;
+    if (in) return true;
+  }
+  return false;
 }
 
 }  // namespace
@@ -103,9 +112,10 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
     tid = omp_get_thread_num();
 #endif
     std::vector<int32_t> slot(n_src_dofs, -1);
-    std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
+    std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1), stamp2(stamp.size(), -1);
+    int64_t probes = 0;
     LocalAssembly la;
-    ElementGeometry sg;
+    ElementGeometry sg, other;
     Evaluator sev;
     Elem2D te;
     int64_t tdofs[8], sdofs[8];
@@ -152,9 +162,27 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
           for (int k = 0; k < ntris; ++k) {
             Poly3 P;
             for (int v = 0; v < 3; ++v) P.push(tv[kTris[k][v]]);
-            bool inside = true;
-            for (int p = 0; p < sg.convex[c].nplanes && inside; ++p) inside = clip_half_space(P, sg.convex[c].p[p], eps);
-            if (!inside) continue;
+            bool keep = true, in_face = false;
+            for (int p = 0; p < sg.convex[c].nplanes && keep; ++p) {
+              const Clip r = clip_half_space(P, sg.convex[c].p[p], eps);
+              keep = r != Clip::empty;
+              in_face = in_face || r == Clip::in_face;
+            }
+            if (!keep) continue;
+            if (in_face) {  // owned by another cell if one holds the points beside it
+              Vec3 c0{0, 0, 0};
+              for (int v = 0; v < P.n; ++v) c0 = add(c0, P.p[v]);
+              const Vec3 probe = add(scale(c0, 1.0 / P.n), scale(kTieBreak, 1e-6 * std::min(h, sg.box.diagonal())));
+              const Vec3 abs_probe = add(probe, origin);
+              bool owned = inside(sg, probe, eps);  // another tet of the same hexahedron
+              if (!owned) search.for_each(BBox{abs_probe, abs_probe}, 0.0, stamp2, probes++, [&](int64_t s2) {
+                if (owned || s2 == s) return;
+                other.build(src, s2, origin, false);
+                other.build_planes();
+                owned = inside(other, probe, eps);
+              });
+              if (owned) continue;
+            }
             for (int f = 1; f + 1 < P.n; ++f) {
               const Vec3 &a = P.p[0], &b = P.p[f], &d = P.p[f + 1];
               const double area = 0.5 * norm(cross(sub(b, a), sub(d, a)));
