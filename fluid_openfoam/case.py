@@ -27,7 +27,12 @@ per cell, 0..1) is loaded by a ``readFields`` function object and drives an
 (``T solid;``) over the cellZone ``allCells`` (all cells, made once by topoSet
 ``boxToCell`` + ``setToCellZone``). The model adds ``-D(solid) U`` to the kinematic
 momentum equation (implicitly, on the diagonal); ``D`` is a table linear in the
-fraction, from 0 at fraction 0 to ``drag`` (1/s) at fraction 1.
+field, from 0 at 0 to ``drag`` (1/s) at 1. The field written is not always the fraction
+itself: ``penalization`` (default ``"wall"``, see :mod:`fluid_openfoam.penalization`) maps
+fractions to a per-cell drag with a sub-cell wall position; ``"linear"`` writes the fraction.
+
+Inlet masking: a fixed-velocity inlet (xmin) gets per-face values ``u_in (1 - f)``, f the
+solid fraction of the cell behind each face (rewritten by the solver before each run).
 
 Drag. Default ``drag = 1e4 * max(nu / h_min^2, 1 / dt, U_ref / h_min)``: ``nu/h^2`` is the
 viscous relaxation rate of one cell, ``1/dt`` the time-step rate (transient solvers),
@@ -140,6 +145,8 @@ class CaseSpec:
     mu: float = 1.0e-3
     drag: float | None = None          # 1/s, see module doc
     drag_table: list | None = None     # [[fraction, D], ...] overriding the linear table
+    penalization: str = "wall"         # how fractions become drag, see penalization.py
+    penalization_exponent: float = 2.0  # for penalization "power"
     max_iterations: int = 2000         # simpleFoam iterations per advance
     tolerance: float = 1.0e-7          # residualControl for p and U
     dt: float = 1.0
@@ -177,7 +184,14 @@ class CaseSpec:
                    drag=config.get("drag"), drag_table=config.get("drag_table"),
                    max_iterations=int(config.get("max_iterations", 2000)),
                    tolerance=float(config.get("tolerance", 1.0e-7)),
-                   dt=float(config.get("dt", 1.0)))
+                   dt=float(config.get("dt", 1.0)),
+                   penalization=str(config.get("penalization", "wall")),
+                   penalization_exponent=float(config.get("penalization_exponent", 2.0)))
+        from .penalization import MODES
+        if spec.penalization not in MODES:
+            raise ValueError(f"penalization must be one of {', '.join(MODES)}, got {spec.penalization!r}")
+        if spec.drag_table is not None and spec.penalization != "linear":
+            raise ValueError("drag_table applies to the fraction itself: it needs penalization 'linear'")
         if spec.rho <= 0 or spec.mu <= 0:
             raise ValueError(f"rho and mu must be positive, got {spec.rho}, {spec.mu}")
         return spec
@@ -203,15 +217,26 @@ def block_mesh_dict(grid: Grid, faces: dict) -> str:
             + "edges\n(\n);\n\nboundary\n(\n" + "\n".join(bnd) + "\n);\n\nmergePatchPairs\n(\n);\n")
 
 
-def boundary_u(faces: dict) -> str:
+def boundary_u(faces: dict, face_values: dict | None = None, binary: bool = False):
+    """boundaryField body of U. ``face_values`` {face: (n_faces, 3) array} gives a fixed-velocity
+    face a nonuniform value (in the patch's face order); then the result is ``bytes``
+    (binary lists when ``binary``), else ``str``."""
+    from .fields import format_list
+
     out = []
     for f in FACES:
         c = faces[f]
         body = {"wall": "type noSlip;", "slip": "type slip;", "symmetry": "type symmetryPlane;",
                 "empty": "type empty;", "pressure": "type zeroGradient;"}.get(c["kind"])
         if c["kind"] == "velocity":
+            if face_values and f in face_values:
+                out.append(f"    {f} {{ type fixedValue; value ".encode() + format_list(face_values[f], binary)
+                           + b" }")
+                continue
             body = f"type fixedValue; value uniform {_vec(c['value'])};"
         out.append(f"    {f} {{ {body} }}")
+    if face_values:
+        return b"\n".join(o if isinstance(o, bytes) else o.encode() for o in out)
     return "\n".join(out)
 
 

@@ -111,6 +111,12 @@ def read_internal_field(path, n_cells: int | None = None) -> np.ndarray:
     return arr
 
 
+def format_list(values, binary: bool) -> bytes:
+    """``nonuniform List<scalar|vector> N(...);`` for a field entry (internalField or a
+    patch ``value``); binary lists for files with ``format binary``."""
+    return _format_internal(values, binary)
+
+
 def _format_internal(values: np.ndarray, binary: bool) -> bytes:
     values = np.asarray(values, dtype=np.float64)
     if values.ndim == 1:
@@ -148,7 +154,8 @@ def write_field(path, values, boundary: str, *, obj: str | None = None, dimensio
     hdr += [f"    object      {obj or path.name};", "}", ""]
     out = ("\n".join(hdr) + f"\ndimensions      {dimensions};\n\ninternalField   ").encode()
     out += _format_internal(values, binary)
-    out += ("\n\nboundaryField\n{\n" + boundary + "\n}\n").encode()
+    bnd = boundary if isinstance(boundary, bytes) else boundary.encode()
+    out += b"\n\nboundaryField\n{\n" + bnd + b"\n}\n"
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_bytes(out)
     os.replace(tmp, path)
@@ -169,3 +176,39 @@ def replace_internal_field(path, values) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_bytes(out)
     os.replace(tmp, path)
+
+
+def read_label_list(path) -> np.ndarray:
+    """A polyMesh label list file (``owner``, ``neighbour``), ASCII or binary (32-bit labels)."""
+    path = Path(path)
+    data = path.read_bytes()
+    hdr = _header(data, path)
+    binary = hdr.get("format", "ascii") == "binary"
+    if binary and "label=" in hdr.get("arch", "") and "label=32" not in hdr["arch"]:
+        raise FieldFormatError(f"{path}: arch {hdr['arch']!r}: only 32-bit labels are supported")
+    body_start = data.index(b"}", data.index(b"FoamFile")) + 1
+    m = re.compile(rb"\s*(?://[^\n]*\n\s*|/\*.*?\*/\s*)*(\d+)\s*\(", re.S).match(data, body_start)
+    if not m:
+        raise FieldFormatError(f"{path}: no label list")
+    n, pos = int(m.group(1)), m.end()
+    if binary:
+        arr = np.frombuffer(data, dtype="<i4", count=n, offset=pos).astype(np.int64)
+    else:
+        end = data.index(b")", pos)
+        arr = np.array(data[pos:end].split(), dtype=np.int64)
+    if arr.size != n:
+        raise FieldFormatError(f"{path}: {arr.size} labels, expected {n}")
+    return arr
+
+
+def read_patches(path) -> dict[str, tuple[int, int]]:
+    """``constant/polyMesh/boundary``: {patch: (startFace, nFaces)}."""
+    text = Path(path).read_text(errors="replace")
+    text = text[text.index("}", text.index("FoamFile")) + 1:]
+    out = {}
+    for name, body in re.findall(r"(\w+)\s*\{([^}]*)\}", text):
+        n = re.search(r"nFaces\s+(\d+);", body)
+        s = re.search(r"startFace\s+(\d+);", body)
+        if n and s:
+            out[name] = (int(s.group(1)), int(n.group(1)))
+    return out

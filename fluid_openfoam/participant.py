@@ -10,13 +10,17 @@ Config (the fluid's part of the scene; same grid conventions as
      "outlet": {"pressure": 0.0},         # xmax, Pa
      "walls": "wall",                     # other faces; "boundaries": {face: cond} overrides
      "drag": null,                        # 1/s, maximum penalization (default: see case.py)
+     "penalization": "wall",              # fractions -> drag: "wall" (sub-cell wall position,
+                                          # second order for grid-aligned walls), "linear"
+                                          # (stock table of the fraction), "power"; penalization.py
      "max_iterations": 2000, "tolerance": 1e-7,   # simpleFoam per advance
      "case_dir": null}                    # default: a fresh temporary directory
 
 Inputs of ``advance``: ``solid_fraction`` (n_cells,) in [0, 1] (clipped), and
 ``solid_velocity`` (n_cells, 3), accepted for the protocol but *not applied*: the stock
 penalization drives the velocity in the solid to zero (no per-cell target velocity in
-stock v1912; a quasi-static solid is assumed). Outputs: ``pressure`` (n_cells,) in Pa
+stock v1912; a quasi-static solid is assumed). A fixed-velocity inlet (xmin) is masked: each face gets ``u_in (1 - f)`` with f the
+solid fraction of the cell behind it. Outputs: ``pressure`` (n_cells,) in Pa
 (OpenFOAM's kinematic p times rho) and ``velocity`` (n_cells, 3) in m/s, at cell
 centres, x fastest.
 

@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from . import case as _case
-from .fields import read_internal_field, write_field
+from .fields import read_internal_field, read_label_list, read_patches, write_field
+from .penalization import drag_fraction
 
 log = logging.getLogger("varcouple.fluid_openfoam")
 
@@ -99,6 +100,28 @@ class OpenFOAMSolver:
         self.run("blockMesh")
         self.run("topoSet")
         self.start = "0"
+        self.patch_cells = self.read_patch_cells()
+
+    def read_patch_cells(self) -> dict[str, np.ndarray]:
+        """Cell behind each face of every patch, in the patch's face order (from
+        constant/polyMesh/boundary and owner). For blockMesh's single block the xmin patch
+        lists the i = 0 column, j fastest then k (checked in tests/test_fluid_inlet.py)."""
+        mesh = self.case / "constant" / "polyMesh"
+        owner = read_label_list(mesh / "owner")
+        return {name: owner[start:start + n] for name, (start, n) in read_patches(mesh / "boundary").items()}
+
+    def write_inlet(self, fraction: np.ndarray) -> None:
+        """Inlet masking: a fixed-velocity xmin face gets ``u_in (1 - f)`` with f the solid
+        fraction of its cell. Rewrites U in the start-time directory (internal field kept)."""
+        c = self.spec.faces["xmin"]
+        if c["kind"] != "velocity":
+            return
+        cells = self.patch_cells["xmin"]
+        values = np.outer(1.0 - fraction[cells], c["value"])
+        path = self.case / self.start / "U"
+        U = read_internal_field(path, self.n)
+        write_field(path, U, _case.boundary_u(self.spec.faces, {"xmin": values}, self.spec.write_binary),
+                    obj="U", location=self.start, binary=self.spec.write_binary, dimensions="[0 1 -1 0 0 0 0]")
 
     # ------------------------------------------------------------------ one solve
     def write_solid(self, fraction) -> None:
@@ -108,7 +131,10 @@ class OpenFOAMSolver:
         if not np.all(np.isfinite(frac)):
             raise ValueError(f"solid_fraction holds NaN/inf at cell {int(np.argmin(np.isfinite(frac)))}")
         frac = np.clip(frac, 0.0, 1.0)
-        write_field(self.case / self.start / "solid", frac, _case.boundary_scalar_passive(self.spec.faces),
+        self.write_inlet(frac)
+        T = drag_fraction(frac, self.spec.grid.shape, self.spec.grid.spacing, self.spec.nu, self.spec.drag_value(),
+                          self.spec.penalization, self.spec.penalization_exponent)
+        write_field(self.case / self.start / "solid", T, _case.boundary_scalar_passive(self.spec.faces),
                     obj="solid", location=self.start, binary=self.spec.write_binary)
 
     def solve(self, solid_fraction) -> tuple[np.ndarray, np.ndarray]:

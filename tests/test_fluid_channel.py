@@ -62,12 +62,15 @@ def test_cubic_law_real_walls(tmp_path, n_across, bound):
     np.testing.assert_allclose(U[:, 1:], 0.0, atol=1e-10 * np.abs(U).max())
 
 
-def test_immersed_half_channel_and_restart(tmp_path):
+@pytest.mark.parametrize("penalization", ["wall", "linear"])
+def test_immersed_half_channel_and_restart(tmp_path, penalization):
     """A solid fraction of 1 in the lower half: no flow there, a Poiseuille flow of aperture
-    w/2 above. With a binary mask the wall sits effectively at the centre of the first solid
-    cell (half a cell too far), so Q is over-predicted by about (1 + h/(w/2))^3."""
+    w/2 above. With penalization "linear" the wall sits at the centre of the first solid cell
+    (half a cell too far), so Q is over-predicted by about (1 + h/(w/2))^3 (measured +16.3%
+    at 10 cells across). The "wall" drag puts it on the cell face: the same +2 (h/w)^2 as a
+    real wall (measured +2.00%)."""
     n = 20
-    s = OpenFOAMSolver(tmp_path / "case", CaseSpec.from_config(channel_config(n)))
+    s = OpenFOAMSolver(tmp_path / "case", CaseSpec.from_config(channel_config(n, penalization=penalization)))
     s.setup()
     yc = (np.arange(n) + 0.5) * W / n
     frac = np.repeat((yc < W / 2).astype(float), NX)
@@ -76,8 +79,11 @@ def test_immersed_half_channel_and_restart(tmp_path):
     solid = frac == 1
     assert np.abs(U[solid]).max() < 1e-3 * np.abs(U).max()
     ratio = flow_rate(U, n) / cubic_law(W / 2)
-    print(f"immersed, 10 cells across, binary mask: Q / cubic law = {ratio.max():.4f}")
-    assert np.all((ratio > 1.0) & (ratio < (1 + (W / n) / (W / 2)) ** 3 * 1.01))
+    print(f"immersed, 10 cells across, binary mask, {penalization}: Q / cubic law = {ratio.max():.4f}")
+    if penalization == "linear":
+        assert np.all((ratio > 1.0) & (ratio < (1 + (W / n) / (W / 2)) ** 3 * 1.01))
+    else:
+        np.testing.assert_allclose(ratio, 1 + 2 * (2 / n) ** 2, rtol=1e-4)
     # warm restart with the same input: converged at once, same fields
     start = s.start
     U2, _ = s.solve(frac)
