@@ -120,7 +120,7 @@ def check(args: argparse.Namespace) -> int:
 # -- varcouple run ---------------------------------------------------------------
 def _run_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("case", metavar="CASE", help="case directory holding scene.toml (or the scene file)")
-    parser.add_argument("--output", "-o", metavar="DIR", default=None,
+    parser.add_argument("--output", "--out", "-o", metavar="DIR", default=None,
                         help="output directory (default: [output] directory of the scene, in the case)")
 
 
