@@ -2,12 +2,19 @@
 the transfer operators built once, the time loop of paper 2.3, the results.
 
 Per time step with flow (Steps 1-6): the fluid advances with the solid's
-velocity and volume fraction on its grid; its pressure is projected to the solid
-mesh (T_s<-f) and loads the solid's wetted boundary; the solid advances; its
-velocity is projected back to the grid (T_f<-s). The interface value of the
-fixed point is the pressure on the solid's vertices, accelerated as the scene
-says. A scene without flow advances the solid once per step: no fluid process
-is ever started.
+velocity and volume fraction on its grid; its pressure is carried to the solid
+(T_s<-f) and loads the solid's wetted boundary (``[coupling] interface``); the
+solid advances; its velocity is projected back to the grid (T_f<-s). Steps 2-3
+use the solid's ``interface_triangles`` (its wetted boundary, from ``geometry``):
+the grid's Q0 pressure is traced on that surface moved half a fluid cell
+diagonal into the fluid along its vertex normals (:class:`WettedInterface`), so
+the pressure is read in fluid cells, not in the penalized ones inside the solid;
+the solid gets it at those vertices and zero elsewhere. A solid that gives no
+triangles (the ``spring_solid`` stand-in) gets the fallback, the volume
+projection onto all its vertices (:class:`VolumeInterface`). The interface value
+of the fixed point is that pressure, accelerated as the scene says. The solid
+fraction on the grid is computed once, from the undeformed solid. A scene without
+flow advances the solid once per step: no fluid process is ever started.
 
 Written to the output directory: ``solid_NNNN.vtu`` (and ``fluid_NNNN.vtu``)
 per output step with ``solid.pvd`` / ``fluid.pvd`` time series for ParaView,
@@ -25,7 +32,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
-from transfer import FunctionSpace, Mesh, StructuredGrid, Transfer
+from transfer import FunctionSpace, Mesh, NoOverlapError, StructuredGrid, Transfer
 
 from .acceleration import make_accelerator
 from .coupled_scene import CoupledScene
@@ -75,10 +82,18 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
         return config
     solver = scene.solvers["fluid"]
     g = scene.fluid
+    material = scene.fluid_material or {"density": 1000.0, "viscosity": 1e-3}
     config = {"grid": {"origin": g.origin, "spacing": g.spacing, "shape": g.shape}, "location": "cells",
-              "material": scene.fluid_material or {}}
+              "material": material, "rho": material["density"], "mu": material["viscosity"]}
     if solver["participant"] == "replay_fluid":
         config.update(pressure=solver["pressure"], feedback=solver["feedback"])
+    if solver["participant"] == "openfoam":
+        flow = scene.flow or {}
+        config.update({k: solver[k] for k in ("penalization", "penalization_exponent", "drag", "max_iterations",
+                                              "tolerance")})
+        if flow:
+            config.update(inlet=flow["inlet"], outlet=flow["outlet"], walls=flow["walls"],
+                          boundaries=dict(flow["faces"]))
     return config
 
 
@@ -111,6 +126,104 @@ class Series:
             f'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n{rows}\n'
             f'  </Collection>\n</VTKFile>\n')
         return self.directory / file
+
+
+class WettedInterface:
+    """Steps 2-3 on the wetted boundary: the trace of the fluid's Q0 pressure on the solid's
+    interface triangles, sampled on the fluid side.
+
+    The interface vertices are moved along their outward normals (area-weighted means of
+    the normals of the interface triangles around them) by half a fluid cell diagonal, so
+    the surface lies in fluid cells and not in the penalized cells inside the solid; the
+    volume -> surface transfer (pseudo-L2, :mod:`transfer.operators`) gives the pressure
+    at its vertices. The interface vector of the fixed point is that pressure (one value
+    per interface vertex); the solid gets it at those vertices and zero elsewhere.
+    """
+
+    method = "surface trace"
+
+    def __init__(self, S, triangles: np.ndarray, G: StructuredGrid, where: str = "[geometry.fluid]"):
+        triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        self.num_points = S.num_points
+        self.vertices, local = np.unique(triangles, return_inverse=True)
+        self.triangles = local.reshape(-1, 3)
+        points = np.asarray(S.points)[self.vertices]
+        a, b, c = (points[self.triangles[:, i]] for i in range(3))
+        area_normals = 0.5 * np.cross(b - a, c - a)  # outward (boundary_triangles orientation), |.| = area
+        normals = np.zeros_like(points)
+        for i in range(3):
+            np.add.at(normals, self.triangles[:, i], area_normals)
+        length = np.linalg.norm(normals, axis=1)
+        if np.any(length <= 0):
+            raise CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel "
+                               f"(a folded surface)")
+        self.normals = normals / length[:, None]
+        self.offset = 0.5 * float(np.linalg.norm(G.spacing))
+        self.surface = Mesh(points + self.offset * self.normals, self.triangles, "triangle", name="interface")
+        uncovered = len(self.vertices)
+        try:
+            self.transfer = Transfer.assemble(FunctionSpace(G, "Q0"), FunctionSpace(self.surface, "P1"),
+                                              "pseudo_l2")
+            uncovered = self.transfer.uncovered.size
+        except NoOverlapError:
+            pass
+        if uncovered:
+            raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled "
+                               f"{self.offset:.3g} m outside the solid ({uncovered} of {len(self.vertices)} "
+                               f"vertices outside the grid): extend the grid beyond the wetted boundary")
+        self.weights = np.asarray(self.transfer.D.sum(axis=1)).ravel()  # lumped surface mass
+        self.area = float(self.surface.cell_measures().sum())
+
+    @property
+    def size(self) -> int:
+        return len(self.vertices)
+
+    num_vertices = size
+
+    @property
+    def num_triangles(self) -> int:
+        return len(self.triangles)
+
+    def from_fluid(self, pressure) -> np.ndarray:
+        """The fluid's cell pressure at the interface vertices."""
+        return self.transfer.apply(pressure)
+
+    def to_solid_vertices(self, x) -> np.ndarray:
+        """The interface pressure at all solid vertices (zero off the interface)."""
+        full = np.zeros(self.num_points)
+        full[self.vertices] = x
+        return full
+
+    def describe(self) -> dict:
+        return {"method": self.method, "vertices": int(self.size), "triangles": int(self.num_triangles),
+                "offset": self.offset, "sampled_area": self.area,
+                "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+
+
+class VolumeInterface:
+    """The fallback of Steps 2-3 when the solid gives no interface triangles (stand-in solids
+    such as ``spring_solid``): the volume projection Q0 (grid) -> P1 of the pressure onto
+    every solid vertex, sampled inside the solid (where a penalized fluid sees no wall)."""
+
+    method = "volume projection"
+
+    def __init__(self, S, G: StructuredGrid, where: str = "[geometry.fluid]"):
+        self.transfer = Transfer.assemble(FunctionSpace(G, "Q0"), FunctionSpace(S, "P1"), "pseudo_l2")
+        if not np.all(self.transfer.covered):
+            raise CouplerError(f"{where}: the fluid grid does not cover the solid "
+                               f"({self.transfer.uncovered.size} solid vertices outside it)")
+        self.weights = np.asarray(self.transfer.D.diagonal())  # lumped solid mass
+        self.size = S.num_points
+
+    def from_fluid(self, pressure) -> np.ndarray:
+        return self.transfer.apply(pressure)
+
+    def to_solid_vertices(self, x) -> np.ndarray:
+        return np.asarray(x)
+
+    def describe(self) -> dict:
+        return {"method": self.method, "vertices": int(self.size),
+                "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
 
 
 def _as_arrays(fields: dict) -> dict:
@@ -160,13 +273,14 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         clients[p.name] = session.client(p.name, timeout=timeout,
                                          process_check=lambda name=p.name: launcher.check(name))
         log(f"started {p.name}: {p.kind} ({p.ranks} rank{'s' * (p.ranks > 1)}), log in {launcher.log_dir / p.name}.log")
-    meshes, announced = {}, {}
+    meshes, announced, geometry_fields = {}, {}, {}
     for name, client in clients.items():
         phases.timed("start", client.wait_alive, timeout)
         announced[name] = client.announce()
         phases.timed(f"{name} setup", client.configure, participant_config(scene, name))
         header, fields = phases.timed(f"{name} setup", client.geometry)
         meshes[name] = _mesh_of(name, header, fields)
+        geometry_fields[name] = fields or {}
         log(f"{name}: {announced[name].get('kind')} on {meshes[name].num_cells} cells")
     summary["participants_announced"] = announced
 
@@ -181,18 +295,34 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         fluid = clients["fluid"]
         S, G = meshes["solid"], meshes["fluid"]
         start = time.perf_counter()
-        to_solid = Transfer.assemble(FunctionSpace(G, "Q0"), FunctionSpace(S, "P1"), "pseudo_l2")
         to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(G, "Q0"), "pseudo_l2")
         fraction = np.asarray(to_fluid.D.diagonal()) / G.cell_measures()  # solid volume per cell / cell volume
-        phases.add("transfer", time.perf_counter() - start)
-        if not np.all(to_solid.covered):
+        solid_volume = float(S.cell_measures().sum())
+        outside = 1.0 - float(np.asarray(to_fluid.D.diagonal()).sum()) / solid_volume
+        if outside > 1e-9:
             raise CouplerError(f"{scene.path}: [geometry.fluid]: the fluid grid does not cover the solid "
-                               f"({to_solid.uncovered.size} solid vertices outside it)")
-        weights = np.asarray(to_solid.D.diagonal())  # lumped solid mass: the M-norm of the residual
-        log(f"transfers: {to_solid.stats['pairs_intersected']} cell pairs; solid fills "
+                               f"({outside:.3g} of the solid's volume lies outside it)")
+        triangles = geometry_fields["solid"].get("interface_triangles")
+        if triangles is not None and len(np.asarray(triangles.data)):
+            interface = WettedInterface(S, np.asarray(triangles.data), G, f"{scene.path}: [geometry.fluid]")
+            summary["interface"] = interface.describe()
+            log(f"interface '{scene.coupling['interface']}': {interface.num_vertices} vertices, "
+                f"{interface.num_triangles} triangles, pressure sampled {interface.offset:.3g} m into the fluid")
+        else:
+            # Fallback (stand-in solids such as spring_solid, which have no boundary): the volume
+            # projection of the grid's pressure onto every solid vertex (the solid applies it on
+            # its wetted boundary only, if it has one).
+            interface = VolumeInterface(S, G, f"{scene.path}: [geometry.fluid]")
+            summary["interface"] = interface.describe()
+            log(f"interface: no boundary triangles from the solid; pressure projected onto all "
+                f"{S.num_points} solid vertices (volume projection)")
+        phases.add("transfer", time.perf_counter() - start)
+        weights = interface.weights  # lumped interface mass: the M-norm of the residual
+        log(f"transfers: {to_fluid.stats['pairs_intersected']} cell pairs; solid fills "
             f"{np.count_nonzero(fraction > 0)} fluid cells")
 
-        def iterate(window, iteration, pressure):
+        def iterate(window, iteration, x):
+            pressure = interface.to_solid_vertices(x)
             solid_out = _as_arrays(phases.timed("solid", solid.advance, window.index, iteration, window.t_start,
                                                 window.dt, {"pressure": Field("pressure", pressure, "Pa")}))
             velocity = phases.timed("transfer", to_fluid.apply, solid_out["velocity"], fill=0.0)
@@ -201,7 +331,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             fluid_out = _as_arrays(phases.timed("fluid", fluid.advance, window.index, iteration, window.t_start,
                                                 window.dt, fluid_in))
             last.update(solid=solid_out, fluid=fluid_out, fluid_in=velocity)
-            return phases.timed("transfer", to_solid.apply, fluid_out["pressure"])
+            return phases.timed("transfer", interface.from_fluid, fluid_out["pressure"])
 
         class Checkpoint:
             def save(self, window):
@@ -212,7 +342,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
                 for c in clients.values():
                     phases.timed("checkpoint", c.restore_state, window.index)
 
-        x0 = np.zeros(S.num_points)
+        x0 = np.zeros(interface.size)
         c = scene.coupling
         accelerator = make_accelerator(c["acceleration"], relaxation=c["relaxation"], reuse=c["reuse"])
         mode, checkpoint = "implicit", Checkpoint()
@@ -230,10 +360,12 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             start = time.perf_counter()
             solid_fields = dict(last["solid"])
             if coupled:
-                solid_fields["pressure"] = x
-                series["fluid"].write(window.index, window.t_end,
-                                      cell_data={"pressure": last["fluid"]["pressure"], "solid_fraction": fraction,
-                                                 "solid_velocity": last["fluid_in"]})
+                solid_fields["pressure"] = interface.to_solid_vertices(x)
+                fluid_fields = {"pressure": last["fluid"]["pressure"], "solid_fraction": fraction,
+                                "solid_velocity": last["fluid_in"]}
+                if "velocity" in last["fluid"]:
+                    fluid_fields["velocity"] = last["fluid"]["velocity"]
+                series["fluid"].write(window.index, window.t_end, cell_data=fluid_fields)
             series["solid"].write(window.index, window.t_end, point_data=solid_fields)
             phases.add("output", time.perf_counter() - start)
         u = last["solid"].get("displacement")

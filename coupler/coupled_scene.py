@@ -29,6 +29,10 @@ FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "replay_fluid": "coupler.sta
 LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure")
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+#: conditions of the fluid grid's side faces ([flow] walls, faces); xmin is the inlet, xmax the outlet
+FACE_CONDITIONS = ("wall", "slip", "symmetry", "empty")
+#: how the openfoam participant turns solid fractions into drag (fluid_openfoam/penalization.py)
+PENALIZATIONS = ("wall", "linear", "power")
 
 _REQUIRED = object()
 
@@ -154,6 +158,7 @@ class CoupledScene:
     output_dir: Path
     output: dict
     check: dict | None = None  # expected displacement: {"x"|"y"|"z": expr, "where": expr, "tolerance": float}
+    flow: dict | None = None  # fluid boundary conditions: inlet, outlet, walls, faces ([flow])
 
     def error(self, table: str, key: str, reason: str) -> SceneError:
         return SceneError(f"{self.path}: [{table}] {key}: {reason}")
@@ -173,6 +178,11 @@ TABLES = {
                  "interface": "the solid boundary the fluid pressure acts on (flow)"},
     "messaging": {"mode": "zenoh mode: peer (default) or client", "connect": "zenoh endpoints to connect to",
                   "timeout": "seconds to wait for a participant's answer"},
+    "flow": {"inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
+             "inlet_pressure": "fixed inlet pressure on the grid face xmin [Pa]",
+             "outlet_pressure": "fixed outlet pressure on the grid face xmax [Pa] (default 0)",
+             "walls": f"condition of the other grid faces: one of {', '.join(FACE_CONDITIONS)} (default wall)",
+             "faces": "table: face (ymin ... zmax) -> condition, overriding walls"},
     "output": {"directory": "output directory, relative to the case (default 'results')",
                "every": "write fields every N steps (default 1)"},
     "check": {"x": "expected x displacement (expression in x, y, z)", "y": "expected y displacement",
@@ -192,7 +202,12 @@ SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI 
                "degree": "polynomial degree (solid: 1 or 2)", "linear_solver": "cg (CG + GAMG) or lu",
                "rtol": "relative tolerance of the linear solver", "stiffness": "spring_solid: spring stiffness",
                "pressure": "replay_fluid: uniform pressure served",
-               "feedback": "replay_fluid: pressure drop per unit mean solid velocity [Pa s/m]"}
+               "feedback": "replay_fluid: pressure drop per unit mean solid velocity [Pa s/m]",
+               "penalization": f"openfoam: solid fractions -> drag, one of {', '.join(PENALIZATIONS)}",
+               "penalization_exponent": "openfoam: exponent of penalization 'power'",
+               "drag": "openfoam: maximum penalization drag [1/s] (default 1e4 x the fastest cell rate)",
+               "max_iterations": "openfoam: simpleFoam iterations per coupling iteration",
+               "tolerance": "openfoam: simpleFoam residual tolerance (p and U)"}
 
 
 def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
@@ -259,6 +274,11 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
             raise coupling.error("interface", f"unknown boundary {coupling_cfg['interface']!r}; named boundaries: "
                                               f"{', '.join(solid.boundaries)}")
 
+    flow = _flow(path, data["flow"], fluid, effects) if "flow" in data else None
+    if flow is None and "flow" in effects and solver_cfg["fluid"]["participant"] == "openfoam":
+        raise SceneError(f"{path}: [flow] inlet_velocity: missing: the openfoam fluid needs a [flow] table with "
+                         f"inlet_velocity = [u, v, w] or inlet_pressure = p (Pa)")
+
     messaging = Table(path, "messaging", data.get("messaging", {}), TABLES["messaging"])
     messaging_cfg = {"mode": messaging.string("mode", "peer", ("peer", "client")),
                      "connect": messaging.strings("connect", []),
@@ -283,7 +303,7 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                         effects=effects, solid=solid, fluid=fluid, material=material,
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
-                        output={"every": out.integer("every", 1)}, check=check)
+                        output={"every": out.integer("every", 1)}, check=check, flow=flow)
 
 
 def _solid_geometry(path, case_dir, data) -> SolidGeometry:
@@ -346,6 +366,46 @@ def _fluid_geometry(path, data) -> FluidGeometry:
     return FluidGeometry(t.vector("origin"), spacing, shape)
 
 
+def _flow(path, data, fluid: FluidGeometry | None, effects) -> dict:
+    """The fluid's boundary conditions on the faces of its grid ([flow])."""
+    t = Table(path, "flow", data, TABLES["flow"])
+    if "flow" not in effects:
+        raise SceneError(f"{path}: [flow]: fluid boundary conditions need the effect 'flow' in [physics] effects")
+    if ("inlet_velocity" in t.data) == ("inlet_pressure" in t.data):
+        raise t.error("inlet_velocity", "give exactly one of inlet_velocity = [u, v, w] (m/s) or "
+                                        "inlet_pressure = p (Pa)")
+    if "inlet_velocity" in t.data:
+        inlet = {"velocity": t.vector("inlet_velocity")}
+    else:
+        inlet = {"pressure": t.number("inlet_pressure")}
+    outlet = {"pressure": t.number("outlet_pressure", 0.0)}
+    walls = t.string("walls", "wall", FACE_CONDITIONS)
+    faces_data = t.data.get("faces", {})
+    if not isinstance(faces_data, dict):
+        raise t.error("faces", f"must be a table face -> condition, got {faces_data!r}")
+    sides = BOX_FACES[2:]
+    faces = {}
+    for face, condition in faces_data.items():
+        where = f"{path}: [flow.faces] {face}"
+        if face in ("xmin", "xmax"):
+            raise SceneError(f"{where}: xmin is the inlet and xmax the outlet (inlet_*, outlet_pressure); "
+                             f"faces sets {', '.join(sides)}")
+        if face not in sides:
+            raise SceneError(f"{where}: unknown face; use one of {', '.join(sides)}")
+        if condition not in FACE_CONDITIONS:
+            raise SceneError(f"{where}: unknown condition {condition!r}; use one of "
+                             f"{', '.join(map(repr, FACE_CONDITIONS))}")
+        faces[face] = condition
+    for axis, (lo, hi) in ((1, ("ymin", "ymax")), (2, ("zmin", "zmax"))):
+        a, b = faces.get(lo, walls), faces.get(hi, walls)
+        if (a == "empty") != (b == "empty"):
+            raise t.error("faces", f"'empty' (2D) needs both {lo} and {hi}, got {lo} = {a!r}, {hi} = {b!r}")
+        if a == "empty" and fluid is not None and fluid.shape[axis] != 1:
+            raise t.error("faces", f"'empty' on {lo} and {hi} needs one cell along {'xyz'[axis]} in "
+                                   f"[geometry.fluid] shape, got {fluid.shape[axis]}")
+    return {"inlet": inlet, "outlet": outlet, "walls": walls, "faces": faces}
+
+
 def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
     if not isinstance(data, list):
         raise SceneError(f"{path}: loads must be an array of tables ([[loads]]), got {data!r}")
@@ -399,4 +459,15 @@ def _solver(path, part, data, participants, default) -> dict:
     if part == "fluid" and cfg["participant"] == "replay_fluid":
         cfg["pressure"] = t.number("pressure", 0.0)
         cfg["feedback"] = t.number("feedback", 0.0)
+    if part == "fluid" and cfg["participant"] == "openfoam":
+        if cfg["ranks"] != 1:
+            raise t.error("ranks", f"the openfoam participant runs on one rank for now (decomposed runs are "
+                                   f"not available yet), got {cfg['ranks']}")
+        cfg["penalization"] = t.string("penalization", "wall", PENALIZATIONS)
+        cfg["penalization_exponent"] = t.number("penalization_exponent", 2.0, positive=True)
+        if "penalization_exponent" in t.data and cfg["penalization"] != "power":
+            raise t.error("penalization_exponent", "applies to penalization = \"power\" only")
+        cfg["drag"] = t.number("drag", None, positive=True)
+        cfg["max_iterations"] = t.integer("max_iterations", 2000)
+        cfg["tolerance"] = t.number("tolerance", 1e-7, positive=True)
     return cfg

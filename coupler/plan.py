@@ -92,15 +92,26 @@ def make_plan(scene: CoupledScene) -> Plan:
             PlannedCoupling("solid.indicator", "fluid.solid_fraction",
                             "P0 (solid mesh) -> Q0 (fluid grid), exact volume fractions", "before step 1"),
             PlannedCoupling("fluid.pressure", "solid.traction",
-                            "Q0 (fluid grid) -> P1 (solid mesh), pseudo_l2", "steps 2-3"),
+                            f"Q0 (fluid grid) -> P1 on the wetted boundary '{scene.coupling['interface']}' moved "
+                            f"half a fluid cell into the fluid, pseudo_l2 trace (solids without boundary "
+                            f"triangles: Q0 -> P1 on all solid vertices)", "steps 2-3"),
             PlannedCoupling("solid.velocity", "fluid.solid_velocity",
                             "P1 (solid mesh) -> Q0 (fluid cells), pseudo_l2", "step 6"),
         ]
         c = scene.coupling
-        iteration = (f"{scene.time['steps']} time steps of {scene.time['dt']:g} s; implicit fixed point per "
+        quasi = ", quasi-static: steady simpleFoam and a static solid per step" \
+            if fluid_cfg["participant"] == "openfoam" and "dynamics" not in scene.effects else ""
+        iteration = (f"{scene.time['steps']} time steps of {scene.time['dt']:g} s{quasi}; implicit fixed point per "
                      f"step ({c['acceleration']}, tolerance {c['tolerance']:g}, at most {c['max_iterations']} "
                      f"iterations)")
     notes = []
+    if "flow" in scene.effects and scene.solvers["fluid"]["participant"] == "openfoam":
+        notes.append("openfoam: the solid fraction comes from the undeformed solid (computed once) and the "
+                     "solid velocity is not applied (penalization towards rest); the deformation does not "
+                     "reach the flow yet")
+        if "dynamics" in scene.effects:
+            notes.append("openfoam runs simpleFoam (steady) per time step: the fluid is quasi-static even "
+                         "with 'dynamics'")
     if scene.material["nu"] > 0.49 and solid_cfg.get("degree", 1) == 1:
         notes.append(f"nu = {scene.material['nu']:g} is nearly incompressible: P1 tetrahedra lock; "
                      f"use [solvers.solid] degree = 2")

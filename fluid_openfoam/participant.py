@@ -16,6 +16,12 @@ Config (the fluid's part of the scene; same grid conventions as
      "max_iterations": 2000, "tolerance": 1e-7,   # simpleFoam per advance
      "case_dir": null}                    # default: a fresh temporary directory
 
+From a scene, :func:`coupler.coupled_run.participant_config` fills these keys: ``rho``, ``mu``
+from ``[materials.fluid]``; ``inlet``, ``outlet``, ``walls``, ``boundaries`` from ``[flow]``
+(inlet_velocity / inlet_pressure, outlet_pressure, walls, faces); ``penalization``,
+``penalization_exponent``, ``drag``, ``max_iterations``, ``tolerance`` from ``[solvers.fluid]``
+(cases/README.md).
+
 Inputs of ``advance``: ``solid_fraction`` (n_cells,) in [0, 1] (clipped), and
 ``solid_velocity`` (n_cells, 3), accepted for the protocol but *not applied*: the stock
 penalization drives the velocity in the solid to zero (no per-cell target velocity in

@@ -8,7 +8,9 @@ or tags of the file), the material, the loads, the solver and whether the
 problem is dynamic (paper eq. 13). ``advance`` solves one step (static: one
 solve) with the coupler's inputs (``pressure`` at the vertices, applied on the
 wetted boundary) and returns the displacement, velocity and von Mises stress
-at the vertices, in the numbering of ``geometry``.
+at the vertices, in the numbering of ``geometry``. ``geometry`` also returns the
+wetted boundary's facets as ``interface_triangles`` (outward oriented), so the
+coupler can sample the fluid pressure on that surface (paper 2.3, Steps 2-3).
 """
 
 from __future__ import annotations
@@ -98,17 +100,33 @@ class SolidParticipant(Participant):
             else:
                 raise ValueError(f"unknown load type {kind!r}")
         self.wetted = config.get("wetted")
+        self.wetted_boundary = None
         if self.wetted is not None:
-            s.add_pressure_field(where(self.wetted), "pressure")
+            self.wetted_boundary = where(self.wetted)
+            s.add_pressure_field(self.wetted_boundary, "pressure")
         self.solver, self.states = s, {}
 
     def geometry(self):
+        """The mesh in input numbering: ``points`` (n, 3), ``cells`` (m, 4) and, with a
+        wetted boundary, ``interface_triangles`` (k, 3): its facets as triangles in the
+        numbering of ``points``, oriented with the outward normal (right-hand rule), for
+        the coupler's volume -> surface transfer of the fluid pressure."""
         io = self.solver.vertices
         points, cells = io.points(), io.tetrahedra()
+        interface = None
+        if self.wetted_boundary is not None:
+            interface = io.boundary_triangles(self.wetted_boundary)
         if self.rank != 0:
             return {}, None
-        return ({"cell_type": "tetra", "boundaries": dict(self.solver.solid.boundaries)},
-                {"points": Field("points", points, "m"), "cells": Field("cells", np.asarray(cells, np.int64))})
+        fields = {"points": Field("points", points, "m"), "cells": Field("cells", np.asarray(cells, np.int64))}
+        header = {"cell_type": "tetra", "boundaries": dict(self.solver.solid.boundaries)}
+        if interface is not None:
+            triangles = np.ascontiguousarray(interface[0], dtype=np.int64)
+            if len(triangles) == 0:
+                raise ValueError(f"the wetted boundary {self.wetted!r} has no facets on the mesh boundary")
+            fields["interface_triangles"] = Field("interface_triangles", triangles)
+            header["interface"] = self.wetted
+        return header, fields
 
     def advance(self, window, iteration, t, dt, inputs):
         s = self.solver

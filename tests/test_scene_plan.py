@@ -149,5 +149,5 @@ def test_missing_supports_are_an_error(tmp_path):
 
 
 def test_shipped_cases_are_valid(capsys):
-    for case in ("cases/block_compression", "cases/transfer_demo"):
+    for case in ("cases/block_compression", "cases/transfer_demo", "cases/plates_fsi"):
         assert main(["check", case]) == 0, capsys.readouterr().err
