@@ -130,3 +130,25 @@ def test_disjoint_and_reversed_dimensions_are_clear_errors():
         Transfer.assemble(S, far, "l2")
     with pytest.raises(TransferError, match="surface field cannot be projected onto a volume"):
         Transfer.assemble(far, S, "l2")
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_piecewise_constant_sources_keep_the_target_mass_exact(method):
+    """Q0/P0 sources with P1/Q1 targets: the default quadrature must integrate the
+    target mass (degree 2 p) too, not only source x target; with a one-point rule
+    a triangle inside one cell had a rank-one mass and a garbage dual basis."""
+    from transfer.generate import box_hexahedra
+
+    grid = StructuredGrid.from_bounds((0, 0, -0.001), (0.05, 0.025, 0.001), (20, 10, 21))
+    surf = rectangle((20, 10), upper=(0.05, 0.025), height=lambda x, y: 2e-4 * np.sin(300 * x) * np.cos(200 * y))
+    cases = [(FunctionSpace(grid, "Q0"), FunctionSpace(surf, "P1")),
+             (FunctionSpace(rectangle((5, 5), jitter=0.2, seed=1), "P0"),
+              FunctionSpace(rectangle((4, 6), jitter=0.2, seed=2), "P1")),
+             (FunctionSpace(StructuredGrid.from_bounds((0, 0, 0), (1, 1, 1), (3, 3, 3)), "Q0"),
+              FunctionSpace(box_hexahedra((4, 4, 4)), "Q1"))]
+    for S, W in cases:
+        T = Transfer.assemble(S, W, method)
+        np.testing.assert_allclose(T.B.sum(), W.mesh.cell_measures().sum(), rtol=1e-12)
+        np.testing.assert_allclose(T(np.full(S.num_dofs, 3.0)), 3.0, rtol=1e-12)
+        M = W.mass_matrix()
+        np.testing.assert_allclose(np.asarray(T.D.sum(axis=1)).ravel(), np.asarray(M.sum(axis=1)).ravel(), rtol=1e-12)

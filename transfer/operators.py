@@ -53,8 +53,10 @@ def _is_affine(space: FunctionSpace) -> bool:
 
 
 def default_quadrature_degree(source: FunctionSpace, target: FunctionSpace) -> int:
-    """Exact for the product of the two bases on affine simplices and boxes."""
-    return max(1, _poly_degree(source) + _poly_degree(target))
+    """Exact, on affine simplices and boxes, for both products assembled: source
+    x target (B) and target x target (D, and the dual basis built from it)."""
+    pt = _poly_degree(target)
+    return max(1, _poly_degree(source) + pt, 2 * pt)
 
 
 def _kind(mesh) -> int:
