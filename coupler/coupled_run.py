@@ -12,8 +12,13 @@ the pressure is read in fluid cells, not in the penalized ones inside the solid;
 the solid gets it at those vertices and zero elsewhere. A solid that gives no
 triangles (the ``spring_solid`` stand-in) gets the fallback, the volume
 projection onto all its vertices (:class:`VolumeInterface`). The interface value
-of the fixed point is that pressure, accelerated as the scene says. The solid
-fraction on the grid is computed once, from the undeformed solid. A scene without
+of the fixed point is that pressure, accelerated as the scene says. Two-way
+coupling (:class:`SolidOnGrid`): in every coupling iteration the solid fraction on
+the grid, the velocity transfer and the sampling surface are rebuilt from the
+deformed solid (points + displacement), so the fluid sees the aperture the pressure
+made (``[coupling] deformation = false``: the undeformed solid throughout); the
+rebuild is skipped while the displacement is zero or unchanged, and timed as the
+phase ``geometry update``. A scene without
 flow advances the solid once per step: no fluid process is ever started.
 
 Written to the output directory: ``solid_NNNN.vtu`` (and ``fluid_NNNN.vtu``)
@@ -142,12 +147,14 @@ class WettedInterface:
 
     method = "surface trace"
 
-    def __init__(self, S, triangles: np.ndarray, G: StructuredGrid, where: str = "[geometry.fluid]"):
+    def __init__(self, S, triangles: np.ndarray, G: StructuredGrid, where: str = "[geometry.fluid]",
+                 points=None):
         triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
         self.num_points = S.num_points
         self.vertices, local = np.unique(triangles, return_inverse=True)
         self.triangles = local.reshape(-1, 3)
-        points = np.asarray(S.points)[self.vertices]
+        # the solid's points (the deformed ones, points + displacement, when given)
+        points = np.asarray(S.points if points is None else points)[self.vertices]
         a, b, c = (points[self.triangles[:, i]] for i in range(3))
         area_normals = 0.5 * np.cross(b - a, c - a)  # outward (boundary_triangles orientation), |.| = area
         normals = np.zeros_like(points)
@@ -158,19 +165,37 @@ class WettedInterface:
             raise CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel "
                                f"(a folded surface)")
         self.normals = normals / length[:, None]
-        self.offset = 0.5 * float(np.linalg.norm(G.spacing))
-        self.surface = Mesh(points + self.offset * self.normals, self.triangles, "triangle", name="interface")
-        uncovered = len(self.vertices)
+        # half the cell's extent along the normal, scaled so that it is half the cell diagonal on
+        # a cubic grid: 0.5 sqrt(3) |(n_i h_i)|; on anisotropic grids (thin cells across a fracture)
+        # a vertical normal moves by 0.87 h_z, not by half the long diagonal
+        h = np.asarray(G.spacing, float)
+        self.offsets = 0.5 * np.sqrt(3.0) * np.linalg.norm(self.normals * h[None, :], axis=1)
+        self.offset = float(self.offsets.max())
+        moved = points + self.offsets[:, None] * self.normals
+        # a vertex on a face of the grid's box (e.g. a fracture face meeting the inlet) stays on it
+        # (a rough face's normal would tilt it out by a few micrometres): clamp the coordinates
+        # that lie on the box's faces; any other vertex moved outside is an error below
+        lo, hi = np.asarray(G.origin, float), np.asarray(G.origin, float) + h * np.asarray(G.shape)
+        tol = 1e-9 * h
+        ref = np.asarray(S.points)[self.vertices]  # undeformed: a face vertex stays on the face when it moves
+        on_face = (np.abs(ref - lo) <= tol) | (np.abs(ref - hi) <= tol)
+        # ... and so does an inside vertex moved out along an axis its normal is nearly tangent to
+        on_face |= (points >= lo - tol) & (points <= hi + tol) & (np.abs(self.normals) < 0.5)
+        moved = np.where(on_face, np.clip(moved, lo, hi), moved)
+        self.surface = Mesh(moved, self.triangles, "triangle", name="interface")
+        uncovered, first = len(self.vertices), ""
         try:
             self.transfer = Transfer.assemble(FunctionSpace(G, "Q0"), FunctionSpace(self.surface, "P1"),
                                               "pseudo_l2")
             uncovered = self.transfer.uncovered.size
+            if uncovered:
+                first = f"; first at {np.array2string(moved[self.transfer.uncovered[0]], precision=6)}"
         except NoOverlapError:
             pass
         if uncovered:
             raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled "
-                               f"{self.offset:.3g} m outside the solid ({uncovered} of {len(self.vertices)} "
-                               f"vertices outside the grid): extend the grid beyond the wetted boundary")
+                               f"up to {self.offset:.3g} m outside the solid ({uncovered} of {len(self.vertices)} "
+                               f"vertices outside the grid{first}): extend the grid beyond the wetted boundary")
         self.weights = np.asarray(self.transfer.D.sum(axis=1)).ravel()  # lumped surface mass
         self.area = float(self.surface.cell_measures().sum())
 
@@ -224,6 +249,81 @@ class VolumeInterface:
     def describe(self) -> dict:
         return {"method": self.method, "vertices": int(self.size),
                 "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+
+
+class SolidOnGrid:
+    """The solid as the fluid sees it, from the solid's current shape (two-way coupling).
+
+    ``fraction``: the solid volume fraction per grid cell (the Q0 projection of the solid's
+    indicator: exact intersection volumes / cell volume); ``to_fluid``: the P1 -> Q0 transfer
+    of the solid velocity; ``interface``: the wetted surface (:class:`WettedInterface`) or the
+    fallback (:class:`VolumeInterface`). :meth:`update` rebuilds all three from the deformed
+    solid (points + displacement), so the flow sees the aperture the pressure made; it keeps
+    the current operators when the displacement is zero (below 1e-12 of the grid spacing) or
+    unchanged since the last build, and always with ``deform=False`` or the volume fallback.
+    The interface vector keeps its size and vertex order (one value per interface vertex),
+    so accelerators see the same unknowns; the residual norm uses the undeformed weights.
+    """
+
+    def __init__(self, S, G: StructuredGrid, triangles, where: str, deform: bool = True):
+        self.S, self.G, self.where = S, G, where
+        self.triangles = None if triangles is None or not len(triangles) else np.asarray(triangles)
+        self.deform = bool(deform) and self.triangles is not None
+        self.threshold = 1e-12 * float(np.min(G.spacing))
+        self.builds, self.build_seconds, self.skipped = 0, 0.0, 0
+        self.max_displacement = 0.0
+        self._u = None
+        self._build(None)
+        self.reference_weights = self.interface.weights
+        self.builds, self.build_seconds = 0, 0.0  # count the rebuilds only, not the initial build
+
+    def _build(self, u) -> None:
+        start = time.perf_counter()
+        S = self.S
+        if u is not None:
+            try:
+                S = Mesh(np.asarray(self.S.points) + u, self.S.cells, "tetra", name="deformed solid")
+            except Exception as exc:  # an inverted tetrahedron: the coupling iteration ran away
+                raise CouplerError(f"the deformed solid is not a valid mesh (largest displacement "
+                                   f"{float(np.max(np.linalg.norm(u, axis=1))):.3g} m): {exc}; the coupling "
+                                   f"iteration diverges: use [coupling] acceleration = 'iqn-ils' or 'aitken', "
+                                   f"or a smaller relaxation") from exc
+        to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(self.G, "Q0"), "pseudo_l2")
+        volumes = np.asarray(to_fluid.D.diagonal())
+        self.outside = max(1.0 - float(volumes.sum()) / float(S.cell_measures().sum()), 0.0)
+        if self.triangles is not None:
+            interface = WettedInterface(self.S, self.triangles, self.G, self.where,
+                                        points=None if u is None else S.points)
+        else:
+            if self.outside > 1e-9:
+                raise CouplerError(f"{self.where}: the fluid grid does not cover the solid "
+                                   f"({self.outside:.3g} of the solid's volume lies outside it)")
+            interface = VolumeInterface(S, self.G, self.where)
+        self.to_fluid, self.fraction, self.interface = to_fluid, volumes / self.G.cell_measures(), interface
+        self.builds += 1
+        self.build_seconds += time.perf_counter() - start
+
+    def update(self, u) -> bool:
+        """Rebuild from the displacement u (num_points, 3) if it changed; True if rebuilt."""
+        if not self.deform or u is None:
+            return False
+        u = np.asarray(u, float).reshape(len(self.S.points), -1)
+        size = float(np.max(np.abs(u))) if u.size else 0.0
+        self.max_displacement = max(self.max_displacement, size)
+        if size <= self.threshold:
+            u = None
+        if (u is None and self._u is None) or (u is not None and self._u is not None and np.array_equal(u, self._u)):
+            self.skipped += 1
+            return False
+        self._build(u)
+        self._u = None if u is None else u.copy()
+        return True
+
+    def describe(self) -> dict:
+        return {"deformed": self.deform, "rebuilds": self.builds, "rebuild_seconds": self.build_seconds,
+                "seconds_per_rebuild": self.build_seconds / self.builds if self.builds else None,
+                "skipped": self.skipped, "solid_volume_outside_grid": self.outside,
+                "fluid_cells_with_solid": int(np.count_nonzero(self.fraction > 0))}
 
 
 def _as_arrays(fields: dict) -> dict:
@@ -295,43 +395,44 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         fluid = clients["fluid"]
         S, G = meshes["solid"], meshes["fluid"]
         start = time.perf_counter()
-        to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(G, "Q0"), "pseudo_l2")
-        fraction = np.asarray(to_fluid.D.diagonal()) / G.cell_measures()  # solid volume per cell / cell volume
-        solid_volume = float(S.cell_measures().sum())
-        outside = 1.0 - float(np.asarray(to_fluid.D.diagonal()).sum()) / solid_volume
-        if outside > 1e-9:
-            raise CouplerError(f"{scene.path}: [geometry.fluid]: the fluid grid does not cover the solid "
-                               f"({outside:.3g} of the solid's volume lies outside it)")
         triangles = geometry_fields["solid"].get("interface_triangles")
-        if triangles is not None and len(np.asarray(triangles.data)):
-            interface = WettedInterface(S, np.asarray(triangles.data), G, f"{scene.path}: [geometry.fluid]")
-            summary["interface"] = interface.describe()
-            log(f"interface '{scene.coupling['interface']}': {interface.num_vertices} vertices, "
-                f"{interface.num_triangles} triangles, pressure sampled {interface.offset:.3g} m into the fluid")
+        triangles = None if triangles is None else np.asarray(triangles.data)
+        on_grid = SolidOnGrid(S, G, triangles, f"{scene.path}: [geometry.fluid]",
+                              deform=scene.coupling["deformation"])
+        interface = on_grid.interface
+        summary["interface"] = interface.describe()
+        if isinstance(interface, WettedInterface):
+            log(f"interface {scene.coupling['interface']}: {interface.num_vertices} vertices, "
+                f"{interface.num_triangles} triangles, pressure sampled up to {interface.offset:.3g} m into the fluid")
+            if on_grid.outside > 1e-9:
+                log(f"the fluid grid covers the wetted interface; {on_grid.outside:.3g} of the solid's volume "
+                    f"lies outside it")
         else:
             # Fallback (stand-in solids such as spring_solid, which have no boundary): the volume
             # projection of the grid's pressure onto every solid vertex (the solid applies it on
             # its wetted boundary only, if it has one).
-            interface = VolumeInterface(S, G, f"{scene.path}: [geometry.fluid]")
-            summary["interface"] = interface.describe()
             log(f"interface: no boundary triangles from the solid; pressure projected onto all "
                 f"{S.num_points} solid vertices (volume projection)")
         phases.add("transfer", time.perf_counter() - start)
-        weights = interface.weights  # lumped interface mass: the M-norm of the residual
-        log(f"transfers: {to_fluid.stats['pairs_intersected']} cell pairs; solid fills "
-            f"{np.count_nonzero(fraction > 0)} fluid cells")
+        summary["geometry_update"] = on_grid.describe()
+        weights = on_grid.reference_weights  # lumped interface mass (undeformed): the M-norm of the residual
+        log(f"transfers: {on_grid.to_fluid.stats['pairs_intersected']} cell pairs; solid fills "
+            f"{np.count_nonzero(on_grid.fraction > 0)} fluid cells"
+            f"{'; rebuilt from the deformed solid every iteration' if on_grid.deform else ''}")
 
         def iterate(window, iteration, x):
-            pressure = interface.to_solid_vertices(x)
+            pressure = on_grid.interface.to_solid_vertices(x)
             solid_out = _as_arrays(phases.timed("solid", solid.advance, window.index, iteration, window.t_start,
                                                 window.dt, {"pressure": Field("pressure", pressure, "Pa")}))
-            velocity = phases.timed("transfer", to_fluid.apply, solid_out["velocity"], fill=0.0)
+            # two-way: the fluid sees the deformed solid (fractions, velocity transfer, sampling surface)
+            phases.timed("geometry update", on_grid.update, solid_out.get("displacement"))
+            velocity = phases.timed("transfer", on_grid.to_fluid.apply, solid_out["velocity"], fill=0.0)
             fluid_in = {"solid_velocity": Field("solid_velocity", velocity, "m/s"),
-                        "solid_fraction": Field("solid_fraction", fraction, "1")}
+                        "solid_fraction": Field("solid_fraction", on_grid.fraction, "1")}
             fluid_out = _as_arrays(phases.timed("fluid", fluid.advance, window.index, iteration, window.t_start,
                                                 window.dt, fluid_in))
-            last.update(solid=solid_out, fluid=fluid_out, fluid_in=velocity)
-            return phases.timed("transfer", interface.from_fluid, fluid_out["pressure"])
+            last.update(solid=solid_out, fluid=fluid_out, fluid_in=velocity, fraction=on_grid.fraction)
+            return phases.timed("transfer", on_grid.interface.from_fluid, fluid_out["pressure"])
 
         class Checkpoint:
             def save(self, window):
@@ -361,7 +462,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             solid_fields = dict(last["solid"])
             if coupled:
                 solid_fields["pressure"] = interface.to_solid_vertices(x)
-                fluid_fields = {"pressure": last["fluid"]["pressure"], "solid_fraction": fraction,
+                fluid_fields = {"pressure": last["fluid"]["pressure"], "solid_fraction": last["fraction"],
                                 "solid_velocity": last["fluid_in"]}
                 if "velocity" in last["fluid"]:
                     fluid_fields["velocity"] = last["fluid"]["velocity"]
@@ -372,6 +473,8 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         if u is not None:
             record["max_displacement"] = float(np.max(np.linalg.norm(u, axis=1)))
         summary["steps"].append(record)
+        if coupled:
+            summary["geometry_update"] = on_grid.describe()
         _write_summary(out, summary)
 
     bar = ProgressBar(steps, label=scene.case_dir.name, enabled=progress)
@@ -389,6 +492,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         stats = client.stats
         phases.add("messaging", max(stats["seconds"] - stats["remote_seconds"], 0.0))
     if coupled:
+        summary["geometry_update"] = on_grid.describe()
         _residual_plot(out / "residuals.png", result)
     log(f"{steps} step{'s' * (steps > 1)} done; results in {out}")
     done = {"iterations": result.iterations, "converged": result.converged}

@@ -175,7 +175,8 @@ TABLES = {
     "coupling": {"acceleration": f"one of {', '.join(ACCELERATIONS)}", "relaxation": "initial relaxation",
                  "tolerance": "relative interface residual (mass-weighted L2)",
                  "max_iterations": "per time step", "reuse": "IQN-ILS: past time windows reused",
-                 "interface": "the solid boundary the fluid pressure acts on (flow)"},
+                 "interface": "the solid boundary (or list of boundaries) the fluid pressure acts on (flow)",
+                 "deformation": "true: the fluid sees the deformed solid (two-way); false: the undeformed one"},
     "messaging": {"mode": "zenoh mode: peer (default) or client", "connect": "zenoh endpoints to connect to",
                   "timeout": "seconds to wait for a participant's answer"},
     "flow": {"inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
@@ -266,13 +267,16 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                     "tolerance": coupling.number("tolerance", 1e-6, positive=True),
                     "max_iterations": coupling.integer("max_iterations", 50),
                     "reuse": coupling.integer("reuse", 8, minimum=0),
-                    "interface": coupling.string("interface", None)}
+                    "interface": _interface(coupling),
+                    "deformation": coupling.boolean("deformation", True)}
     if "flow" in effects:
         if coupling_cfg["interface"] is None:
             raise coupling.error("interface", "missing: the solid boundary the fluid pressure acts on")
-        if coupling_cfg["interface"] not in solid.boundaries:
-            raise coupling.error("interface", f"unknown boundary {coupling_cfg['interface']!r}; named boundaries: "
-                                              f"{', '.join(solid.boundaries)}")
+        names = [coupling_cfg["interface"]] if isinstance(coupling_cfg["interface"], str) else coupling_cfg["interface"]
+        for name in names:
+            if name not in solid.boundaries:
+                raise coupling.error("interface", f"unknown boundary {name!r}; named boundaries: "
+                                                  f"{', '.join(solid.boundaries)}")
 
     flow = _flow(path, data["flow"], fluid, effects) if "flow" in data else None
     if flow is None and "flow" in effects and solver_cfg["fluid"]["participant"] == "openfoam":
@@ -304,6 +308,17 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
                         output={"every": out.integer("every", 1)}, check=check, flow=flow)
+
+
+def _interface(coupling: Table):
+    """[coupling] interface: one boundary name, or a non-empty list of names (e.g. both faces
+    of a fracture)."""
+    value = coupling.data.get("interface")
+    if isinstance(value, list):
+        if not value:
+            raise coupling.error("interface", "an empty list: name at least one boundary")
+        return coupling.strings("interface")
+    return coupling.string("interface", None)
 
 
 def _solid_geometry(path, case_dir, data) -> SolidGeometry:

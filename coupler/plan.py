@@ -106,9 +106,9 @@ def make_plan(scene: CoupledScene) -> Plan:
                      f"iterations)")
     notes = []
     if "flow" in scene.effects and scene.solvers["fluid"]["participant"] == "openfoam":
-        notes.append("openfoam: the solid fraction comes from the undeformed solid (computed once) and the "
-                     "solid velocity is not applied (penalization towards rest); the deformation does not "
-                     "reach the flow yet")
+        notes.append("openfoam: the solid velocity is not applied (penalization towards rest)"
+                     + ("" if scene.coupling.get("deformation", True) else
+                        "; [coupling] deformation = false: the solid fraction comes from the undeformed solid"))
         if "dynamics" in scene.effects:
             notes.append("openfoam runs simpleFoam (steady) per time step: the fluid is quasi-static even "
                          "with 'dynamics'")

@@ -102,7 +102,9 @@ class SolidParticipant(Participant):
         self.wetted = config.get("wetted")
         self.wetted_boundary = None
         if self.wetted is not None:
-            self.wetted_boundary = where(self.wetted)
+            # one boundary, or a list of them (e.g. both faces of a fracture)
+            self.wetted_boundary = (where(self.wetted) if isinstance(self.wetted, (str, int))
+                                    else [where(w) for w in self.wetted])
             s.add_pressure_field(self.wetted_boundary, "pressure")
         self.solver, self.states = s, {}
 
