@@ -9,4 +9,4 @@ bash "$ROOT/scripts/ensure_installed.sh"
 . "$ROOT/scripts/env.sh"
 cd "$ROOT"
 
-exec "$ROOT/.venv/bin/varcouple" run cases/transfer_demo "$@"
+exec "$ROOT/.venv/bin/varcouple" run cases/small_fracture "$@"
