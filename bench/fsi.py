@@ -67,7 +67,7 @@ def run_case(case: Path, acceleration: str, relaxation: float, replace: dict) ->
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--case", default=str(ROOT / "cases" / "small_fracture"))
+    ap.add_argument("--case", default="cases/small_fracture", help="case directory (relative to the repository)")
     ap.add_argument("--accelerations", nargs="+", default=["constant", "aitken", "iqn-ils"])
     ap.add_argument("--relaxation", type=float, default=1.0)
     ap.add_argument("--set", action="append", default=[], metavar="OLD=NEW",
@@ -84,7 +84,7 @@ def main(argv=None):
             half = len(parts) // 2
             replace["=".join(parts[:half])] = "=".join(parts[half:])
         result = {"case": a.case, "relaxation": a.relaxation, "replace": replace, "platform": platform.platform(),
-                  "runs": {acc: run_case(Path(a.case), acc, a.relaxation, replace) for acc in a.accelerations}}
+                  "runs": {acc: run_case(ROOT / a.case, acc, a.relaxation, replace) for acc in a.accelerations}}
         for acc, r in result["runs"].items():
             print(f"{acc:9s} iterations/step {r['iterations_per_step']}  wall {r['wall_seconds']:.1f} s  "
                   f"fluid {r['fluid_seconds']:.1f}  solid {r['solid_seconds']:.2f}  transfer {r['transfer_seconds']:.2f} "

@@ -178,7 +178,7 @@ def machine_info() -> dict:
 
         built = Path(_kernels.__file__).stat().st_mtime
         sources = [f.stat().st_mtime for f in (ROOT / "transfer" / "_kernels").glob("*.[ch]pp")]
-        info["kernels"] = {"file": _kernels.__file__,
+        info["kernels"] = {"file": Path(_kernels.__file__).name,
                            "built": _dt.datetime.fromtimestamp(built, _dt.timezone.utc).isoformat(timespec="seconds"),
                            "older_than_sources": bool(sources) and built < max(sources)}
     except (ImportError, OSError, AttributeError):

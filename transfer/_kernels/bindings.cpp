@@ -77,58 +77,38 @@ nb::dict to_dict(vc::AssemblyResult&& r) {
 
 NB_MODULE(_kernels, m) {
   m.doc() = "Compiled kernels of varcouple.transfer: search, clipping, quadrature, sparse assembly";
-  m.def(
-      "assemble_volume",
-      [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
-         int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,
-         int64_t ntd, std::optional<Grid> grid, int nthreads) {
-        check_dofs(nsd, ntd);
-        auto src = element_set(sp, sc, skind, sdeg);
-        auto tgt = element_set(tp, tc, tkind, tdeg);
-        auto rule = simplex_rule(bary, w);
-        if (rule.nbary != 4) throw std::invalid_argument("volume rule needs 4 barycentric coordinates");
-        vc::GridInfo g;
-        if (grid) {
-          g.origin = std::get<0>(*grid);
-          g.spacing = std::get<1>(*grid);
-          g.shape = std::get<2>(*grid);
-        }
-        vc::AssemblyResult r;
-        {
-          nb::gil_scoped_release release;
-          r = vc::assemble_volume(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads);
-        }
-        return to_dict(std::move(r));
-      },
-      "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
-      "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
-      "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1);
-  m.def(
-      "assemble_trace",
-      [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
-         int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd,
-         int64_t ntd, std::optional<Grid> grid, int nthreads) {
-        check_dofs(nsd, ntd);
-        auto src = element_set(sp, sc, skind, sdeg);
-        auto tgt = element_set(tp, tc, tkind, tdeg);
-        auto rule = simplex_rule(bary, w);
-        if (rule.nbary != 3) throw std::invalid_argument("trace rule needs 3 barycentric coordinates");
-        vc::GridInfo g;
-        if (grid) {
-          g.origin = std::get<0>(*grid);
-          g.spacing = std::get<1>(*grid);
-          g.shape = std::get<2>(*grid);
-        }
-        vc::AssemblyResult r;
-        {
-          nb::gil_scoped_release release;
-          r = vc::assemble_trace(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads);
-        }
-        return to_dict(std::move(r));
-      },
-      "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
-      "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
-      "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1);
+  for (auto [name, kernel, nbary] : {std::tuple{"assemble_volume", &vc::assemble_volume, 4},
+                                     std::tuple{"assemble_trace", &vc::assemble_trace, 3}}) {
+    m.def(
+        name,
+        [kernel = kernel, nbary = nbary, name = name](
+            const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
+            int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd, int64_t ntd,
+            std::optional<Grid> grid, int nthreads) {
+          check_dofs(nsd, ntd);
+          auto src = element_set(sp, sc, skind, sdeg);
+          auto tgt = element_set(tp, tc, tkind, tdeg);
+          auto rule = simplex_rule(bary, w);
+          if (rule.nbary != nbary)
+            throw std::invalid_argument(std::string(name) + ": the rule needs " + std::to_string(nbary) +
+                                        " barycentric coordinates");
+          vc::GridInfo g;
+          if (grid) {
+            g.origin = std::get<0>(*grid);
+            g.spacing = std::get<1>(*grid);
+            g.shape = std::get<2>(*grid);
+          }
+          vc::AssemblyResult r;
+          {
+            nb::gil_scoped_release release;
+            r = kernel(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads);
+          }
+          return to_dict(std::move(r));
+        },
+        "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
+        "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
+        "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1);
+  }
   m.def(
       "assemble_surface",
       [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,

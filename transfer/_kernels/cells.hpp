@@ -181,8 +181,9 @@ struct Evaluator {
 // Candidate source elements of a target bounding box.
 class SourceSearch {
  public:
-  SourceSearch(const ElementSet& src, const std::vector<BBox>& boxes, const GridInfo* grid)
-      : boxes_(boxes), grid_(grid) {
+  SourceSearch(const ElementSet& src, const GridInfo* grid) : boxes_(src.ncells), grid_(grid) {
+    for (int64_t e = 0; e < src.ncells; ++e)
+      for (int k = 0; k < src.nverts; ++k) boxes_[e].grow(src.vertex(e, k));
     if (grid_) return;
     BBox all;
     double mean = 0.0;
@@ -229,7 +230,6 @@ class SourceSearch {
             }
       }
     }
-    (void)src;
   }
 
   // Calls f(e) once for every source element whose box may overlap `b`.
@@ -275,7 +275,7 @@ class SourceSearch {
     return true;
   }
 
-  const std::vector<BBox>& boxes_;
+  std::vector<BBox> boxes_;
   const GridInfo* grid_;
   Vec3 lo_{}, h_{};
   int64_t n_[3] = {1, 1, 1};

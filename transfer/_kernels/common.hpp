@@ -248,8 +248,13 @@ struct LocalAssembly {
   }
 };
 
+// Threads of an assembly: `nthreads`, or all OpenMP offers when it is <= 0.
+int thread_count(int nthreads);
+
 // Result of one assembly, handed to Python.
 struct AssemblyResult {
+  explicit AssemblyResult(int64_t ntarget = 0) : overlap(ntarget, 0.0), measure(ntarget, 0.0) {}
+
   CSR B, D;
   std::vector<double> overlap;   // per target element: measure covered by the source
   std::vector<double> measure;   // per target element: its own measure

@@ -189,16 +189,8 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
   if (rule.nbary != 3 || rule.npts <= 0) throw std::invalid_argument("surface rule needs 3 barycentric coordinates");
   search_distance = std::max(0.0, search_distance);
 
-  int nth = 1;
-#ifdef _OPENMP
-  nth = nthreads > 0 ? nthreads : omp_get_max_threads();
-#else
-  (void)nthreads;
-#endif
-
-  AssemblyResult result;
-  result.overlap.assign(tgt.ncells, 0.0);
-  result.measure.assign(tgt.ncells, 0.0);
+  const int nth = thread_count(nthreads);
+  AssemblyResult result(tgt.ncells);
 
   // Source side, once: boxes, unit normals (zero if degenerate), bin grid.
   const int64_t ns_cells = src.ncells;

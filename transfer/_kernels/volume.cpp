@@ -176,21 +176,10 @@ void clip_convex(const Tet* subject, int nsubject, const Convex& c, double eps, 
 AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
                                const GridInfo* src_grid, int nthreads) {
-  AssemblyResult result;
-  result.overlap.assign(tgt.ncells, 0.0);
-  result.measure.assign(tgt.ncells, 0.0);
+  AssemblyResult result(tgt.ncells);
+  const SourceSearch search(src, src_grid);
 
-  std::vector<BBox> src_boxes(src.ncells);
-  for (int64_t e = 0; e < src.ncells; ++e)
-    for (int k = 0; k < src.nverts; ++k) src_boxes[e].grow(src.vertex(e, k));
-  const SourceSearch search(src, src_boxes, src_grid);
-
-#ifdef _OPENMP
-  const int nth = nthreads > 0 ? nthreads : omp_get_max_threads();
-#else
-  const int nth = 1;
-  (void)nthreads;
-#endif
+  const int nth = thread_count(nthreads);
   std::vector<Triplets> Bparts(nth), Dparts(nth);
   int64_t tested = 0, intersected = 0;
   const int nt = tgt.nbasis(), ns = src.nbasis();
