@@ -133,8 +133,6 @@ class MeshFile:
 
     @classmethod
     def read(cls, path) -> "MeshFile":
-        import meshio
-
         name = str(path)
         p = Path(path)
         if not p.exists():

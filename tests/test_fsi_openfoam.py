@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
-from coupler.coupled_run import WettedInterface, participant_config
+from coupler.coupled_run import participant_config
+from coupler.interface import WettedInterface
 from coupler.errors import CouplerError, SceneError
 from coupler.scene import load
 from transfer import Mesh, StructuredGrid

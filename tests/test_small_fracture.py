@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
-from coupler.coupled_run import SolidOnGrid, WettedInterface
+from coupler.interface import SolidOnGrid, WettedInterface
 from coupler.errors import SceneError
 from coupler.scene import load
 from transfer import Mesh, StructuredGrid
