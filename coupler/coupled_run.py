@@ -51,7 +51,9 @@ from .results import Series, check_displacement, residual_plot, write_summary
 
 
 class Phases:
-    """Wall time per phase (solver, transfer, messaging, output)."""
+    """Wall time per phase (each solver, transfer, messaging, output): a call to a
+    participant counts the participant's own time (the ``elapsed`` of its reply) in
+    its phase and the rest of the round trip in ``messaging``."""
 
     def __init__(self):
         self.seconds: dict[str, float] = {}
@@ -65,6 +67,17 @@ class Phases:
             return fn(*args, **kwargs)
         finally:
             self.add(phase, time.perf_counter() - start)
+
+    def remote(self, phase: str, client, verb: str, *args):
+        """``client.<verb>(*args)``, its time split into `phase` and ``messaging``."""
+        before = client.stats["seconds"], client.stats["remote_seconds"]
+        try:
+            return getattr(client, verb)(*args)
+        finally:
+            total = client.stats["seconds"] - before[0]
+            own = client.stats["remote_seconds"] - before[1]
+            self.add(phase, own)
+            self.add("messaging", max(total - own, 0.0))
 
 
 def participant_config(scene: CoupledScene, name: str) -> dict:
@@ -155,8 +168,8 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
     for name, client in clients.items():
         phases.timed("start", client.wait_alive, timeout)
         announced[name] = client.announce()
-        phases.timed(f"{name} setup", client.configure, participant_config(scene, name))
-        header, fields = phases.timed(f"{name} setup", client.geometry)
+        phases.remote(f"{name} setup", client, "configure", participant_config(scene, name))
+        header, fields = phases.remote(f"{name} setup", client, "geometry")
         meshes[name] = _mesh_of(name, header, fields)
         geometry_fields[name] = fields or {}
         log(f"{name}: {announced[name].get('kind')} on {meshes[name].num_cells} cells")
@@ -200,14 +213,14 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
 
         def iterate(window, iteration, x):
             pressure = on_grid.interface.to_solid_vertices(x)
-            solid_out = _as_arrays(phases.timed("solid", solid.advance, window.index, iteration, window.t_start,
+            solid_out = _as_arrays(phases.remote("solid", solid, "advance", window.index, iteration, window.t_start,
                                                 window.dt, {"pressure": Field("pressure", pressure, "Pa")}))
             # two-way: the fluid sees the deformed solid (fractions, velocity transfer, sampling surface)
             phases.timed("geometry update", on_grid.update, solid_out.get("displacement"))
             velocity = phases.timed("transfer", on_grid.to_fluid.apply, solid_out["velocity"], fill=0.0)
             fluid_in = {"solid_velocity": Field("solid_velocity", velocity, "m/s"),
                         "solid_fraction": Field("solid_fraction", on_grid.fraction, "1")}
-            fluid_out = _as_arrays(phases.timed("fluid", fluid.advance, window.index, iteration, window.t_start,
+            fluid_out = _as_arrays(phases.remote("fluid", fluid, "advance", window.index, iteration, window.t_start,
                                                 window.dt, fluid_in))
             last.update(solid=solid_out, fluid=fluid_out, fluid_in=velocity, fraction=on_grid.fraction)
             return phases.timed("transfer", on_grid.interface.from_fluid, fluid_out["pressure"])
@@ -215,11 +228,11 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         class Checkpoint:
             def save(self, window):
                 for c in clients.values():
-                    phases.timed("checkpoint", c.save_state, window.index)
+                    phases.remote("checkpoint", c, "save_state", window.index)
 
             def restore(self, window):
                 for c in clients.values():
-                    phases.timed("checkpoint", c.restore_state, window.index)
+                    phases.remote("checkpoint", c, "restore_state", window.index)
 
         x0 = np.zeros(interface.size)
         c = scene.coupling
@@ -229,7 +242,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         weights, x0, accelerator, mode, checkpoint = None, np.zeros(0), None, "explicit", None
 
         def iterate(window, iteration, x):
-            last["solid"] = _as_arrays(phases.timed("solid", solid.advance, window.index, iteration,
+            last["solid"] = _as_arrays(phases.remote("solid", solid, "advance", window.index, iteration,
                                                     window.t_start, window.dt, {}))
             return x
 
@@ -267,8 +280,6 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
     for name, client in clients.items():
         client.finish()
         launcher.wait(name, timeout=30)
-        stats = client.stats
-        phases.add("messaging", max(stats["seconds"] - stats["remote_seconds"], 0.0))
     if coupled:
         summary["geometry_update"] = on_grid.describe()
         residual_plot(out / "residuals.png", result)
