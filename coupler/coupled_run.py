@@ -275,6 +275,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
                              on_converged=on_converged, progress=bar, weights=weights, coupling=mode)
     finally:
         bar.close()
+    summary["accelerator"] = result.accelerator
     for record, step in zip(summary["steps"], result.steps):
         record.update(iterations=step.iterations, residuals=list(step.residuals), converged=step.converged)
     for name, client in clients.items():

@@ -241,17 +241,62 @@ def open_listening_session(host: str = "127.0.0.1", port: int | None = None, att
 #: than the pool, API change) falls back to the implicit one. Environment:
 #: ``VARCOUPLE_SHM_MODE``.
 SHM_MODE = os.environ.get("VARCOUPLE_SHM_MODE", "explicit")
-_provider = None
+#: Size of the first explicit shared-memory pool (bytes). Making a pool costs time in
+#: proportion to its size (the segment is written once: about 0.45 ms per MB on these
+#: machines, 0.12 s for 256 MB and up to 0.9 s while the other processes of a run
+#: compute on two cores), so a process starts with a small pool, made during set-up by
+#: :func:`warm_up_shm`, and replaces it by a larger one (a power of two at least four
+#: times the message, at most :data:`SHM_POOL_SIZE`) when a message does not fit in half
+#: of it. Environment: ``VARCOUPLE_SHM_INITIAL_POOL`` (bytes).
+SHM_INITIAL_POOL = int(os.environ.get("VARCOUPLE_SHM_INITIAL_POOL", 16 * 2**20))
+_providers: list = []  # [(size, provider)], newest last; older pools are kept for the buffers in flight
+_provider_lock = threading.Lock()
 _explicit_broken = False
 
 
-def _shm_provider():
-    global _provider
-    if _provider is None:
+def _pool_size_for(nbytes: int) -> int:
+    size = max(SHM_INITIAL_POOL, 1)
+    while size < 4 * nbytes and size < SHM_POOL_SIZE:
+        size *= 2
+    return min(size, SHM_POOL_SIZE)
+
+
+def _shm_provider(nbytes: int = 0):
+    """The explicit shared-memory pool for a message of `nbytes`: ``(provider, size)``,
+    made (or grown) as :data:`SHM_INITIAL_POOL` explains."""
+    with _provider_lock:
+        if _providers and (2 * nbytes <= _providers[-1][0] or _providers[-1][0] >= SHM_POOL_SIZE):
+            size, provider = _providers[-1]
+            return provider, size
         import zenoh.shm as zshm
 
-        _provider = zshm.ShmProvider.default_backend(SHM_POOL_SIZE)
-    return _provider
+        size = _pool_size_for(nbytes)
+        t0 = time.perf_counter()
+        provider = zshm.ShmProvider.default_backend(size)
+        _providers.append((size, provider))
+        log.debug("shared-memory pool of %d MB made in %.3f s", size >> 20, time.perf_counter() - t0)
+        return provider, size
+
+
+def warm_up_shm() -> float:
+    """Make this process's first shared-memory pool and allocate from it once, so that the
+    first large message of a run does not pay for it (a participant calls it before it
+    declares itself alive, the coupler when its session opens). Returns the seconds spent;
+    never raises (a failure disables the explicit path, as in :func:`_zbytes`)."""
+    global _explicit_broken
+    if SHM_MODE != "explicit" or _explicit_broken:
+        return 0.0
+    t0 = time.perf_counter()
+    try:
+        import zenoh.shm as zshm
+
+        provider, _ = _shm_provider(SHM_THRESHOLD)
+        provider.alloc(SHM_THRESHOLD, zshm.GarbageCollect())  # dropped at once: back to the pool
+    except Exception as exc:  # noqa: BLE001 - unstable API
+        _explicit_broken = True
+        log.warning("explicit shared memory unavailable (%s: %s); using zenoh's transport optimization",
+                    type(exc).__name__, exc)
+    return time.perf_counter() - t0
 
 
 def _zbytes(buf, shm: bool = False):
@@ -264,14 +309,14 @@ def _zbytes(buf, shm: bool = False):
     try:
         import zenoh.shm as zshm
 
-        provider = _shm_provider()
+        provider, size = _shm_provider(len(buf))
         policy = zshm.GarbageCollect()
     except Exception as exc:  # noqa: BLE001 - unstable API: never let it break a message
         _explicit_broken = True
         log.warning("explicit shared memory unavailable (%s: %s); using zenoh's transport optimization",
                     type(exc).__name__, exc)
         return buf
-    if len(buf) > SHM_POOL_SIZE // 2:
+    if len(buf) > size // 2:
         return buf
     try:
         m = provider.alloc(len(buf), policy)
@@ -351,6 +396,8 @@ class ParticipantServer:
         if watch_coupler:
             self._coupler_sub = session.liveliness().declare_subscriber(
                 alive_key(run_id, COUPLER), _callback(self._on_coupler), history=True)
+        if shared_memory:
+            warm_up_shm()  # the first large reply must not pay for the pool
         # The token comes last: a client that sees it finds every queryable declared.
         self._token = session.liveliness().declare_token(alive_key(run_id, name))
         log.info("%s: serving %s", name, key(run_id, name, "*"))
@@ -685,6 +732,8 @@ class CouplerSession:
             self.session = open_session(mode=mode, connect=connect, shared_memory=shared_memory, **kwargs)
             self.endpoints = connect
         self.shared_memory = shared_memory
+        if shared_memory:
+            warm_up_shm()  # the first large request must not pay for the pool
         self._token = self.session.liveliness().declare_token(alive_key(self.run_id, COUPLER))
         self.clients: dict[str, ParticipantClient] = {}
 
