@@ -216,7 +216,13 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             solid_out = _as_arrays(phases.remote("solid", solid, "advance", window.index, iteration, window.t_start,
                                                 window.dt, {"pressure": Field("pressure", pressure, "Pa")}))
             # two-way: the fluid sees the deformed solid (fractions, velocity transfer, sampling surface)
-            phases.timed("geometry update", on_grid.update, solid_out.get("displacement"))
+            try:
+                phases.timed("geometry update", on_grid.update, solid_out.get("displacement"))
+            except CouplerError as exc:
+                u = solid_out.get("displacement")
+                largest = float(np.max(np.linalg.norm(u, axis=1))) if u is not None else 0.0
+                raise CouplerError(f"{window}, iteration {iteration}: the deformed solid (largest displacement "
+                                   f"{largest:.3g} m) no longer fits the fluid grid: {exc}") from None
             velocity = phases.timed("transfer", on_grid.to_fluid.apply, solid_out["velocity"], fill=0.0)
             fluid_in = {"solid_velocity": Field("solid_velocity", velocity, "m/s"),
                         "solid_fraction": Field("solid_fraction", on_grid.fraction, "1")}
