@@ -221,3 +221,18 @@ def test_solid_fenicsx_reads_the_tags(blocks, tmp_path):
     lower = read_mesh(path)
     assert lower.boundaries == {str(FACE_TAGS[n]): FACE_TAGS[n] for n in blocks.lower.faces}
     assert comm.allreduce(len(lower.facets(str(FACE_TAGS["fracture_lower"])))) == 576
+
+
+def test_write_case_mesh_is_reproducible(tmp_path):
+    import meshio
+
+    from transfer.fracture import write_case_mesh
+
+    params = dict(shape=(8, 4, 2), size=(0.02, 0.01), height=2e-3, aperture=1e-3, min_aperture=0.5e-3,
+                  rms=0.1e-3, hurst=0.8, mismatch_length=5e-3, seed=3)
+    text = write_case_mesh(tmp_path / "a.msh", **params)
+    write_case_mesh(tmp_path / "b.msh", **params)
+    assert (tmp_path / "a.msh").read_bytes() == (tmp_path / "b.msh").read_bytes()
+    m = meshio.read(tmp_path / "a.msh")
+    assert sum(len(b.data) for b in m.cells if b.type == "tetra") == 2 * 8 * 4 * 2 * 6
+    assert "aperture mean 1.0000 mm" in text

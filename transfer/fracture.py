@@ -502,3 +502,20 @@ def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, g
     up = _block(xs, ys, upper, np.full_like(upper, top), nz, grading, False,
                 sides + ("fracture_upper", "top"), BLOCK_TAGS["upper_block"], "upper_block")
     return FractureBlocks(low, up, _combine(low, up), (lower, upper), size, (float(origin[0]), float(origin[1])))
+
+
+def write_case_mesh(path, shape, size, height, aperture, min_aperture, rms, hurst, mismatch_length, seed) -> str:
+    """Make and write the solid of a fracture case (two blocks around a non-periodic
+    matched fracture pair, :func:`fracture_pair` and :func:`fracture_blocks`); return a
+    description with the z-range the fluid grid must cover."""
+    lower, upper = fracture_pair(shape[:2], size, aperture=aperture, hurst=hurst, rms=rms, seed=seed,
+                                 min_aperture=min_aperture, periodic=False, mismatch_length=mismatch_length)
+    blocks = fracture_blocks(shape, size, height, (lower, upper))
+    written = blocks.solid.write(path)
+    w = blocks.aperture
+    z = blocks.solid.points[:, 2]
+    return "\n".join([
+        f"{written}: {len(blocks.solid.points)} points, {len(blocks.solid.cells)} tetrahedra",
+        f"aperture mean {surface_mean(w, size) * 1e3:.4f} mm, min {w.min() * 1e3:.4f} mm, max {w.max() * 1e3:.4f} mm",
+        f"lower face z in [{lower.min():.6g}, {lower.max():.6g}], upper face z in [{upper.min():.6g}, {upper.max():.6g}]",
+        f"top z = {z.max():.6g}, bottom z = {z.min():.6g}"])
