@@ -10,18 +10,13 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
+from vc_helpers import copy_case
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 
 
 def run_case(tmp_path, name, replace=None):
-    case = tmp_path / name
-    shutil.copytree(CASES / name, case, ignore=shutil.ignore_patterns("results"))
-    scene = (case / "scene.toml").read_text()
-    for old, new in (replace or {}).items():
-        assert old in scene
-        scene = scene.replace(old, new)
-    (case / "scene.toml").write_text(scene)
+    case = copy_case(CASES / name, tmp_path, replace)
     out = tmp_path / "out"
     code = main(["run", str(case), "--output", str(out)])
     return code, out, json.loads((out / "summary.json").read_text())

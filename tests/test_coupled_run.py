@@ -3,7 +3,6 @@ real processes talking zenoh (paper 2.3, Steps 1-6)."""
 
 import json
 import os
-import shutil
 import signal
 import threading
 import time
@@ -14,20 +13,9 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
+from vc_helpers import copy_case
 
 CASE = Path(__file__).resolve().parent.parent / "cases" / "standin_flow"
-
-
-def case_copy(tmp_path, replace):
-    """The stand-in case in tmp_path, with the text replacements {old: new} in its scene."""
-    case = tmp_path / "case"
-    shutil.copytree(CASE, case, ignore=shutil.ignore_patterns("results"))
-    scene = (case / "scene.toml").read_text()
-    for old, new in replace.items():
-        assert old in scene
-        scene = scene.replace(old, new)
-    (case / "scene.toml").write_text(scene)
-    return case
 
 
 def summary(out):
@@ -61,7 +49,7 @@ def test_implicit_loop_converges_with_iqn_ils(tmp_path, capsys):
 
 
 def test_constant_relaxation_diverges_with_a_clear_error(tmp_path, capsys):
-    case = case_copy(tmp_path, {'acceleration = "iqn-ils"': 'acceleration = "constant"\nrelaxation = 1.0'})
+    case = copy_case(CASE, tmp_path, {'acceleration = "iqn-ils"': 'acceleration = "constant"\nrelaxation = 1.0'})
     out = tmp_path / "out"
     assert main(["run", str(case), "--output", str(out)]) == 2
     err = capsys.readouterr().err
@@ -71,7 +59,7 @@ def test_constant_relaxation_diverges_with_a_clear_error(tmp_path, capsys):
 
 
 def test_aitken_converges_too(tmp_path, capsys):
-    case = case_copy(tmp_path, {'acceleration = "iqn-ils"': 'acceleration = "aitken"'})
+    case = copy_case(CASE, tmp_path, {'acceleration = "iqn-ils"': 'acceleration = "aitken"'})
     out = tmp_path / "out"
     assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err
     s = summary(out)
@@ -79,7 +67,7 @@ def test_aitken_converges_too(tmp_path, capsys):
 
 
 def test_killed_participant_ends_the_run_cleanly(tmp_path, capsys):
-    case = case_copy(tmp_path, {"steps = 4": "steps = 100000"})
+    case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
     out = tmp_path / "out"
 
     def kill_fluid():
@@ -114,7 +102,7 @@ def test_killed_participant_ends_the_run_cleanly(tmp_path, capsys):
 
 def test_swapping_the_solid_is_one_line(tmp_path, capsys):
     """The same coupled scene with dolfinx instead of the spring stand-in."""
-    case = case_copy(tmp_path, {'participant = "spring_solid"': 'participant = "solid_fenicsx"'})
+    case = copy_case(CASE, tmp_path, {'participant = "spring_solid"': 'participant = "solid_fenicsx"'})
     out = tmp_path / "out"
     assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err
     s = summary(out)
@@ -136,7 +124,7 @@ def test_ctrl_c_ends_every_process_and_keeps_results(tmp_path):
     import subprocess
     import sys
 
-    case = case_copy(tmp_path, {"steps = 4": "steps = 100000"})
+    case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from fluid_openfoam.case import CaseSpec
-from fluid_openfoam.fields import read_internal_field
 from fluid_openfoam.solver import OpenFOAMSolver
 
 pytestmark = pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from transfer import Mesh, MeshError
+from transfer import Mesh
 from transfer.fracture import (BLOCK_TAGS, FACE_TAGS, fracture_blocks, fracture_pair, measure_hurst,
                                node_weights, rough_surface, surface_integral, surface_mean)
 

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
+from vc_helpers import copy_case
 from transfer.fracture import fracture_blocks, fracture_pair
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
@@ -28,17 +29,6 @@ SMALL = CASES / "small_fracture"
 needs_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")
 
 ONE_STEP = {"steps = 2": "steps = 1"}
-
-
-def case_copy(tmp_path, replace, source=SMALL):
-    case = tmp_path / "case"
-    shutil.copytree(source, case, ignore=shutil.ignore_patterns("results"))
-    scene = (case / "scene.toml").read_text()
-    for old, new in replace.items():
-        assert old in scene, old
-        scene = scene.replace(old, new)
-    (case / "scene.toml").write_text(scene)
-    return case
 
 
 def run(case, tmp_path, capsys):
@@ -117,7 +107,7 @@ def test_fracture_flow_converges_every_step(tmp_path, capsys):
 def test_velocity_times_ten(tmp_path, capsys):
     """Inlet velocity 0.1 m/s (x10): pressure about 6 kPa on E = 200 kPa, the faces move by up to
     0.16 mm (a sixth of the aperture). Measured: 7 coupling iterations, 10 to 16 s."""
-    case = case_copy(tmp_path, {**ONE_STEP, "inlet_velocity = [0.01, 0.0, 0.0]": "inlet_velocity = [0.1, 0.0, 0.0]"})
+    case = copy_case(SMALL, tmp_path, {**ONE_STEP, "inlet_velocity = [0.01, 0.0, 0.0]": "inlet_velocity = [0.1, 0.0, 0.0]"})
     s = assert_converged_and_finite(*run(case, tmp_path, capsys))
     assert s["steps"][0]["max_displacement"] > 1e-4
 
@@ -126,9 +116,9 @@ def test_velocity_times_ten(tmp_path, capsys):
 def test_high_inlet_pressure(tmp_path, capsys):
     """A pressure inlet of 100 kPa (170 times the base case's inlet pressure) on E = 1 GPa.
     Measured: 3 coupling iterations, about 7 s."""
-    case = case_copy(tmp_path, {**ONE_STEP, "inlet_velocity = [0.01, 0.0, 0.0]": "inlet_pressure = 1.0e5",
-                                "E = 2.0e5": "E = 1.0e9"})
-    s = assert_converged_and_finite(*run(case, tmp_path, capsys))
+    case = copy_case(SMALL, tmp_path, {**ONE_STEP, "inlet_velocity = [0.01, 0.0, 0.0]": "inlet_pressure = 1.0e5",
+                                                  "E = 2.0e5": "E = 1.0e9"})
+    assert_converged_and_finite(*run(case, tmp_path, capsys))
     solid = meshio.read(sorted((tmp_path / "out").glob("solid_*.vtu"))[-1])
     assert solid.point_data["pressure"].max() > 5e4
 
@@ -136,7 +126,7 @@ def test_high_inlet_pressure(tmp_path, capsys):
 @needs_foam
 def test_stiff_rock(tmp_path, capsys):
     """E = 1e11 Pa: displacements of 1e-11 m, converges at once. Measured: 3 iterations, about 8 s."""
-    case = case_copy(tmp_path, {**ONE_STEP, "E = 2.0e5": "E = 1.0e11"})
+    case = copy_case(SMALL, tmp_path, {**ONE_STEP, "E = 2.0e5": "E = 1.0e11"})
     s = assert_converged_and_finite(*run(case, tmp_path, capsys))
     assert s["steps"][0]["max_displacement"] < 1e-9
 
@@ -147,7 +137,7 @@ def test_soft_rock(tmp_path, capsys):
     1e6): the faces move by up to 0.16 mm on the base grid. Measured: 7 coupling
     iterations, about 11 s.
     E = 5e3 on an extended grid converges too (tests/test_small_fracture.py, slow)."""
-    case = case_copy(tmp_path, {**ONE_STEP, "E = 2.0e5": "E = 2.0e4"})
+    case = copy_case(SMALL, tmp_path, {**ONE_STEP, "E = 2.0e5": "E = 2.0e4"})
     s = assert_converged_and_finite(*run(case, tmp_path, capsys))
     assert s["steps"][0]["max_displacement"] > 5e-5
 
@@ -162,7 +152,7 @@ def test_nearly_closed_fracture(tmp_path, capsys):
                                  min_aperture=0.1e-3, periodic=False, mismatch_length=0.0125)
     blocks = fracture_blocks((20, 10, 2), (0.05, 0.025), 5e-3, (lower, upper))
     assert blocks.aperture.max() < 0.3e-3
-    case = case_copy(tmp_path, ONE_STEP)
+    case = copy_case(SMALL, tmp_path, ONE_STEP)
     blocks.solid.write(str(case / "solid.msh"))
     s = assert_converged_and_finite(*run(case, tmp_path, capsys))
     assert s["steps"][0]["max_displacement"] > 5e-5
@@ -174,7 +164,7 @@ def test_flow_without_fluid_domain(tmp_path, capsys):
     scene = (SMALL / "scene.toml").read_text()
     start = scene.index("[geometry.fluid]")
     end = scene.index("[materials.solid]")
-    case = case_copy(tmp_path, {scene[start:end]: ""})
+    case = copy_case(SMALL, tmp_path, {scene[start:end]: ""})
     rc, err, s, out = run(case, tmp_path, capsys)
     assert_clear_failure(rc, err, s, "scene.toml", "[geometry] fluid", "flow", "no fluid domain")
     assert s is None  # validated before anything ran: nothing written
@@ -189,7 +179,7 @@ def test_grid_not_covering_the_interface(tmp_path, capsys, replace):
     """The grid stops below the upper fracture face, or 10 mm before the outlet end of the
     fracture: an error at set-up naming the grid, the count of uncovered interface vertices and
     the fix (about 1.5 s: the participants start, then the coupler stops them)."""
-    case = case_copy(tmp_path, replace)
+    case = copy_case(SMALL, tmp_path, replace)
     rc, err, s, out = run(case, tmp_path, capsys)
     assert_clear_failure(rc, err, s, "[geometry.fluid]", "does not cover the interface", "vertices outside the grid")
     assert s["steps"] == []
@@ -199,7 +189,7 @@ def test_grid_not_covering_the_interface(tmp_path, capsys, replace):
 def test_soft_rock_leaving_the_grid_names_step_and_deformation(tmp_path, capsys):
     """E = 1 kPa: the fracture opens beyond the grid. It fails in 3 s with exit 2 (good), but the
     one-line diagnostic says in which step it happened and that the solid deformed."""
-    case = case_copy(tmp_path, {**ONE_STEP, "E = 2.0e5": "E = 1.0e3", "max_iterations = 30": "max_iterations = 15"})
+    case = copy_case(SMALL, tmp_path, {**ONE_STEP, "E = 2.0e5": "E = 1.0e3", "max_iterations = 30": "max_iterations = 15"})
     rc, err, s, out = run(case, tmp_path, capsys)
     line = assert_clear_failure(rc, err, s, "does not cover the interface")
     assert "time step 0" in line and "deformed solid" in line and "largest displacement" in line

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import textwrap
 from pathlib import Path
 
 import meshio
@@ -14,6 +13,7 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
+from vc_helpers import copy_case
 from coupler.interface import SolidOnGrid, WettedInterface
 from coupler.errors import SceneError
 from coupler.scene import load
@@ -33,23 +33,12 @@ def fracture_solid():
     return S, tris
 
 
-def case_copy(tmp_path, replace):
-    case = tmp_path / "case"
-    shutil.copytree(CASE, case, ignore=shutil.ignore_patterns("results"))
-    scene = (case / "scene.toml").read_text()
-    for old, new in replace.items():
-        assert old in scene, old
-        scene = scene.replace(old, new)
-    (case / "scene.toml").write_text(scene)
-    return case
-
-
 # ------------------------------------------------------------------------------ fast
 def test_interface_may_be_a_list_of_boundaries(tmp_path):
     scene = load(CASE)
     assert scene.coupling["interface"] == ["fracture_lower", "fracture_upper"]
     assert scene.coupling["deformation"] is True
-    bad = case_copy(tmp_path, {'interface = ["fracture_lower", "fracture_upper"]':
+    bad = copy_case(CASE, tmp_path, {'interface = ["fracture_lower", "fracture_upper"]':
                                'interface = ["fracture_lower", "nope"]'})
     with pytest.raises(SceneError, match=r"\[coupling\] interface: unknown boundary 'nope'"):
         load(bad)
@@ -132,7 +121,7 @@ def test_soft_rock_needs_acceleration(tmp_path, capsys):
     many more coupling iterations than IQN-ILS (measured: 17 against 11)."""
     iterations = {}
     for acc in ("constant", "iqn-ils"):
-        case = case_copy(tmp_path / acc, {**SOFT, 'acceleration = "iqn-ils"':
+        case = copy_case(CASE, tmp_path / acc, {**SOFT, 'acceleration = "iqn-ils"':
                                           f'acceleration = "{acc}"\nrelaxation = 1.0'})
         out = tmp_path / acc / "out"
         assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err

@@ -218,3 +218,20 @@ def q1_inverse(vertices: np.ndarray, x: np.ndarray, iterations: int = 50) -> np.
 
 #: the six tetrahedra of a hexahedron around its 0-6 diagonal (as documented for the kernels)
 HEX_SIX_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])
+
+
+# -- cases -------------------------------------------------------------------
+def copy_case(source, directory, replace=None):
+    """A copy of the case directory `source` in `directory`/case, with the text
+    replacements {old: new} applied to its scene.toml (each `old` must occur)."""
+    import shutil
+    from pathlib import Path
+
+    case = Path(directory) / "case"
+    shutil.copytree(source, case, ignore=shutil.ignore_patterns("results"))
+    scene = (case / "scene.toml").read_text()
+    for old, new in (replace or {}).items():
+        assert old in scene, old
+        scene = scene.replace(old, new)
+    (case / "scene.toml").write_text(scene)
+    return case
