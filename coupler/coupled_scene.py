@@ -100,6 +100,14 @@ class Table:
             raise self.error(key, f"must be a list of {length} numbers, got {value!r}")
         return [float(v) for v in value]
 
+    def shape(self, key, default=_REQUIRED):
+        """Cells per axis: a list of 3 positive integers."""
+        value = self._value(key, default)
+        if not isinstance(value, list) or len(value) != 3 or any(
+                isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in value):
+            raise self.error(key, f"must be a list of 3 positive integers, got {value!r}")
+        return list(value)
+
     def strings(self, key, default=_REQUIRED, choices=None):
         value = self._value(key, default)
         if not isinstance(value, list) or any(not isinstance(v, str) for v in value):
@@ -338,10 +346,7 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
         lower, upper = t.vector("lower"), t.vector("upper")
         if any(u <= lo for lo, u in zip(lower, upper)):
             raise t.error("upper", f"must exceed lower in every coordinate, got {lower} .. {upper}")
-        shape = t._value("shape", _REQUIRED)
-        if not isinstance(shape, list) or len(shape) != 3 or any(
-                isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in shape):
-            raise t.error("shape", f"must be a list of 3 positive integers, got {shape!r}")
+        shape = t.shape("shape")
         box = {"lower": lower, "upper": upper, "shape": shape,
                "jitter": t.number("jitter", 0.0, minimum=0.0, maximum=0.24), "seed": t.integer("seed", 0, minimum=0)}
     boundaries = {}
@@ -366,10 +371,7 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
 
 def _fluid_geometry(path, data) -> FluidGeometry:
     t = Table(path, "geometry.fluid", data, FLUID_KEYS)
-    shape = t._value("shape", _REQUIRED)
-    if not isinstance(shape, list) or len(shape) != 3 or any(
-            isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in shape):
-        raise t.error("shape", f"must be a list of 3 positive integers, got {shape!r}")
+    shape = t.shape("shape")
     if "lower" in t.data or "upper" in t.data:
         lower, upper = t.vector("lower"), t.vector("upper")
         if any(u <= lo for lo, u in zip(lower, upper)):
