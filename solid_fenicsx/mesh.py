@@ -35,10 +35,8 @@ from mpi4py import MPI
 
 import dolfinx
 import dolfinx.cpp
+from transfer.mesh import lattice_tetrahedra
 
-#: tetrahedra splitting a VTK-ordered hexahedron along its 0-6 diagonal; every
-#: hexahedron of a lattice split alike gives a conforming tet mesh
-HEX_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])
 
 #: names of the six faces of a box, in the order (axis, side)
 BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
@@ -338,11 +336,7 @@ def box_arrays(axes: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     nx, ny, nz = len(xs) - 1, len(ys) - 1, len(zs) - 1
     Z, Y, X = np.meshgrid(zs, ys, xs, indexing="ij")
     points = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])  # x fastest
-    px, py = nx + 1, ny + 1
-    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-    base = (i + px * (j + py * k)).ravel()
-    hexes = base[:, None] + np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
-    return points, hexes[:, HEX_TETS].reshape(-1, 4)
+    return points, lattice_tetrahedra((nx, ny, nz))
 
 
 def box_mesh(lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), shape=(4, 4, 4), axes=None,

@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .mesh import HEX_TETS, Mesh
+from .mesh import Mesh, lattice_tetrahedra
 
 #: integer tag of each named boundary (gmsh physical tags of dimension 2)
 FACE_TAGS = {"bottom": 1, "top": 2, "fracture_lower": 3, "fracture_upper": 4,
@@ -402,14 +402,6 @@ def _stretched_lattice(xs, ys, z_of_layer):
     return points, idx
 
 
-def _lattice_tets(nx, ny, nz):
-    px, py = nx + 1, ny + 1
-    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-    base = (i + px * (j + py * k)).ravel()
-    offsets = np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
-    return (base[:, None] + offsets[None, :])[:, HEX_TETS].reshape(-1, 4)
-
-
 def _boundary_faces(cells, idx, shape, names):
     """Outward boundary triangles of a positively oriented lattice tet mesh, by lattice face.
 
@@ -438,7 +430,7 @@ def _block(xs, ys, z_bottom, z_top, nz, grading, fine_at_top, names, tag, name):
     z = z_bottom[None] + t[:, None, None] * (z_top - z_bottom)[None]
     z[0], z[-1] = z_bottom, z_top  # the faces carry the surface heights exactly
     points, idx = _stretched_lattice(xs, ys, z)
-    cells = _lattice_tets(nx, ny, nz)
+    cells = lattice_tetrahedra((nx, ny, nz))
     faces = _boundary_faces(cells, idx, (nx, ny, nz), names)
     block = Block(points, cells, faces, np.full(len(cells), tag, np.int32), name=name)
     block.mesh  # validate now: raises MeshError on an inverted or degenerate tet

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import HEX_TETS, Mesh
+from .mesh import Mesh, lattice_hexahedra, lattice_tetrahedra
 
 _QUAD_TRIS = np.array([[0, 1, 2], [0, 2, 3]])
 
@@ -29,25 +29,16 @@ def _lattice(shape, lower, upper, jitter, seed):
     return points
 
 
-def _hex_cells(shape):
-    nx, ny, nz = shape
-    px, py = nx + 1, ny + 1
-    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-    base = (i + px * (j + py * k)).ravel()
-    offsets = np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
-    return base[:, None] + offsets[None, :]
-
-
 def box_hexahedra(shape, lower=(0, 0, 0), upper=(1, 1, 1), jitter=0.0, seed=0, name="box") -> Mesh:
     """Hexahedral mesh of a box with `shape` = (nx, ny, nz) cells."""
-    return Mesh(_lattice(shape, lower, upper, jitter, seed), _hex_cells(shape), "hexahedron", name=name)
+    return Mesh(_lattice(shape, lower, upper, jitter, seed), lattice_hexahedra(shape), "hexahedron", name=name)
 
 
 def box_tetrahedra(shape, lower=(0, 0, 0), upper=(1, 1, 1), jitter=0.0, seed=0, name="box") -> Mesh:
     """Tetrahedral mesh of a box: every hexahedron of the lattice split in six tets
     (:data:`transfer.mesh.HEX_TETS`, conforming across faces)."""
     points = _lattice(shape, lower, upper, jitter, seed)
-    cells = _hex_cells(shape)[:, HEX_TETS].reshape(-1, 4)
+    cells = lattice_tetrahedra(shape)
     return Mesh(points, cells, "tetra", name=name)
 
 

@@ -13,7 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from .errors import MeshError
-from .mesh import Mesh
+from .mesh import Mesh, lattice_hexahedra
 
 
 class StructuredGrid:
@@ -63,12 +63,7 @@ class StructuredGrid:
 
     @cached_property
     def cells(self) -> np.ndarray:
-        nx, ny, nz = self.shape
-        px, py = nx + 1, ny + 1
-        k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-        base = (i + px * (j + py * k)).ravel()
-        offsets = np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
-        return np.ascontiguousarray(base[:, None] + offsets[None, :], dtype=np.int64)
+        return lattice_hexahedra(self.shape)
 
     def cell_measures(self) -> np.ndarray:
         return np.full(self.num_cells, float(np.prod(self.spacing)))

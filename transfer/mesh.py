@@ -26,6 +26,24 @@ CELL_TYPES = {
 #: tetrahedra splitting a hexahedron along its 0-6 diagonal (same as the kernels)
 HEX_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])
 
+
+
+def lattice_hexahedra(shape) -> np.ndarray:
+    """Hexahedra (VTK order) of an (nx, ny, nz) lattice of (nx+1)(ny+1)(nz+1) points
+    numbered x fastest; cells numbered x fastest too."""
+    nx, ny, nz = (int(n) for n in shape)
+    px, py = nx + 1, ny + 1
+    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    base = (i + px * (j + py * k)).ravel()
+    offsets = np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
+    return np.ascontiguousarray(base[:, None] + offsets[None, :], dtype=np.int64)
+
+
+def lattice_tetrahedra(shape) -> np.ndarray:
+    """The hexahedra of :func:`lattice_hexahedra` split by :data:`HEX_TETS` (conforming)."""
+    return np.ascontiguousarray(lattice_hexahedra(shape)[:, HEX_TETS].reshape(-1, 4))
+
+
 #: a cell whose measure is below this times (longest edge)^dim is degenerate
 DEGENERATE_RTOL = 1e-13
 
