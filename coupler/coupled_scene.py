@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import SceneError
-from .scene import check_expression
+from .scene import _REQUIRED, Table, check_expression, output_directory
 
 #: effects a scene may ask for
 EFFECTS = {
@@ -33,98 +33,6 @@ BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 FACE_CONDITIONS = ("wall", "slip", "symmetry", "empty")
 #: how the openfoam participant turns solid fractions into drag (fluid_openfoam/penalization.py)
 PENALIZATIONS = ("wall", "linear", "power")
-
-_REQUIRED = object()
-
-
-class Table:
-    """One table of the scene: typed access to its keys, errors naming the key."""
-
-    def __init__(self, path: Path, name: str, data, keys: dict[str, str]):
-        self.path, self.name, self.keys = path, name, keys
-        if not isinstance(data, dict):
-            raise SceneError(f"{path}: [{name}] must be a table, got {data!r}")
-        self.data = data
-        for key in data:
-            if key not in keys:
-                raise SceneError(f"{self.where(key)}: unknown key; known keys: {', '.join(keys)}")
-
-    def where(self, key: str) -> str:
-        return f"{self.path}: [{self.name}] {key}"
-
-    def error(self, key: str, reason: str) -> SceneError:
-        return SceneError(f"{self.where(key)}: {reason}")
-
-    def _value(self, key, default):
-        if key in self.data:
-            return self.data[key]
-        if default is _REQUIRED:
-            raise self.error(key, f"missing ({self.keys[key]})")
-        return default
-
-    def string(self, key, default=_REQUIRED, choices=None):
-        value = self._value(key, default)
-        if value is None:
-            return None
-        if not isinstance(value, str) or not value.strip():
-            raise self.error(key, f"must be a non-empty string, got {value!r}")
-        if choices is not None and value not in choices:
-            raise self.error(key, f"unknown value {value!r}; use one of {', '.join(map(repr, choices))}")
-        return value
-
-    def number(self, key, default=_REQUIRED, positive=False, minimum=None, maximum=None):
-        value = self._value(key, default)
-        if value is None:
-            return None
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(key, f"must be a number, got {value!r}")
-        value = float(value)
-        if positive and not value > 0:
-            raise self.error(key, f"must be positive, got {value!r}")
-        if minimum is not None and value < minimum or maximum is not None and value > maximum:
-            raise self.error(key, f"must lie in [{minimum}, {maximum}], got {value!r}")
-        return value
-
-    def integer(self, key, default=_REQUIRED, minimum=1):
-        value = self._value(key, default)
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            raise self.error(key, f"must be an integer >= {minimum}, got {value!r}")
-        return value
-
-    def vector(self, key, default=_REQUIRED, length=3):
-        value = self._value(key, default)
-        if value is None:
-            return None
-        if (not isinstance(value, list) or len(value) != length
-                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
-            raise self.error(key, f"must be a list of {length} numbers, got {value!r}")
-        return [float(v) for v in value]
-
-    def shape(self, key, default=_REQUIRED):
-        """Cells per axis: a list of 3 positive integers."""
-        value = self._value(key, default)
-        if not isinstance(value, list) or len(value) != 3 or any(
-                isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in value):
-            raise self.error(key, f"must be a list of 3 positive integers, got {value!r}")
-        return list(value)
-
-    def strings(self, key, default=_REQUIRED, choices=None):
-        value = self._value(key, default)
-        if not isinstance(value, list) or any(not isinstance(v, str) for v in value):
-            raise self.error(key, f"must be a list of strings, got {value!r}")
-        for v in value:
-            if choices is not None and v not in choices:
-                raise self.error(key, f"unknown value {v!r}; use one of {', '.join(map(repr, choices))}")
-        if len(set(value)) != len(value):
-            raise self.error(key, f"a value is listed twice in {value!r}")
-        return list(value)
-
-    def boolean(self, key, default=_REQUIRED):
-        value = self._value(key, default)
-        if not isinstance(value, bool):
-            raise self.error(key, f"must be true or false, got {value!r}")
-        return value
-
 
 @dataclass
 class SolidGeometry:
@@ -307,10 +215,7 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
         check["tolerance"] = t.number("tolerance", positive=True)
 
     out = Table(path, "output", data.get("output", {}), TABLES["output"])
-    output_dir = Path(output) if output is not None else case_dir / out.string("directory", "results")
-    if output_dir.exists() and not output_dir.is_dir():
-        raise SceneError(f"{output if output is not None else out.where('directory')}: "
-                         f"{str(output_dir)!r} exists and is not a directory")
+    output_dir = output_directory(case_dir, out, output)
     return CoupledScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
                         effects=effects, solid=solid, fluid=fluid, material=material,
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
@@ -336,10 +241,7 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
     if mesh is not None:
         if any(k in t.data for k in ("lower", "upper", "shape", "jitter", "seed")):
             raise t.error("mesh", "give either a mesh file or the box keys (lower, upper, shape), not both")
-        file = case_dir / mesh
-        if not file.is_file():
-            raise t.error("mesh", f"file {mesh!r} not found")
-        mesh = file
+        mesh = t.file("mesh", case_dir)
     else:
         if "lower" not in t.data and "upper" not in t.data:
             raise t.error("mesh", "missing: give a mesh file, or a box with lower, upper and shape")

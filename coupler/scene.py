@@ -80,22 +80,116 @@ def _scene_path(case) -> tuple[Path, Path]:
     return path, case
 
 
-def _positive_int(where, value):
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise SceneError(f"{where}: must be a positive integer, got {value!r}")
-    return value
+_REQUIRED = object()
 
 
-def _string(where, value):
-    if not isinstance(value, str) or not value.strip():
-        raise SceneError(f"{where}: must be a non-empty string, got {value!r}")
-    return value
+class Table:
+    """One table of the scene: typed access to its keys, errors naming the key."""
+
+    def __init__(self, path: Path, name: str, data, keys: dict[str, str]):
+        self.path, self.name, self.keys = path, name, keys
+        if not isinstance(data, dict):
+            raise SceneError(f"{path}: [{name}] must be a table, got {data!r}")
+        self.data = data
+        for key in data:
+            if key not in keys:
+                raise SceneError(f"{self.where(key)}: unknown key; known keys: {', '.join(keys)}")
+
+    def where(self, key: str) -> str:
+        return f"{self.path}: [{self.name}] {key}"
+
+    def error(self, key: str, reason: str) -> SceneError:
+        return SceneError(f"{self.where(key)}: {reason}")
+
+    def _value(self, key, default):
+        if key in self.data:
+            return self.data[key]
+        if default is _REQUIRED:
+            raise self.error(key, f"missing ({self.keys[key]})")
+        return default
+
+    def string(self, key, default=_REQUIRED, choices=None):
+        value = self._value(key, default)
+        if value is None:
+            return None
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(key, f"must be a non-empty string, got {value!r}")
+        if choices is not None and value not in choices:
+            raise self.error(key, f"unknown value {value!r}; use one of {', '.join(map(repr, choices))}")
+        return value
+
+    def number(self, key, default=_REQUIRED, positive=False, minimum=None, maximum=None):
+        value = self._value(key, default)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(key, f"must be a number, got {value!r}")
+        value = float(value)
+        if positive and not value > 0:
+            raise self.error(key, f"must be positive, got {value!r}")
+        if minimum is not None and value < minimum or maximum is not None and value > maximum:
+            raise self.error(key, f"must lie in [{minimum}, {maximum}], got {value!r}")
+        return value
+
+    def integer(self, key, default=_REQUIRED, minimum=1):
+        value = self._value(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise self.error(key, f"must be an integer >= {minimum}, got {value!r}")
+        return value
+
+    def vector(self, key, default=_REQUIRED, length=3):
+        value = self._value(key, default)
+        if value is None:
+            return None
+        if (not isinstance(value, list) or len(value) != length
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
+            raise self.error(key, f"must be a list of {length} numbers, got {value!r}")
+        return [float(v) for v in value]
+
+    def shape(self, key, default=_REQUIRED):
+        """Cells per axis: a list of 3 positive integers."""
+        value = self._value(key, default)
+        if not isinstance(value, list) or len(value) != 3 or any(
+                isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in value):
+            raise self.error(key, f"must be a list of 3 positive integers, got {value!r}")
+        return list(value)
+
+    def file(self, key, case_dir: Path) -> Path:
+        """A file named relative to the case directory, which must exist."""
+        name = self.string(key)
+        file = Path(case_dir) / name
+        if not file.exists():
+            raise self.error(key, f"file {name!r} not found")
+        if not file.is_file():
+            raise self.error(key, f"{name!r} is not a file")
+        return file
+
+    def strings(self, key, default=_REQUIRED, choices=None):
+        value = self._value(key, default)
+        if not isinstance(value, list) or any(not isinstance(v, str) for v in value):
+            raise self.error(key, f"must be a list of strings, got {value!r}")
+        for v in value:
+            if choices is not None and v not in choices:
+                raise self.error(key, f"unknown value {v!r}; use one of {', '.join(map(repr, choices))}")
+        if len(set(value)) != len(value):
+            raise self.error(key, f"a value is listed twice in {value!r}")
+        return list(value)
+
+    def boolean(self, key, default=_REQUIRED):
+        value = self._value(key, default)
+        if not isinstance(value, bool):
+            raise self.error(key, f"must be true or false, got {value!r}")
+        return value
 
 
-def _method(where, value):
-    if value not in METHODS:
-        raise SceneError(f"{where}: unknown method {value!r}; use one of {', '.join(repr(m) for m in METHODS)}")
-    return value
+def output_directory(case_dir: Path, out: Table, output) -> Path:
+    """``--output`` (relative to the working directory) or ``[output] directory``
+    (relative to the case, default ``results``); it must not be a file."""
+    output_dir = Path(output) if output is not None else Path(case_dir) / out.string("directory", "results")
+    if output_dir.exists() and not output_dir.is_dir():
+        origin = "--output" if output is not None else out.where("directory")
+        raise SceneError(f"{origin}: {str(output_dir)!r} exists and is not a directory")
+    return output_dir
 
 
 def check_expression(text: str, where: str) -> None:
@@ -145,78 +239,33 @@ def load(case, output: str | Path | None = None):
 
 def _load_transfer(path: Path, case_dir: Path, data: dict, output) -> TransferScene:
     for table, value in data.items():
-        if table not in KEYS and not isinstance(value, dict):
-            raise SceneError(f"{path}: {table}: unknown key; a scene holds the tables "
-                             f"{', '.join(f'[{t}]' for t in KEYS)}")
         if table not in KEYS:
             raise SceneError(f"{path}: unknown table [{table}]; known tables: "
                              f"{', '.join(f'[{t}]' for t in KEYS)} (a transfer scene) or [physics] "
                              f"and the tables of a coupled scene")
-        if not isinstance(value, dict):
-            raise SceneError(f"{path}: [{table}] must be a table, got {value!r}")
-        for key in value:
-            if key not in KEYS[table]:
-                raise SceneError(f"{path}: [{table}] {key}: unknown key; known keys: {', '.join(KEYS[table])}")
     if "transfer" not in data:
         raise SceneError(f"{path}: [transfer]: missing table (keys: {', '.join(KEYS['transfer'])})")
-    tr, out = data["transfer"], data.get("output", {})
-
-    def where(table, key):
-        return f"{path}: [{table}] {key}"
-
-    def required(key):
-        if key not in tr:
-            raise SceneError(f"{where('transfer', key)}: missing ({KEYS['transfer'][key]})")
-        return tr[key]
-
-    files = {}
-    for key in ("source", "target"):
-        name = _string(where("transfer", key), required(key))
-        file = case_dir / name
-        if not file.exists():
-            raise SceneError(f"{where('transfer', key)}: file {name!r} not found")
-        if not file.is_file():
-            raise SceneError(f"{where('transfer', key)}: {name!r} is not a file")
-        files[key] = file
-    field = _string(where("transfer", "field"), required("field"))
-
-    if "method" in tr and "methods" in tr:
-        raise SceneError(f"{where('transfer', 'methods')}: give either method or methods, not both")
-    if "method" in tr:
-        methods = [_method(where("transfer", "method"), tr["method"])]
-    elif "methods" in tr:
-        value = tr["methods"]
-        if not isinstance(value, list) or not value:
-            raise SceneError(f"{where('transfer', 'methods')}: must be a non-empty list of methods, "
-                             f"e.g. {list(METHODS)}, got {value!r}")
-        methods = [_method(where("transfer", "methods"), m) for m in value]
-        if len(set(methods)) != len(methods):
-            raise SceneError(f"{where('transfer', 'methods')}: a method is listed twice in {value!r}")
+    tr = Table(path, "transfer", data["transfer"], KEYS["transfer"])
+    out = Table(path, "output", data.get("output", {}), KEYS["output"])
+    source, target = tr.file("source", case_dir), tr.file("target", case_dir)
+    field = tr.string("field")
+    if "method" in tr.data and "methods" in tr.data:
+        raise tr.error("methods", "give either method or methods, not both")
+    if "methods" in tr.data:
+        methods = tr.strings("methods", choices=METHODS)
+        if not methods:
+            raise tr.error("methods", f"must be a non-empty list of methods, e.g. {list(METHODS)}")
+    elif "method" in tr.data:
+        methods = [tr.string("method", choices=METHODS)]
     else:
         methods_list = ", ".join(f'"{m}"' for m in METHODS)
-        raise SceneError(f'{where("transfer", "method")}: missing (give method = "{METHODS[0]}" '
-                         f'or methods = [{methods_list}])')
-
-    exact = tr.get("exact")
+        raise tr.error("method", f'missing (give method = "{METHODS[0]}" or methods = [{methods_list}])')
+    exact = tr.string("exact", None)
     if exact is not None:
-        _string(where("transfer", "exact"), exact)
-        check_expression(exact, where("transfer", "exact"))
-    qdeg = tr.get("quadrature_degree")
-    if qdeg is not None:
-        _positive_int(where("transfer", "quadrature_degree"), qdeg)
-    threads = _positive_int(where("transfer", "threads"), tr.get("threads", 1))
-
-    if output is not None:
-        output_dir = Path(output)
-    else:
-        output_dir = case_dir / _string(where("output", "directory"), out.get("directory", "results"))
-    if output_dir.exists() and not output_dir.is_dir():
-        origin = "--output" if output is not None else where("output", "directory")
-        raise SceneError(f"{origin}: {str(output_dir)!r} exists and is not a directory")
-    slice_z = out.get("slice_z")
-    if slice_z is not None and (isinstance(slice_z, bool) or not isinstance(slice_z, (int, float))):
-        raise SceneError(f"{where('output', 'slice_z')}: must be a number, got {slice_z!r}")
-
-    return TransferScene(path=path, case_dir=case_dir, source=files["source"], target=files["target"],
-                         field=field, methods=methods, exact=exact, quadrature_degree=qdeg, threads=threads,
-                         output_dir=output_dir, slice_z=None if slice_z is None else float(slice_z))
+        check_expression(exact, tr.where("exact"))
+    qdeg = tr.integer("quadrature_degree", None) if "quadrature_degree" in tr.data else None
+    slice_z = out.number("slice_z", None)
+    return TransferScene(path=path, case_dir=case_dir, source=source, target=target, field=field,
+                         methods=methods, exact=exact, quadrature_degree=qdeg,
+                         threads=tr.integer("threads", 1), output_dir=output_directory(case_dir, out, output),
+                         slice_z=slice_z)
