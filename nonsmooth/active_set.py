@@ -1,0 +1,163 @@
+"""Primal-dual active set method (Hintermueller, Ito and Kunisch 2002) for a
+:class:`BoundConstrainedQP`: the semismooth Newton method on the KKT system of
+paper eq. 10-11 written as ``x = P(x + c lam)``, ``lam = b - A x``.
+
+Each iteration predicts the active sets from ``y = x + lam / diag(A)``::
+
+    U = {y > upper},   L = {y < lower},   I = the rest
+
+and solves the equality-constrained problem ``x_U = upper_U``, ``x_L = lower_L``,
+``(A x)_I = b_I`` with CG + GAMG (the active rows and columns replaced by their
+diagonal, which keeps the block structure and the near-nullspace usable for
+AMG). It stops when the sets repeat (the exact PDAS criterion: the last solve
+then satisfies all KKT conditions up to the Krylov tolerance) or when the
+scaled natural residual ``max |x - P(x + lam / diag(A))|`` falls below ``tol``.
+
+Anti-chattering: when a set seen earlier returns (a cycle), the method
+switches to a monotone mode in which a constraint leaves the active set only
+when no inactive component violates its bound, and then only the half with
+the most negative multiplier. If that also fails within ``max_iter`` it raises
+:class:`NonsmoothSolveError` with the set changes of the last iterations.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from petsc4py import PETSc
+
+from .petsc import configure_cg_amg, near_nullspace, petsc_matrix, petsc_vector
+from .problem import BoundConstrainedQP, NonsmoothSolveError, Solution
+
+
+def _fixed_system(A: sp.csr_matrix, b: np.ndarray, diag: np.ndarray, active: np.ndarray, value: np.ndarray):
+    """The system with x[active] = value[active]: active rows and columns
+    replaced by their diagonal, the known values moved to the right side."""
+    keep = (~active).astype(float)
+    K = sp.diags(keep) @ A @ sp.diags(keep) + sp.diags(np.where(active, diag, 0.0))
+    xa = np.where(active, value, 0.0)
+    rhs = np.where(active, diag * xa, b - A @ xa)
+    return sp.csr_matrix(K), rhs
+
+
+class _Sets:
+    """The active sets as one int8 array: -1 at lower, +1 at upper, 0 inactive."""
+
+    @staticmethod
+    def predict(qp, x, lam, dinv, tol):
+        y = x + lam * dinv
+        s = np.zeros(qp.size, np.int8)
+        s[y > qp.upper + tol] = 1
+        s[y < qp.lower - tol] = -1
+        s[qp.lower == qp.upper] = 1  # fixed components are always at their bound
+        return s
+
+    @staticmethod
+    def monotone(qp, s, x, lam, dinv, tol):
+        """Add every violated bound; drop wrong-sign multipliers only when
+        nothing is violated, the worst half of them."""
+        new = s.copy()
+        free = s == 0
+        new[free & (x > qp.upper + tol)] = 1
+        new[free & (x < qp.lower - tol)] = -1
+        if np.any(new != s):
+            return new
+        wrong = np.flatnonzero(((s == 1) & (lam * dinv < -tol)) | ((s == -1) & (lam * dinv > tol)))
+        wrong = wrong[qp.lower[wrong] != qp.upper[wrong]]
+        if wrong.size:
+            worst = wrong[np.argsort(-np.abs(lam[wrong] * dinv[wrong]))][: max(1, wrong.size // 2)]
+            new[worst] = 0
+        return new
+
+
+def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, tol: float = 1e-10,
+                     max_iter: int = 100, ksp_rtol: float = 1e-12, ksp_max_it: int = 2000, amg: str = "gamg",
+                     raise_on_failure: bool = True) -> Solution:
+    """Solve the QP by the primal-dual active set method with CG + GAMG inner solves.
+
+    amg : ``"gamg"`` (with the near-nullspace) or ``"hypre"``, see :func:`nonsmooth.petsc.configure_cg_amg`
+    tol : on the natural residual scaled by diag(A), relative to max(|x|, |finite bounds|)
+    x0 : start (e.g. the previous load step); projected onto the bounds
+    ``iterations`` counts active-set iterations (one linear solve each),
+    ``history`` the scaled natural residual after each, ``info["changes"]``
+    the number of components whose set changed before each solve.
+    """
+    start = time.perf_counter()
+    n = qp.size
+    A, b = qp.A, qp.b
+    diag = A.diagonal()
+    if np.any(diag <= 0):
+        raise NonsmoothSolveError(f"A has {int(np.sum(diag <= 0))} non-positive diagonal entries: not SPD")
+    dinv = 1.0 / diag
+    finite = np.concatenate([qp.lower[np.isfinite(qp.lower)], qp.upper[np.isfinite(qp.upper)]])
+    x = qp.project(np.zeros(n) if x0 is None else np.asarray(x0, float).copy())
+    bound = np.where(qp.lower == qp.upper, qp.lower, 0.0)
+
+    def scale(x):
+        return max(np.max(np.abs(x), initial=0.0), np.max(np.abs(finite), initial=0.0), np.finfo(float).tiny)
+
+    nns = near_nullspace(qp.near_nullspace)
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    configure_cg_amg(ksp, ksp_rtol, max_it=ksp_max_it, amg=amg)
+    ksp.setInitialGuessNonzero(True)
+
+    lam = b - A @ x
+    sets = _Sets.predict(qp, x, lam, dinv, tol * scale(x))
+    seen = {sets.tobytes(): 0}
+    history, changes, krylov = [], [], 0
+    monotone_from, converged, message = None, False, ""
+    try:
+        for it in range(1, max_iter + 1):
+            value = np.where(sets == 1, qp.upper, np.where(sets == -1, qp.lower, bound))
+            K, rhs = _fixed_system(A, b, diag, sets != 0, value)
+            M = petsc_matrix(K, qp.block_size)
+            if nns is not None:
+                M.setNearNullSpace(nns)
+            ksp.setOperators(M)
+            xv, bv = petsc_vector(np.where(sets != 0, value, x)), petsc_vector(rhs)
+            ksp.solve(bv, xv)
+            reason = ksp.getConvergedReason()
+            krylov += ksp.getIterationNumber()
+            if reason < 0:
+                raise NonsmoothSolveError(f"active set iteration {it}: CG + GAMG diverged (PETSc reason {reason}) "
+                                          f"after {ksp.getIterationNumber()} iterations")
+            x = xv.getArray().copy()
+            for obj in (M, xv, bv):
+                obj.destroy()
+            if not np.all(np.isfinite(x)):
+                raise NonsmoothSolveError(f"active set iteration {it}: the linear solve returned NaN/inf")
+            lam = b - A @ x
+            lam[sets == 0] = 0.0  # zero up to the Krylov tolerance
+            tol_abs = tol * scale(x)
+            residual = float(np.max(np.abs(x - qp.project(x + lam * dinv)), initial=0.0))
+            history.append(residual)
+            if monotone_from is None:
+                new = _Sets.predict(qp, x, lam, dinv, tol_abs)
+            else:
+                new = _Sets.monotone(qp, sets, x, lam, dinv, tol_abs)
+            changes.append(int(np.count_nonzero(new != sets)))
+            if changes[-1] == 0 or residual <= tol_abs:
+                converged = True
+                break
+            key = new.tobytes()
+            if key in seen and monotone_from is None:
+                monotone_from = it  # a cycle: the sets of iteration seen[key] came back
+                new = _Sets.monotone(qp, sets, x, lam, dinv, tol_abs)
+                key = new.tobytes()
+            seen[key] = it
+            sets = new
+        else:
+            message = (f"active set method: no convergence in {max_iter} iterations; scaled KKT residual "
+                       f"{history[-1]:.3e} (tol {tol:g}); set changes in the last iterations {changes[-5:]}"
+                       f"{'' if monotone_from is None else f'; cycling detected at iteration {monotone_from}'}")
+    finally:
+        ksp.destroy()
+    sol = Solution(x=x, iterations=len(history), converged=converged, solver="active_set",
+                   seconds=time.perf_counter() - start, krylov_iterations=krylov, history=history,
+                   active=sets != 0,
+                   info={"changes": changes, "monotone_from": monotone_from, "kkt_residual": qp.kkt_residual(x)})
+    if not converged and raise_on_failure:
+        raise NonsmoothSolveError(message)
+    return sol

@@ -1,0 +1,165 @@
+"""The primal-dual active set solver and the SNES VI baseline on obstacle
+problems with independent solutions: the discrete 1D obstacle problem without
+load is the upper concave envelope of the obstacle (a convex hull, computed
+here by a monotone chain), the 2D one is checked against projected
+red-black Gauss-Seidel run to a fixed point."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from nonsmooth import BoundConstrainedQP, NonsmoothSolveError
+from nonsmooth.solvers import SOLVERS, available, get, solve
+
+
+def laplacian_1d(n):
+    """FD -u'' on n interior nodes of (0, 1), scaled by h (so the entries are O(1/h))."""
+    h = 1.0 / (n + 1)
+    return sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr") / h
+
+
+def laplacian_2d(m):
+    I = sp.identity(m)
+    T = sp.diags([-np.ones(m - 1), 2 * np.ones(m), -np.ones(m - 1)], [-1, 0, 1])
+    return sp.csr_matrix(sp.kron(I, T) + sp.kron(T, I))
+
+
+def upper_concave_envelope(x, y):
+    """Values at x of the least concave majorant of the points (x, y) (x sorted)."""
+    hull = []
+    for p in zip(x, y):
+        while len(hull) >= 2 and ((hull[-1][0] - hull[-2][0]) * (p[1] - hull[-2][1])
+                                  - (hull[-1][1] - hull[-2][1]) * (p[0] - hull[-2][0])) >= 0:
+            hull.pop()
+        hull.append(p)
+    hx, hy = np.array(hull).T
+    return np.interp(x, hx, hy)
+
+
+def obstacle_1d(n, height=0.3, curvature=4.0):
+    x = np.linspace(0, 1, n + 2)[1:-1]
+    psi = height - curvature * (x - 0.45) ** 2
+    return x, psi, BoundConstrainedQP(laplacian_1d(n), np.zeros(n), psi, np.inf)
+
+
+def obstacle_2d(m=24, load=-40.0):
+    """-Laplace u = load on the unit square, u = 0 outside, u >= psi (a bump)."""
+    h = 1.0 / (m + 1)
+    g = np.linspace(h, 1 - h, m)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    psi = 0.2 - 3.0 * ((X - 0.4) ** 2 + (Y - 0.55) ** 2)
+    return BoundConstrainedQP(laplacian_2d(m), load * h * h * np.ones(m * m), psi.ravel(), np.inf), m
+
+
+def projected_gauss_seidel(m, b, lower, sweeps=20000, tol=1e-15):
+    """Red-black projected Gauss-Seidel for the 5-point Laplacian (independent of the solvers)."""
+    u = np.maximum(np.zeros((m + 2, m + 2)), 0.0)
+    lo = np.full((m + 2, m + 2), -np.inf)
+    lo[1:-1, 1:-1] = lower.reshape(m, m)
+    f = np.zeros((m + 2, m + 2))
+    f[1:-1, 1:-1] = b.reshape(m, m)
+    u[1:-1, 1:-1] = np.maximum(0.0, lower.reshape(m, m))
+    I, J = np.meshgrid(np.arange(m + 2), np.arange(m + 2), indexing="ij")
+    colours = [((I + J) % 2 == c) & (I > 0) & (I < m + 1) & (J > 0) & (J < m + 1) for c in (0, 1)]
+    for _ in range(sweeps):
+        old = u.copy()
+        for mask in colours:
+            nb = np.zeros_like(u)
+            nb[1:-1, 1:-1] = u[:-2, 1:-1] + u[2:, 1:-1] + u[1:-1, :-2] + u[1:-1, 2:]
+            u[mask] = np.maximum(lo[mask], (f[mask] + nb[mask]) / 4.0)
+        if np.max(np.abs(u - old)) < tol:
+            break
+    return u[1:-1, 1:-1].ravel()
+
+
+@pytest.mark.parametrize("method", ["active_set", "snes_vi"])
+def test_1d_obstacle_is_the_concave_envelope(method):
+    x, psi, qp = obstacle_1d(200)
+    xs = np.concatenate([[0.0], x, [1.0]])
+    exact = upper_concave_envelope(xs, np.concatenate([[0.0], psi, [0.0]]))[1:-1]
+    sol = solve(qp, method)
+    assert sol.converged and sol.solver == method
+    assert np.max(np.abs(sol.x - exact)) < 1e-10
+    assert qp.kkt_residual(sol.x) < 1e-9
+    assert qp.infeasibility(sol.x) < 1e-12
+    contact = np.flatnonzero(np.isclose(exact, psi, atol=1e-14, rtol=0))
+    assert 20 < contact.size < 150  # a real contact zone, not all or nothing
+
+
+@pytest.mark.parametrize("method", ["active_set", "snes_vi"])
+def test_2d_obstacle_against_projected_gauss_seidel(method):
+    qp, m = obstacle_2d()
+    reference = projected_gauss_seidel(m, qp.b, qp.lower)
+    sol = solve(qp, method)
+    assert np.max(np.abs(sol.x - reference)) < 1e-9 * np.max(np.abs(reference))
+    assert qp.kkt_residual(sol.x) < 1e-9
+    lam = qp.multiplier(sol.x)
+    at_bound = np.isclose(sol.x, qp.lower, atol=1e-12, rtol=0)
+    assert at_bound.sum() > 10 and (~at_bound).sum() > 10
+    assert np.all(lam[at_bound] <= 1e-9)  # the obstacle pushes up: A x - b >= 0
+    assert np.max(np.abs(lam[~at_bound])) < 1e-9
+
+
+def test_solvers_agree_on_a_two_sided_elastic_problem():
+    """A 3D vector-valued problem with block size 3, rigid-body-like near-nullspace
+    and both bounds: the two solvers agree to 1e-8."""
+    m = 8
+    L = laplacian_2d(m)
+    A = sp.csr_matrix(sp.kron(L, sp.csr_matrix(np.array([[2.0, 0.5, 0.0], [0.5, 1.5, 0.2], [0.0, 0.2, 1.0]]))))
+    n = A.shape[0]
+    rng = np.random.default_rng(3)
+    b = rng.normal(size=n)
+    lower = np.full(n, -np.inf)
+    upper = np.full(n, np.inf)
+    lower[0::3] = -0.05
+    upper[2::3] = 0.02
+    Z = np.kron(np.ones((m * m, 1)), np.eye(3))
+    qp = BoundConstrainedQP(A, b, lower, upper, block_size=3, near_nullspace=Z)
+    a, s = solve(qp, "active_set"), solve(qp, "snes_vi")
+    assert np.max(np.abs(a.x - s.x)) <= 1e-8 * np.max(np.abs(a.x))
+    assert a.active.sum() > 0 and a.iterations >= 2
+    assert a.krylov_iterations > 0 and len(a.history) == a.iterations
+    assert qp.kkt_residual(a.x) < 1e-9
+
+
+def test_warm_start_from_the_solution_takes_one_iteration():
+    qp, _ = obstacle_2d()
+    x = solve(qp, "active_set").x
+    again = solve(qp, "active_set", x0=x)
+    assert again.iterations == 1 and np.max(np.abs(again.x - x)) < 1e-12
+
+
+def test_fixed_components_stay_at_their_value():
+    qp, _ = obstacle_2d(10)
+    lower, upper = qp.lower.copy(), qp.upper.copy()
+    lower[5] = upper[5] = 0.123
+    fixed = BoundConstrainedQP(qp.A, qp.b, lower, upper)
+    for method in ("active_set", "snes_vi"):
+        assert solve(fixed, method).x[5] == pytest.approx(0.123, abs=1e-12)
+
+
+def test_registry():
+    assert {"active_set", "snes_vi", "multilevel"} <= set(available())
+    assert get("active_set") is SOLVERS["active_set"]
+    with pytest.raises(ValueError, match="unknown nonsmooth solver 'nope'.*active_set"):
+        get("nope")
+
+
+def test_no_convergence_is_a_clear_error():
+    qp, _ = obstacle_2d()
+    with pytest.raises(NonsmoothSolveError, match="no convergence in 1 iterations.*KKT residual"):
+        solve(qp, "active_set", max_iter=1)
+    with pytest.raises(NonsmoothSolveError, match="SNES VI.*did not converge"):
+        solve(qp, "snes_vi", max_iter=1)
+    sol = solve(qp, "active_set", max_iter=1, raise_on_failure=False)
+    assert not sol.converged
+
+
+def test_bad_input():
+    A = sp.identity(3, format="csr")
+    with pytest.raises(ValueError, match="NaN"):
+        BoundConstrainedQP(A, [1.0, np.nan, 0.0], 0.0, 1.0)
+    with pytest.raises(ValueError, match="empty feasible set"):
+        BoundConstrainedQP(A, np.ones(3), 1.0, 0.0)
+    with pytest.raises(NonsmoothSolveError, match="non-positive diagonal"):
+        solve(BoundConstrainedQP(-A, np.ones(3), 0.0, 1.0), "active_set")
