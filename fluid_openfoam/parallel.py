@@ -120,6 +120,17 @@ class Decomposition:
             out[cells] = part
         return out
 
+    def write_cell_sets(self, sets: dict[str, np.ndarray]) -> None:
+        """cellSets given by global cells, as each processor's ``constant/polyMesh/sets/NAME``
+        holding its local cells (the velocity sources' sets, :mod:`fluid_openfoam.zones`)."""
+        from .zones import write_cell_set
+
+        for proc, cells in zip(self.processors, self.cells):
+            folder = proc / "constant" / "polyMesh" / "sets"
+            folder.mkdir(exist_ok=True)
+            for name, members in sets.items():
+                write_cell_set(folder / name, name, np.flatnonzero(np.isin(cells, members)))
+
     def write_inputs(self, time: str, fraction: np.ndarray, drag: np.ndarray) -> None:
         """Per processor: the ``solid`` drag field and, for a fixed-velocity inlet, ``U`` with
         the inlet faces masked as in :meth:`OpenFOAMSolver.write_inlet` (internal field kept)."""
