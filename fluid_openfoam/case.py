@@ -149,14 +149,24 @@ class CaseSpec:
     penalization_exponent: float = 2.0  # for penalization "power"
     max_iterations: int = 2000         # simpleFoam iterations per advance
     tolerance: float = 1.0e-7          # residualControl for p and U
-    dt: float = 1.0
-    n_correctors: int = 0
+    dt: float = 1.0                    # coupling time step [s]
+    transient: bool = False            # pimpleFoam over each coupling step (else simpleFoam)
+    substeps: int = 1                  # pimpleFoam time steps per coupling step
+    outer_correctors: int = 50         # PIMPLE outer iterations per time step at most
+    solid_velocity: str = "bodies"     # "bodies": one velocity source per solid body (zones.py); "none"
     write_binary: bool = True
+    ranks: int = 1                     # MPI ranks of the solver (decomposed case, parallel.py)
+    decomposition: str = "simple"      # decomposePar method with ranks > 1 (parallel.METHODS)
     extra: dict = field(default_factory=dict)
 
     @property
     def nu(self) -> float:
         return self.mu / self.rho
+
+    @property
+    def time_step(self) -> float:
+        """pimpleFoam's deltaT (transient), else the coupling step."""
+        return self.dt / self.substeps if self.transient else self.dt
 
     def drag_value(self) -> float:
         if self.drag is not None:
@@ -164,7 +174,8 @@ class CaseSpec:
         h = float(self.grid.spacing.min())
         u_ref = max((float(np.linalg.norm(c["value"])) for c in self.faces.values()
                      if c["kind"] == "velocity"), default=0.0)
-        return 1.0e4 * max(self.nu / h ** 2, 1.0 / self.dt if self.dt > 0 else 0.0, u_ref / h)
+        rate = 1.0 / self.time_step if self.transient else 0.0
+        return 1.0e4 * max(self.nu / h ** 2, rate, u_ref / h)
 
     def table(self) -> list:
         if self.drag_table is not None:
@@ -185,13 +196,27 @@ class CaseSpec:
                    max_iterations=int(config.get("max_iterations", 2000)),
                    tolerance=float(config.get("tolerance", 1.0e-7)),
                    dt=float(config.get("dt", 1.0)),
+                   transient=bool(config.get("transient", False)),
+                   substeps=int(config.get("substeps", 1)),
+                   outer_correctors=int(config.get("outer_correctors", 50)),
+                   solid_velocity=str(config.get("solid_velocity", "bodies")),
                    penalization=str(config.get("penalization", "wall")),
-                   penalization_exponent=float(config.get("penalization_exponent", 2.0)))
+                   penalization_exponent=float(config.get("penalization_exponent", 2.0)),
+                   ranks=int(config.get("ranks", 1)), decomposition=str(config.get("decomposition", "simple")))
+        from .parallel import METHODS as DECOMPOSITIONS
+        if spec.ranks < 1 or spec.decomposition not in DECOMPOSITIONS:
+            raise ValueError(f"ranks must be at least 1 and decomposition one of {', '.join(DECOMPOSITIONS)}, "
+                             f"got {spec.ranks}, {spec.decomposition!r}")
         from .penalization import MODES
         if spec.penalization not in MODES:
             raise ValueError(f"penalization must be one of {', '.join(MODES)}, got {spec.penalization!r}")
         if spec.drag_table is not None and spec.penalization != "linear":
             raise ValueError("drag_table applies to the fraction itself: it needs penalization 'linear'")
+        if spec.solid_velocity not in ("bodies", "none"):
+            raise ValueError(f"solid_velocity must be 'bodies' or 'none', got {spec.solid_velocity!r}")
+        if spec.dt <= 0 or spec.substeps < 1 or spec.outer_correctors < 1:
+            raise ValueError(f"dt must be positive and substeps, outer_correctors at least 1, got "
+                             f"{spec.dt}, {spec.substeps}, {spec.outer_correctors}")
         if spec.rho <= 0 or spec.mu <= 0:
             raise ValueError(f"rho and mu must be positive, got {spec.rho}, {spec.mu}")
         return spec
@@ -260,11 +285,14 @@ def boundary_scalar_passive(faces: dict) -> str:
     return "\n".join(out)
 
 
-def control_dict(start: float, end: float, write_binary: bool = True, application: str = "simpleFoam") -> str:
+def control_dict(start, end, write_binary: bool = True, application: str = "simpleFoam",
+                 delta_t: float = 1.0, write_interval: int = 100000000) -> str:
+    """``start`` and ``end`` as numbers (written ``%g``) or time names (written as given)."""
+    start, end = (t if isinstance(t, str) else f"{t:g}" for t in (start, end))
     return (_header("dictionary", "controlDict", "system")
-            + f"application     {application};\nstartFrom       startTime;\nstartTime       {start:g};\n"
-            f"stopAt          endTime;\nendTime         {end:g};\ndeltaT          1;\n"
-            "writeControl    timeStep;\nwriteInterval   100000000;\npurgeWrite      0;\n"
+            + f"application     {application};\nstartFrom       startTime;\nstartTime       {start};\n"
+            f"stopAt          endTime;\nendTime         {end};\ndeltaT          {delta_t!r};\n"
+            f"writeControl    timeStep;\nwriteInterval   {write_interval};\npurgeWrite      0;\n"
             f"writeFormat     {'binary' if write_binary else 'ascii'};\nwritePrecision  17;\n"
             "writeCompression off;\ntimeFormat      general;\ntimePrecision   12;\n"
             "runTimeModifiable false;\n\n"
@@ -273,9 +301,11 @@ def control_dict(start: float, end: float, write_binary: bool = True, applicatio
             "    }\n}\n")
 
 
-def fv_schemes() -> str:
+def fv_schemes(transient: bool = False) -> str:
+    """Euler in time when transient: a restart from a saved time directory is then exact
+    (backward would need the state before it)."""
     return (_header("dictionary", "fvSchemes", "system")
-            + "ddtSchemes { default steadyState; }\n"
+            + f"ddtSchemes {{ default {'Euler' if transient else 'steadyState'}; }}\n"
             "gradSchemes { default Gauss linear; }\n"
             "divSchemes\n{\n    default none;\n    div(phi,U) bounded Gauss linearUpwind grad(U);\n"
             "    div((nuEff*dev2(T(grad(U))))) Gauss linear;\n}\n"
@@ -284,8 +314,19 @@ def fv_schemes() -> str:
             "snGradSchemes { default corrected; }\n")
 
 
-def fv_solution(tolerance: float, needs_ref: bool) -> str:
+def fv_solution(tolerance: float, needs_ref: bool, transient: bool = False, outer_correctors: int = 50) -> str:
     ref = "    pRefCell 0;\n    pRefValue 0;\n" if needs_ref else ""
+    if transient:  # PIMPLE: outer iterations per time step until the initial residuals fall below tolerance
+        return (_header("dictionary", "fvSolution", "system")
+                + "solvers\n{\n"
+                "    \"p|pFinal\" { solver GAMG; smoother GaussSeidel; tolerance 1e-12; relTol 0.01; }\n"
+                "    \"U|UFinal\" { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-14; relTol 0.01; }\n"
+                "}\n\nPIMPLE\n{\n    momentumPredictor yes;\n"
+                f"    nOuterCorrectors {int(outer_correctors)};\n    nCorrectors 2;\n"
+                "    nNonOrthogonalCorrectors 0;\n" + ref
+                + f"    residualControl\n    {{\n        p {{ tolerance {tolerance:g}; relTol 0; }}\n"
+                f"        U {{ tolerance {tolerance:g}; relTol 0; }}\n    }}\n}}\n\n"
+                "relaxationFactors\n{\n    equations { \".*\" 1; }\n}\n")
     return (_header("dictionary", "fvSolution", "system")
             + "solvers\n{\n"
             "    p { solver GAMG; smoother GaussSeidel; tolerance 1e-12; relTol 0.01; }\n"
@@ -295,8 +336,16 @@ def fv_solution(tolerance: float, needs_ref: bool) -> str:
             "relaxationFactors\n{\n    equations { U 0.95; \".*\" 0.95; }\n}\n")
 
 
-def fv_options(table: list) -> str:
+def fv_options(table: list, sources=()) -> str:
+    """The penalization (``immersedSolid``) and, per :class:`zones.BodySource`, a
+    ``vectorSemiImplicitSource`` on its cellSet with ``Su = D_max U_s`` (specific, i.e.
+    per unit volume, kinematic) and ``Sp = 0``: with the penalization's implicit
+    ``-D_max U`` in those cells the momentum balance there is ``D_max (U_s - U) ~ 0``."""
     rows = " ".join(f"({a!r} {b!r})" for a, b in table)
+    extra = "".join(f"\n{src.name}\n{{\n    type            vectorSemiImplicitSource;\n    active          yes;\n"
+                    f"    selectionMode   cellSet;\n    cellSet         {src.name};\n"
+                    f"    volumeMode      specific;\n    injectionRateSuSp\n    {{\n"
+                    f"        U ({_vec(src.su)} 0);\n    }}\n}}\n" for src in sources)
     return (_header("dictionary", "fvOptions", "constant")
             + "immersedSolid\n{\n    type            explicitPorositySource;\n    active          yes;\n\n"
             "    explicitPorositySourceCoeffs\n    {\n        selectionMode   cellZone;\n"
@@ -305,7 +354,7 @@ def fv_options(table: list) -> str:
             f"            D   table ( {rows} );\n"
             "            coordinateSystem\n            {\n                origin  (0 0 0);\n"
             "                e1      (1 0 0);\n                e2      (0 1 0);\n            }\n"
-            "        }\n    }\n}\n")
+            "        }\n    }\n}\n" + extra)
 
 
 def topo_set_dict(grid: Grid) -> str:
@@ -327,8 +376,8 @@ def write_case(case_dir, spec: CaseSpec) -> Path:
     files = {
         "system/blockMeshDict": block_mesh_dict(spec.grid, faces),
         "system/controlDict": control_dict(0, spec.max_iterations, spec.write_binary),
-        "system/fvSchemes": fv_schemes(),
-        "system/fvSolution": fv_solution(spec.tolerance, needs_ref),
+        "system/fvSchemes": fv_schemes(spec.transient),
+        "system/fvSolution": fv_solution(spec.tolerance, needs_ref, spec.transient, spec.outer_correctors),
         "system/topoSetDict": topo_set_dict(spec.grid),
         "constant/transportProperties": _header("dictionary", "transportProperties", "constant")
         + f"transportModel  Newtonian;\n\nnu              {spec.nu!r};\n",

@@ -22,15 +22,24 @@ from ``[materials.fluid]``; ``inlet``, ``outlet``, ``walls``, ``boundaries`` fro
 ``penalization_exponent``, ``drag``, ``max_iterations``, ``tolerance`` from ``[solvers.fluid]``
 (cases/README.md).
 
+Transient (``"transient": true``, from a scene with ``dynamics``): each ``advance(t, dt)``
+runs pimpleFoam from the state at ``t`` (the window's start, restored by the coupler for
+every coupling iteration) to ``t + dt`` in ``substeps`` Euler steps of at most
+``outer_correctors`` PIMPLE iterations each (initial residuals of p and U below
+``tolerance``). Keys ``"dt"`` (the coupling step), ``"substeps"``, ``"outer_correctors"``.
+
 Inputs of ``advance``: ``solid_fraction`` (n_cells,) in [0, 1] (clipped), and
-``solid_velocity`` (n_cells, 3), accepted for the protocol but *not applied*: the stock
-penalization drives the velocity in the solid to zero (no per-cell target velocity in
-stock v1912; a quasi-static solid is assumed). A fixed-velocity inlet (xmin) is masked: each face gets ``u_in (1 - f)`` with f the
+``solid_velocity`` (n_cells, 3). Stock v1912 has no per-cell target velocity; with
+``"solid_velocity": "bodies"`` (default) every solid body (connected solid-centred cells)
+moves rigidly with the fraction-weighted mean velocity of its wetted cell layer, through a
+``vectorSemiImplicitSource`` on top of the penalization (:mod:`fluid_openfoam.zones`:
+what this represents and what not); ``"none"`` penalizes the solid towards rest. A zero
+velocity (quasi-static solids) adds nothing. A fixed-velocity inlet (xmin) is masked: each face gets ``u_in (1 - f)`` with f the
 solid fraction of the cell behind it. Outputs: ``pressure`` (n_cells,) in Pa
 (OpenFOAM's kinematic p times rho) and ``velocity`` (n_cells, 3) in m/s, at cell
 centres, x fastest.
 
-State: the time directory simpleFoam starts from. Each ``advance`` starts from the current
+State: the time directory the solver starts from. Each ``advance`` starts from the current
 one (a warm start) and makes its result current; ``save_state(w)`` remembers it,
 ``restore_state(w)`` goes back to it, so a repeated window gives identical outputs.
 """
@@ -100,10 +109,13 @@ class FluidParticipant(Participant):
                 raise ValueError(f"input {name!r} has shape {f.data.shape}, expected {want}")
         if "solid_fraction" in inputs:
             self.fraction = np.array(inputs["solid_fraction"].data, dtype=np.float64)
-        if "solid_velocity" in inputs and not self._warned_velocity and np.any(inputs["solid_velocity"].data != 0):
-            log.warning("fluid_openfoam: solid_velocity is not applied (the solid is penalized towards rest)")
+        velocity = inputs["solid_velocity"].data if "solid_velocity" in inputs else None
+        if velocity is not None and self.spec.solid_velocity == "none" and not self._warned_velocity \
+                and np.any(velocity != 0):
+            log.warning("fluid_openfoam: solid_velocity is not applied (solid_velocity 'none': the solid is "
+                        "penalized towards rest)")
             self._warned_velocity = True
-        U, p = self.solver.solve(self.fraction)
+        U, p = self.solver.solve(self.fraction, velocity, t, dt)
         self.solver.prune(set(self.saved.values()))
         log.info("window %d iteration %d: %s", window, iteration, self.solver.last_run)
         return {"pressure": Field("pressure", p * self.spec.rho, "Pa"),

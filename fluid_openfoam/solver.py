@@ -2,13 +2,15 @@
 
 ``blockMesh`` and ``topoSet`` run once (:meth:`OpenFOAMSolver.setup`); each
 :meth:`OpenFOAMSolver.solve` writes the ``solid`` field into the start-time directory,
-relaunches ``simpleFoam`` from that time (``startFrom startTime``; a running solver
-cannot pick up a new ``solid`` field) and reads ``U`` and ``p`` of the time directory it
-wrote. Logs go to ``<case>/log.<application>``; a failing binary raises
+relaunches ``simpleFoam`` (quasi-static) or ``pimpleFoam`` (transient: from the coupling
+step's start ``t`` over ``dt``, Euler in time) from that time (``startFrom startTime``; a
+running solver cannot pick up a new ``solid`` field) and reads ``U`` and ``p`` of the time
+directory it wrote. With a solid velocity it also writes one velocity source per solid body
+(:mod:`fluid_openfoam.zones`) into constant/fvOptions. Logs go to ``<case>/log.<application>``; a failing binary raises
 :class:`OpenFOAMError` with the tail of its log, and non-finite output fields raise it
 too (with the first bad cell).
 
-Time directories are pseudo-time iteration counts (``deltaT 1``); the solver writes only
+simpleFoam's time directories are pseudo-time iteration counts (``deltaT 1``); it writes only
 at its end (``writeControl runTime`` with the interval equal to the iteration budget, or
 earlier when ``residualControl`` is met). Measured on these machines: about 0.1 s start-up
 per launch on small grids.
@@ -27,8 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from . import case as _case
-from .fields import read_internal_field, read_label_list, read_patches, write_field
+from .fields import read_internal_field, write_field
+from .parallel import Decomposition, patch_cells
 from .penalization import drag_fraction
+from .zones import body_sources, write_cell_set
 
 log = logging.getLogger("varcouple.fluid_openfoam")
 
@@ -68,13 +72,15 @@ def time_dirs(case_dir: Path) -> dict[float, str]:
 class OpenFOAMSolver:
     """One OpenFOAM case on disk, written from a :class:`case.CaseSpec`."""
 
-    def __init__(self, case_dir, spec: _case.CaseSpec, application: str = "simpleFoam"):
+    def __init__(self, case_dir, spec: _case.CaseSpec, application: str | None = None):
         self.case = Path(case_dir)
         self.spec = spec
-        self.application = application
+        self.application = application or ("pimpleFoam" if spec.transient else "simpleFoam")
         self.n = spec.grid.n_cells
         self.start = "0"
         self.last_run: dict = {}
+        self.parallel: Decomposition | None = None  # ranks > 1: the processor directories
+        self.sources: list = []
 
     # -------------------------------------------------------------- running binaries
     def run(self, app: str, *args: str, log_name: str | None = None) -> float:
@@ -85,7 +91,10 @@ class OpenFOAMSolver:
         logf = self.case / f"log.{log_name or app}"
         t0 = time.perf_counter()
         with open(logf, "wb") as out:
-            rc = subprocess.run([exe, "-case", str(self.case), *args], stdout=out, stderr=subprocess.STDOUT,
+            cmd = [exe, "-case", str(self.case), *args]
+            if self.parallel is not None and app == self.application:
+                cmd = self.parallel.mpi_command(cmd)
+            rc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, env=openfoam_env()).returncode
         dt = time.perf_counter() - t0
         if rc != 0:
@@ -101,14 +110,16 @@ class OpenFOAMSolver:
         self.run("topoSet")
         self.start = "0"
         self.patch_cells = self.read_patch_cells()
+        self.parallel = None
+        if self.spec.ranks > 1:  # decomposePar once; fields per processor from now on (parallel.py)
+            self.parallel = Decomposition(self.case, self.spec)
+            self.parallel.decompose(self.run)
 
     def read_patch_cells(self) -> dict[str, np.ndarray]:
         """Cell behind each face of every patch, in the patch's face order (from
         constant/polyMesh/boundary and owner). For blockMesh's single block the xmin patch
         lists the i = 0 column, j fastest then k (checked in tests/test_fluid_inlet.py)."""
-        mesh = self.case / "constant" / "polyMesh"
-        owner = read_label_list(mesh / "owner")
-        return {name: owner[start:start + n] for name, (start, n) in read_patches(mesh / "boundary").items()}
+        return patch_cells(self.case / "constant" / "polyMesh")
 
     def write_inlet(self, fraction: np.ndarray) -> None:
         """Inlet masking: a fixed-velocity xmin face gets ``u_in (1 - f)`` with f the solid
@@ -131,40 +142,85 @@ class OpenFOAMSolver:
         if not np.all(np.isfinite(frac)):
             raise ValueError(f"solid_fraction holds NaN/inf at cell {int(np.argmin(np.isfinite(frac)))}")
         frac = np.clip(frac, 0.0, 1.0)
-        self.write_inlet(frac)
         T = drag_fraction(frac, self.spec.grid.shape, self.spec.grid.spacing, self.spec.nu, self.spec.drag_value(),
                           self.spec.penalization, self.spec.penalization_exponent)
+        if self.parallel is not None:
+            self.parallel.write_inputs(self.start, frac, T)
+            return
+        self.write_inlet(frac)
         write_field(self.case / self.start / "solid", T, _case.boundary_scalar_passive(self.spec.faces),
                     obj="solid", location=self.start, binary=self.spec.write_binary)
 
-    def solve(self, solid_fraction) -> tuple[np.ndarray, np.ndarray]:
-        """Solve from the current start time with this solid fraction; returns
-        ``(U (n,3) m/s, p (n,) kinematic m^2/s^2)`` and makes the result the new start."""
+    def write_sources(self, fraction, velocity) -> None:
+        """constant/fvOptions with one velocity source per solid body (:mod:`zones`) when the
+        spec asks for it and the velocity is nonzero, and their cellSets."""
+        self.sources = []
+        if velocity is not None and self.spec.solid_velocity == "bodies":
+            vel = np.asarray(velocity, dtype=np.float64).reshape(self.n, 3)
+            if not np.all(np.isfinite(vel)):
+                raise ValueError(f"solid_velocity holds NaN/inf at cell {int(np.argmin(np.isfinite(vel).all(1)))}")
+            self.sources = body_sources(np.clip(fraction, 0.0, 1.0), vel, self.spec.grid.shape,
+                                        self.spec.drag_value())
+        sets = self.case / "constant" / "polyMesh" / "sets"
+        for src in self.sources:
+            write_cell_set(sets / src.name, src.name, src.cells)
+        if self.parallel is not None:
+            self.parallel.write_cell_sets({src.name: src.cells for src in self.sources})
+        (self.case / "constant" / "fvOptions").write_text(_case.fv_options(self.spec.table(), self.sources))
+
+    def control(self, t: float | None, dt: float | None) -> str:
+        """controlDict of one run from the start time: simpleFoam for at most
+        ``max_iterations`` pseudo-time steps (written once at the end), or pimpleFoam from
+        ``t`` over ``dt`` in ``substeps`` steps (written at ``t + dt``)."""
+        if not self.spec.transient:
+            t0, budget = float(self.start), self.spec.max_iterations
+            cd = _case.control_dict(t0, t0 + budget, self.spec.write_binary, self.application)
+            cd = re.sub(r"writeControl\s+\w+;", "writeControl    runTime;", cd)
+            return re.sub(r"writeInterval\s+\S+;", f"writeInterval   {budget};", cd)
+        if t is None or dt is None:
+            raise ValueError("a transient fluid advances from t over dt: both are needed")
+        if abs(float(self.start) - t) > 1e-9 * max(dt, abs(t)):
+            raise OpenFOAMError(f"the fluid's state is at time {self.start}, the coupling step starts at {t!r} "
+                                f"(restore_state to the step's start first)")
+        n = self.spec.substeps
+        return _case.control_dict(self.start, repr(t + dt), self.spec.write_binary, self.application,
+                                  delta_t=dt / n, write_interval=n)
+
+    def solve(self, solid_fraction, solid_velocity=None, t: float | None = None,
+              dt: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Solve from the current start time with this solid fraction (and velocity); returns
+        ``(U (n,3) m/s, p (n,) kinematic m^2/s^2)`` and makes the result the new start.
+        Transient specs advance from ``t`` over ``dt`` (:meth:`control`)."""
         self.write_solid(solid_fraction)
+        self.write_sources(np.asarray(solid_fraction, dtype=np.float64).reshape(-1), solid_velocity)
         t0 = float(self.start)
         budget = self.spec.max_iterations
-        cd = _case.control_dict(t0, t0 + budget, self.spec.write_binary, self.application)
-        cd = re.sub(r"writeControl\s+\w+;", "writeControl    runTime;", cd)
-        cd = re.sub(r"writeInterval\s+\S+;", f"writeInterval   {budget};", cd)
-        (self.case / "system" / "controlDict").write_text(cd)
-        for t, name in time_dirs(self.case).items():
+        (self.case / "system" / "controlDict").write_text(self.control(t, dt))
+        for t, name in time_dirs(self.time_root).items():
             if t > t0:  # stale results of a window being repeated (restore_state)
-                shutil.rmtree(self.case / name)
+                self.remove_time(name)
         wall = self.run(self.application)
         logf = self.case / f"log.{self.application}"
         text = logf.read_text(errors="replace")
-        new = {t: name for t, name in time_dirs(self.case).items() if t > t0}
+        new = {t: name for t, name in time_dirs(self.time_root).items() if t > t0}
         if not new:
             raise OpenFOAMError(f"{self.application} wrote no time directory after {self.start}:\n{_tail(logf)}")
         end = new[max(new)]
-        m = re.search(r"SIMPLE solution converged in (\S+) iterations", text)
-        iters = int(round(float(end) - t0))  # the log names the converged *time*, not a count
-        self.last_run = {"wall": wall, "iterations": iters, "converged": bool(m), "start": self.start, "end": end}
+        if self.spec.transient:  # PIMPLE outer iterations per time step, all converged
+            outer = [int(k) for k in re.findall(r"PIMPLE: converged in (\d+) iterations", text)]
+            steps = len(re.findall(r"^Time = ", text, re.M))
+            m = len(outer) == steps and steps > 0
+            iters = sum(outer) + (steps - len(outer)) * self.spec.outer_correctors
+        else:
+            m = re.search(r"SIMPLE solution converged in (\S+) iterations", text)
+            iters = int(round(float(end) - t0))  # the log names the converged *time*, not a count
+        self.last_run = {"wall": wall, "iterations": iters, "converged": bool(m), "start": self.start, "end": end,
+                         "velocity_sources": [src.velocity.tolist() for src in self.sources]}
         if not m:
-            log.warning("%s: not converged to %g within %d iterations (%s -> %s)", self.application,
-                        self.spec.tolerance, budget, self.start, end)
-        U = read_internal_field(self.case / end / "U", self.n)
-        p = read_internal_field(self.case / end / "p", self.n)
+            log.warning("%s: not converged to %g within %d %s (%s -> %s)", self.application, self.spec.tolerance,
+                        self.spec.outer_correctors if self.spec.transient else budget,
+                        "PIMPLE iterations per time step" if self.spec.transient else "iterations", self.start, end)
+        U, p = self.read_cells(end, "U"), self.read_cells(end, "p")
         for name, arr in (("U", U), ("p", p)):
             bad = ~np.isfinite(arr)
             if bad.any():
@@ -178,6 +234,23 @@ class OpenFOAMSolver:
 
     def prune(self, keep: set[str]) -> None:
         """Delete time directories other than 0, the current start and ``keep``."""
-        for t, name in time_dirs(self.case).items():
+        for t, name in time_dirs(self.time_root).items():
             if name not in keep and name != self.start and t != 0.0:
-                shutil.rmtree(self.case / name, ignore_errors=True)
+                self.remove_time(name)
+
+    # ------------------------------------------- serial case or processor directories
+    @property
+    def time_root(self) -> Path:
+        """The directory holding the time directories (processor0 when decomposed)."""
+        return self.case if self.parallel is None else self.parallel.time_root
+
+    def remove_time(self, name: str) -> None:
+        if self.parallel is not None:
+            self.parallel.remove_time(name)
+        shutil.rmtree(self.case / name, ignore_errors=True)
+
+    def read_cells(self, time: str, name: str) -> np.ndarray:
+        """A cell field of time directory ``time``, in grid order (gathered when decomposed)."""
+        if self.parallel is not None:
+            return self.parallel.read(time, name)
+        return read_internal_field(self.case / time / name, self.n)

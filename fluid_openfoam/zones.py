@@ -1,0 +1,73 @@
+"""The solid's velocity in the fluid (paper 2.3, Step 6) with stock OpenFOAM v1912: one
+uniform velocity per solid body.
+
+Stock v1912 has no per-cell target velocity for the penalization (``solidification``
+drives ``U`` to zero). What it has is ``vectorSemiImplicitSource``: a source ``Su + Sp U``
+uniform over a cell set. With ``Su = D_max U_s`` and ``Sp = 0`` on cells the penalization
+already holds with ``-D_max U`` (implicit), the momentum balance there becomes
+``D_max (U_s - U) = grad p - ...`` and ``U -> U_s`` up to ``1 / D_max`` (about 1e-4 of
+the other rates). ``Sp < 0`` is not needed (and diverged in v1912 when tried as the
+whole penalization; not used).
+
+A body is a connected set (face neighbours) of solid-centred cells (fraction >= 1/2, the
+cells the penalization stops: :mod:`fluid_openfoam.penalization`). Its velocity ``U_s`` is
+the mean of the projected solid velocity over its *interface layer* (its cells with a
+fluid-centred face neighbour), weighted by the solid fraction: the velocity of the
+wetted wall, which is what the fluid must see (displacement flux, added mass). The body
+then moves rigidly in the fluid. What is not represented: rotation and deformation inside
+one body (a body whose interface layer moves non-uniformly gets the mean), and the
+velocity of the partially filled fluid-centred cells next to the wall (their sub-cell wall
+drag still pulls towards rest). A rigid body translating in the fluid is exact to the
+penalization error; a body cut by the grid's boundary must have an open face there
+(a ``pressure`` face in ``[flow] faces``), or incompressibility forbids its motion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+
+@dataclass
+class BodySource:
+    name: str            # cellSet and fvOption name
+    cells: np.ndarray    # cell labels (x fastest)
+    velocity: np.ndarray  # U_s (3,), m/s
+    su: np.ndarray       # D_max U_s, m/s^2 (kinematic, per unit volume)
+
+
+def body_sources(fraction, velocity, shape, d_max: float) -> list[BodySource]:
+    """One :class:`BodySource` per solid body with a nonzero interface velocity."""
+    nx, ny, nz = (int(s) for s in shape)
+    f = np.asarray(fraction, dtype=float).reshape(nz, ny, nx)
+    v = np.asarray(velocity, dtype=float).reshape(nz, ny, nx, 3)
+    solid = f >= 0.5
+    labels, count = ndimage.label(solid)  # 6-connectivity (face neighbours)
+    layer = solid & ndimage.binary_dilation(~solid, structure=ndimage.generate_binary_structure(3, 1),
+                                            border_value=0)
+    out = []
+    flat = labels.reshape(-1)
+    for body in range(1, count + 1):
+        mine = labels == body
+        where = mine & layer
+        if not where.any():  # a body filling the grid: no wall to move
+            continue
+        w = f[where]
+        us = (w[:, None] * v[where]).sum(axis=0) / w.sum()
+        if not np.any(us):
+            continue
+        out.append(BodySource(f"solidBody{len(out)}", np.flatnonzero(flat == body), us, d_max * us))
+    return out
+
+
+def write_cell_set(path, name: str, cells) -> None:
+    """An ASCII cellSet file (constant/polyMesh/sets/NAME)."""
+    cells = np.asarray(cells, dtype=np.int64)
+    head = ("FoamFile\n{\n    version     2.0;\n    format      ascii;\n    class       cellSet;\n"
+            f'    location    "constant/polyMesh/sets";\n    object      {name};\n}}\n\n')
+    with open(path, "w") as out:
+        out.write(head + f"{cells.size}\n(\n")
+        out.write("\n".join(map(str, cells.tolist())))
+        out.write("\n)\n")
