@@ -21,6 +21,7 @@ Fraction handling (``method``):
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +35,23 @@ METHODS = ("binary", "linear", "power", "wall")
 
 def cubic_law(w: float = W, dp: float = DP, mu: float = MU, length: float = L) -> float:
     return w ** 3 * dp / (12 * mu * length)
+
+
+@dataclass(frozen=True)
+class Plates:
+    """The physical problem: aperture ``w`` [m], length ``length`` [m] along x, pressure drop
+    ``dp`` [Pa] over it, fluid ``mu`` [Pa s] and ``rho`` [kg/m^3]."""
+
+    w: float = W
+    length: float = L
+    dp: float = DP
+    mu: float = MU
+    rho: float = RHO
+
+    @property
+    def q_cubic(self) -> float:
+        """Flow rate per unit width of the cubic law, ``w^3 dp / (12 mu L)`` [m^2/s]."""
+        return cubic_law(self.w, self.dp, self.mu, self.length)
 
 
 def geometry(n_across: int, offset: float = 0.3, w: float = W, length: float = L):
@@ -72,31 +90,36 @@ def centre_mask(grid: dict, blocks) -> np.ndarray:
 
 
 def run(n_across: int, method: str = "wall", offset: float = 0.3, workdir="plates_case",
-        exponent: float = 3.0, tolerance: float = 1e-7) -> dict:
-    """One immersed-plates solve; returns errors and timings."""
+        exponent: float = 3.0, tolerance: float = 1e-7, plates: Plates = Plates(), max_iterations: int = 5000,
+        keep_fields: bool = False) -> dict:
+    """One immersed-plates solve; returns errors and timings (and, with ``keep_fields``, the
+    grid, the solid fractions and the cell fields U, p in Pa under ``"fields"``)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     t_all = time.perf_counter()
-    grid, lower, upper = geometry(n_across, offset)
+    grid, lower, upper = geometry(n_across, offset, plates.w, plates.length)
     t0 = time.perf_counter()
     frac = centre_mask(grid, (lower, upper)) if method == "binary" else exact_fractions(grid, (lower, upper))
     t_frac = time.perf_counter() - t0
-    cfg = {"grid": grid, "inlet": {"pressure": DP}, "outlet": {"pressure": 0.0},
-           "boundaries": {"zmin": "empty", "zmax": "empty"}, "mu": MU, "rho": RHO,
-           "max_iterations": 5000, "tolerance": tolerance,
+    cfg = {"grid": grid, "inlet": {"pressure": plates.dp}, "outlet": {"pressure": 0.0},
+           "boundaries": {"zmin": "empty", "zmax": "empty"}, "mu": plates.mu, "rho": plates.rho,
+           "max_iterations": max_iterations, "tolerance": tolerance,
            "penalization": "linear" if method == "binary" else method, "penalization_exponent": exponent}
     s = OpenFOAMSolver(Path(workdir), CaseSpec.from_config(cfg))
     t0 = time.perf_counter()
     s.setup()
     t_setup = time.perf_counter() - t0
     t0 = time.perf_counter()
-    U, _ = s.solve(frac)
+    U, p = s.solve(frac)
     t_solve = time.perf_counter() - t0
     ny = grid["shape"][1]
     Q = U[:, 0].reshape(ny, NX).sum(axis=0) * grid["spacing"][1]
-    err = float(Q.mean() / cubic_law() - 1)
-    return {"n_across": n_across, "method": method, "offset": offset, "cells": s.n, "Q": float(Q.mean()),
-            "Q_cubic": cubic_law(), "error": err, "Q_spread": float(np.ptp(Q) / abs(Q.mean())),
-            "converged": s.last_run["converged"], "iterations": s.last_run["iterations"],
-            "time_fractions": t_frac, "time_setup": t_setup, "time_solve": t_solve,
-            "time_total": time.perf_counter() - t_all}
+    err = float(Q.mean() / plates.q_cubic - 1)
+    out = {"n_across": n_across, "method": method, "offset": offset, "cells": s.n, "Q": float(Q.mean()),
+           "Q_cubic": plates.q_cubic, "error": err, "Q_spread": float(np.ptp(Q) / abs(Q.mean())),
+           "converged": s.last_run["converged"], "iterations": s.last_run["iterations"],
+           "time_fractions": t_frac, "time_setup": t_setup, "time_solve": t_solve,
+           "time_total": time.perf_counter() - t_all}
+    if keep_fields:
+        out["fields"] = {"grid": grid, "solid_fraction": frac, "velocity": U, "pressure": p * plates.rho}
+    return out
