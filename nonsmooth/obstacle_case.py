@@ -109,7 +109,8 @@ def body_mesh(problem: dict, cells) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return points, tets, top
 
 
-def _options(problem: dict, hierarchy) -> dict:
+def options(problem: dict, hierarchy) -> dict:
+    """Solver options of the problem's method (the multilevel one gets the hierarchy)."""
     if problem["method"] == "multilevel":
         nu = problem["smoothing"]
         return {"hierarchy": hierarchy, "tol": problem["tolerance"], "maxiter": problem["max_iterations"],
@@ -117,8 +118,8 @@ def _options(problem: dict, hierarchy) -> dict:
     return {}
 
 
-def solve_level(problem: dict, levels: int, cells, nthreads: int = 1) -> tuple[dict, dict]:
-    """One run: mesh, obstacle problem, hierarchy, solve. Returns (summary entry, fields)."""
+def build(problem: dict, levels: int, cells, nthreads: int = 1):
+    """Mesh, obstacle problem and hierarchy of one run: (points, tets, top, qp, hierarchy, seconds)."""
     t0 = time.perf_counter()
     points, tets, top = body_mesh(problem, cells)
     plane = points[:, 2].min() - problem["gap"]
@@ -126,10 +127,15 @@ def solve_level(problem: dict, levels: int, cells, nthreads: int = 1) -> tuple[d
     t1 = time.perf_counter()
     hierarchy = semi_geometric_hierarchy(points, tets, levels, problem["coarse_shape"],
                                          margin=problem["margin"], nthreads=nthreads)
-    t2 = time.perf_counter()
-    sol = solve(qp, problem["method"], **_options(problem, hierarchy))
+    return points, tets, top, qp, hierarchy, {"assembly": t1 - t0, "hierarchy": time.perf_counter() - t1}
+
+
+def solve_level(problem: dict, levels: int, cells, nthreads: int = 1) -> tuple[dict, dict]:
+    """One run: mesh, obstacle problem, hierarchy, solve. Returns (summary entry, fields)."""
+    points, tets, top, qp, hierarchy, seconds = build(problem, levels, cells, nthreads)
+    sol = solve(qp, problem["method"], **options(problem, hierarchy))
     u = sol.x.reshape(-1, 3)
-    force = -qp.multiplier(sol.x).reshape(-1, 3)  # the obstacle's push on the body
+    force = -qp.multiplier(sol.x).reshape(-1, 3)  # A x - b: the obstacle's push on the body (up)
     prescribed = np.zeros(len(points), bool)
     prescribed[top] = True
     contact = (u[:, 2] <= qp.lower[2::3]) & ~prescribed
@@ -138,12 +144,12 @@ def solve_level(problem: dict, levels: int, cells, nthreads: int = 1) -> tuple[d
              "level_sizes": hierarchy.sizes, "iterations": sol.iterations, "converged": sol.converged,
              "asymptotic_rate": sol.info.get("asymptotic_rate"), "final_step": sol.history[-1] if sol.history else None,
              "step_history": sol.history, "contact_nodes": int(contact.sum()),
-             "contact_force_z": float(-force[:, 2].sum()),
+             "contact_force_z": float(force[:, 2].sum()),
              "max_penetration": float(max(0.0, np.max(qp.lower[2::3] - u[:, 2]))),
              "kkt_residual": qp.kkt_residual(sol.x), "energy": qp.energy(sol.x),
-             "seconds": {"assembly": t1 - t0, "hierarchy": t2 - t1, "solve": sol.seconds}}
+             "seconds": {**seconds, "solve": sol.seconds}}
     fields = {"points": points, "tets": tets, "displacement": u, "contact": contact.astype(np.uint8),
-              "contact_force": -force}
+              "contact_force": force}
     return entry, fields
 
 

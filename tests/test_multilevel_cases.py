@@ -1,0 +1,89 @@
+"""The obstacle cases (cases/cube_obstacle, cases/rock_obstacle): outputs, physics checks
+and clean errors on bad problem files."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from coupler.scene import SceneError
+from nonsmooth.obstacle_case import load, main, run_case
+
+CASES = Path(__file__).resolve().parent.parent / "cases"
+
+
+def copy_case(name, tmp_path, replace=()):
+    case = tmp_path / name
+    case.mkdir()
+    text = (CASES / name / "problem.toml").read_text()
+    for old, new in replace:
+        assert old in text, old
+        text = text.replace(old, new)
+    (case / "problem.toml").write_text(text)
+    return case
+
+
+def test_cube_case_two_levels_writes_vtu_png_and_summary(tmp_path):
+    case = copy_case("cube_obstacle", tmp_path)
+    summary = run_case(case, only_levels=[2], log=lambda line: None)
+    out = case / "results"
+    assert sorted(p.name for p in out.iterdir()) == ["convergence.png", "solution_L2.vtu", "summary.json"]
+    assert json.loads((out / "summary.json").read_text()) == json.loads(json.dumps(summary))
+    (run,) = summary["runs"]
+    assert run["dofs"] == 3 * 7**3 and run["converged"] and run["final_step"] < 1e-12
+    mesh = meshio.read(out / "solution_L2.vtu")
+    u, contact = mesh.point_data["displacement"], mesh.point_data["contact"].astype(bool)
+    bottom = mesh.points[:, 2] == 0.0
+    # the whole bottom is pushed onto the plane and stays on it (no penetration, no gap)
+    assert np.array_equal(contact, bottom) and run["max_penetration"] == 0.0
+    np.testing.assert_allclose(u[bottom, 2], 0.0, atol=1e-15)
+    # the plane pushes up, with the force the top face applies
+    force = mesh.point_data["contact_force"]
+    assert np.all(force[bottom, 2] >= 0) and run["contact_force_z"] > 0
+
+
+def test_rock_case_touches_at_asperities_only(tmp_path):
+    case = copy_case("rock_obstacle", tmp_path, [("cells = [[48, 48, 16]]", "cells = [[16, 16, 6]]"),
+                                                 ("levels = [4]", "levels = [3]"),
+                                                 ("coarse_shape = [6, 6, 2]", "coarse_shape = [4, 4, 2]")])
+    (run,) = run_case(case, log=lambda line: None)["runs"]
+    assert run["converged"] and run["max_penetration"] == 0.0
+    mesh = meshio.read(case / "results" / "solution_L3.vtu")
+    contact = mesh.point_data["contact"].astype(bool)
+    assert 0 < contact.sum() == run["contact_nodes"]
+    z = mesh.points[:, 2]
+    on_bottom_face = z < z.min() + 4 * 5e-4 + 1e-12  # within the rough face's height range
+    assert np.all(on_bottom_face[contact]) and contact.sum() < 0.5 * on_bottom_face.sum()
+    # touching points are on the plane: z + u_z = the plane (min z) exactly
+    deformed = z + mesh.point_data["displacement"][:, 2]
+    np.testing.assert_allclose(deformed[contact], z.min(), atol=1e-15)
+    assert deformed.min() >= z.min() - 1e-15
+
+
+@pytest.mark.parametrize("replace, words", [
+    (("size = 0.01", "size = 0.01\ncolour = 1"), ["[body] colour", "unknown key"]),
+    (("levels = [2, 3, 4, 5]", "levels = [2, 3]"), ["[hierarchy] levels", "2 entries", "4"]),
+    (("shape = \"cube\"", "shape = \"sphere\""), ["[body] shape", "'sphere'"]),
+    (("E = 1.0e10", "E = -1.0"), ["[material] E", "positive"]),
+    (("[output]", "[outputs]"), ["[outputs]", "unknown table"]),
+])
+def test_bad_problem_files_name_file_table_and_key(tmp_path, replace, words):
+    case = copy_case("cube_obstacle", tmp_path, [replace])
+    with pytest.raises(SceneError) as err:
+        load(case)
+    message = str(err.value)
+    assert str(case / "problem.toml") in message
+    for word in words:
+        assert word in message, (word, message)
+
+
+def test_run_py_reports_a_bad_level_and_exits_2(tmp_path, capsys):
+    case = copy_case("cube_obstacle", tmp_path)
+    shutil.copy(CASES / "cube_obstacle" / "run.py", case)
+    assert main(case, ["--levels", "7"]) == 2
+    assert "[hierarchy] levels" in capsys.readouterr().err
