@@ -54,7 +54,7 @@ def p1_elasticity_stiffness(points: np.ndarray, tets: np.ndarray, E: float, nu: 
             B[:, 3, c + 1], B[:, 3, c + 2] = gz, gy  # gamma_yz
             B[:, 4, c], B[:, 4, c + 2] = gz, gx  # gamma_xz
             B[:, 5, c], B[:, 5, c + 1] = gy, gx  # gamma_xy
-        Ke = np.einsum("m,mki,kl,mlj->mij", vol, B, C, B)
+        Ke = vol[:, None, None] * (B.transpose(0, 2, 1) @ (C @ B))
         dofs = (3 * cells[:, :, None] + np.arange(3)).reshape(len(cells), 12)
         rows = np.repeat(dofs, 12, axis=1).ravel()
         cols = np.tile(dofs, (1, 12)).ravel()

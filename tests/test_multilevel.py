@@ -63,6 +63,22 @@ def test_coarse_dofs_without_support_on_the_fine_mesh_are_dropped():
         assert np.all(abs(P).sum(axis=0) > 0)
 
 
+def test_p1_stiffness_passes_the_patch_test():
+    """An affine displacement: no force at interior nodes, and the energy of its uniform
+    strain, 1/2 eps : C : eps times the volume."""
+    grid = StructuredGrid.from_bounds([0, 0, 0], [2.0, 1.0, 0.5], [5, 4, 3])
+    K = p1_elasticity_stiffness(grid.points, lattice_tetrahedra(grid.shape), E, NU)
+    G = np.array([[1.0, 2.0, 0.0], [0.0, -1.0, 0.5], [3.0, 0.0, 2.0]]) * 1e-3  # du_i / dx_j
+    u = (grid.points @ G.T).ravel()
+    inner = np.all((grid.points > [0, 0, 0]) & (grid.points < [2.0, 1.0, 0.5]), axis=1)
+    forces = (K @ u).reshape(-1, 3)
+    assert np.abs(forces[inner]).max() < 1e-10 * np.abs(forces).max()
+    eps = 0.5 * (G + G.T)
+    lam, mu = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
+    energy = 0.5 * (lam * np.trace(eps) ** 2 + 2 * mu * np.sum(eps * eps)) * 1.0
+    assert 0.5 * u @ (K @ u) == pytest.approx(energy, rel=1e-12)
+
+
 def test_block_prolongation_and_galerkin_operators_keep_rigid_body_modes():
     points, tets, _ = cube(4)
     H = hierarchy(points, tets, 3)
