@@ -3,7 +3,7 @@ cases/added_mass_light (ratio 1.1, a harder rock, a shorter step). A rock block 
 channel is loaded suddenly by the channel's pressure; the moving top face must push the water
 out of the channel's ends, so the fluid's pressure answers its acceleration with an added mass
 (rho_f L^2 / (12 h) = 72 kg/m^2, checked on the fluid alone in test_fluid_transient.py) larger
-than the block's effective mass. The partitioned iteration on the interface pressure then needs
+than the block's modal mass rho_s H / 2 (24 and 10 kg/m^2). The partitioned iteration on the interface pressure then needs
 acceleration: IQN-ILS converges in a few iterations per step where constant relaxation does
 not converge at all. Iteration counts are the ones measured on these machines (summary.json)."""
 
@@ -38,13 +38,13 @@ def iterations(summary) -> list[int]:
 
 
 def test_light_rock_iqn_ils_converges_where_constant_relaxation_blows_up(tmp_path):
-    """Density ratio 1.1: measured IQN-ILS [7, 6, 5, 5] iterations per step (about 5 s); constant
+    """Density ratio 1.1: measured IQN-ILS [6, 5, 4, 4] iterations per step (about 5 s); constant
     relaxation 0.5 amplifies the interface pressure every iteration until the block inverts
-    (iteration 5 of step 0, displacement 0.02 m against 2e-7 m converged)."""
+    (iteration 9 of step 0, displacement 0.03 m against 1e-7 m converged)."""
     code, s = run("added_mass_light", tmp_path / "iqn")
     assert code == 0
     its = iterations(s)
-    assert len(its) == 4 and max(its) <= 8 and sum(its) <= 26, its
+    assert len(its) == 4 and max(its) <= 8 and sum(its) <= 24, its
     assert "pimpleFoam" in s["iteration"] and "applied per solid body" in " ".join(s["notes"])
     assert 1e-7 < s["steps"][-1]["max_displacement"] < 1e-6
     code, s = run("added_mass_light", tmp_path / "constant", {IQN: 'acceleration = "constant"'})
@@ -53,13 +53,13 @@ def test_light_rock_iqn_ils_converges_where_constant_relaxation_blows_up(tmp_pat
 
 
 def test_heavy_rock_iqn_ils_converges_where_constant_relaxation_does_not(tmp_path):
-    """Density ratio 2.6: measured IQN-ILS [6, 5, 4, 4] iterations per step; constant
-    relaxation 0.5 oscillates (relative residuals 1.1 and 1.7 in turn) and stops after
+    """Density ratio 2.6: measured IQN-ILS [5, 5, 4, 4] iterations per step; constant
+    relaxation 0.5 oscillates (relative residuals about 1.1 and 1.6 in turn) and stops after
     max_iterations = 30 in step 0."""
     code, s = run("added_mass_heavy", tmp_path / "iqn")
     assert code == 0
     its = iterations(s)
-    assert len(its) == 4 and max(its) <= 7 and sum(its) <= 22, its
+    assert len(its) == 4 and max(its) <= 7 and sum(its) <= 21, its
     code, s = run("added_mass_heavy", tmp_path / "constant", {IQN: 'acceleration = "constant"'})
     assert code != 0 and s["status"] == "failed"
     assert "did not converge in time step 0" in s["error"] and "30 iterations" in s["error"], s["error"]
@@ -70,7 +70,7 @@ def test_added_mass_comes_from_the_moving_wall_and_aitken_sits_between(tmp_path)
     """Without the solid velocity in the fluid (solid_velocity = "none") the pressure does not
     answer the wall's motion: constant relaxation contracts by exactly 1 - 0.5 per iteration
     (measured [21, 6, 1, 1]) and IQN-ILS needs [3, 2, 1, 1]. Aitken on the heavy case with the
-    velocity: measured [14, 6, 6, 6], between constant and IQN-ILS."""
+    velocity: measured [14, 6, 6, 6], between constant and IQN-ILS ([5, 5, 4, 4])."""
     still = {IQN: 'acceleration = "constant"', "substeps = 1": 'substeps = 1\nsolid_velocity = "none"'}
     code, s = run("added_mass_heavy", tmp_path / "still", still)
     assert code == 0

@@ -66,7 +66,10 @@ def test_piston_moves_the_fluid_column_and_feels_its_added_mass(tmp_path):
     rest, both ends open at p = 0. Incompressibility moves the whole column at V; one Euler step
     accelerates it by V/dt, so p falls linearly behind the body and rises ahead of it:
     p = -rho V x / dt before, rho V (L - x) / dt after (the added mass rho L_fluid per area).
-    Measured: U within 7e-4 of V (the penalization error, ~ grad p / D_max), p within 0.07%."""
+    The jump across the body is the inertia of the fluid outside it only: the penalized fluid
+    inside passes its own to the penalty, which is why a surface-coupled rock keeps its rho_s
+    (coupler/coupled_run.py). Measured: U within 7e-4 of V (the penalization error, ~ grad p /
+    D_max), p within 0.07%."""
     nx, L, V = 20, 0.2, 0.1
     empty = {f: "empty" for f in ("ymin", "ymax", "zmin", "zmax")}
     s = transient(tmp_path, [nx, 1, 1], [L / nx, 0.01, 0.01], empty)
