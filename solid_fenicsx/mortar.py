@@ -1,0 +1,152 @@
+"""Mortar coupling of two contact faces of a dolfinx P1 displacement space
+(paper 2.2.1, eq. 9): the faces as triangle meshes in dof numbering, the
+slave's nodal normals, ``T = D^-1 B`` from :mod:`transfer` with the dual
+(biorthogonal) basis on the slave side, and the weighted gap.
+
+With the dual basis ``D`` is diagonal, ``D_kk = int phi_k`` over the part of the
+slave face the master covers, and the discrete non-penetration condition at
+slave node k (linearized, ``n^m = -n^s``, eq. 8) reads::
+
+    n_k . (u_S - T u_M)_k  <=  g_k = n_k . (T X_M - X_S)_k
+
+with X the node positions: g_k is the gap measured along the slave normal
+between the slave node and the mortar projection of the master face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+import dolfinx
+
+from transfer import FunctionSpace, Mesh, NoOverlapError, Transfer
+
+
+class ContactSetupError(ValueError):
+    """Contact faces that cannot be coupled (missing, overlapping, not facing each other)."""
+
+
+@dataclass
+class Face:
+    """A boundary of the mesh as triangles over its own nodes.
+
+    nodes : (k,) block dof indices (P1 vertex dofs of the vector space) of the face's nodes
+    triangles : (t, 3) outward-oriented triangles, indices into ``nodes``
+    points : (k, 3) node coordinates
+    """
+
+    name: str
+    nodes: np.ndarray
+    triangles: np.ndarray
+    points: np.ndarray
+
+    def mesh(self) -> Mesh:
+        return Mesh(self.points, self.triangles, "triangle", name=self.name)
+
+    def area_normals(self) -> np.ndarray:
+        """(t, 3) outward normals scaled by twice the triangle areas."""
+        p = self.points[self.triangles]
+        return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
+    def nodal_normals(self) -> np.ndarray:
+        """(k, 3) unit outward normals at the nodes: the area-weighted mean of the
+        normals of the triangles around each node."""
+        an = self.area_normals()
+        n = np.zeros((len(self.nodes), 3))
+        for c in range(3):
+            np.add.at(n, self.triangles[:, c], an)
+        return n / np.linalg.norm(n, axis=1)[:, None]
+
+
+def vertex_dofs(V) -> np.ndarray:
+    """Block dof index of each mesh vertex of a P1 vector space (serial)."""
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim, 0)
+    c2v = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)
+    dofs = np.asarray(V.dofmap.list.array).reshape(-1, tdim + 1)
+    out = np.full(mesh.topology.index_map(0).size_local + mesh.topology.index_map(0).num_ghosts, -1, np.int64)
+    out[c2v] = dofs
+    return out
+
+
+def boundary_face(solid, V, boundary, name: str | None = None) -> Face:
+    """The facets of a named boundary as an outward-oriented :class:`Face` in dof numbering."""
+    if V.ufl_element().degree() != 1:
+        raise ContactSetupError("contact needs P1 displacements (degree 1)")
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    facets = solid.facets(boundary)
+    if len(facets) == 0:
+        raise ContactSetupError(f"contact boundary {boundary!r} has no facets")
+    for a, b in ((tdim - 1, 0), (tdim - 1, tdim), (tdim, 0)):
+        mesh.topology.create_connectivity(a, b)
+    f2v = mesh.topology.connectivity(tdim - 1, 0)
+    f2c = mesh.topology.connectivity(tdim - 1, tdim)
+    c2v = mesh.topology.connectivity(tdim, 0)
+    vdofs = vertex_dofs(V)
+    coords = V.tabulate_dof_coordinates()
+    tri = np.array([f2v.links(f) for f in facets], np.int64)
+    opposite = np.array([np.setdiff1d(c2v.links(f2c.links(f)[0]), f2v.links(f))[0] for f in facets], np.int64)
+    tri, opposite = vdofs[tri], vdofs[opposite]
+    p = coords[tri]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    inward = np.einsum("ij,ij->i", normal, coords[opposite] - p[:, 0]) > 0
+    tri[inward] = tri[inward][:, [0, 2, 1]]
+    nodes, local = np.unique(tri, return_inverse=True)
+    return Face(name or str(boundary), nodes, local.reshape(-1, 3), coords[nodes])
+
+
+@dataclass
+class Mortar:
+    """The mortar coupling of a slave and a master face (paper eq. 9, dual basis).
+
+    T : (ns, nm) ``D^-1 B`` on the slave nodes the master covers (zero rows elsewhere)
+    weights : (ns,) diagonal of D (``int phi_k`` over the covered part)
+    covered : (ns,) slave nodes the master face reaches
+    normals : (ns, 3) unit slave normals (pointing at the master)
+    gap : (ns,) weighted gap g_k (NaN where not covered)
+    """
+
+    slave: Face
+    master: Face
+    T: sp.csr_matrix
+    weights: np.ndarray
+    covered: np.ndarray
+    normals: np.ndarray
+    gap: np.ndarray
+    stats: dict
+
+
+def mortar(slave: Face, master: Face, search_distance: float | None = None,
+           max_normal_angle: float = 45.0) -> Mortar:
+    """Assemble ``T = D^-1 B`` from the master face to the slave face with the dual
+    basis on the slave (``pseudo_l2``), the slave normals and the weighted gap.
+
+    search_distance : how far along the slave normal master triangles are
+        looked for; default 0.5 x the slave's mean edge (give at least the largest
+        initial gap that may close)
+    """
+    if np.intersect1d(slave.nodes, master.nodes).size:
+        raise ContactSetupError(f"contact faces {slave.name!r} and {master.name!r} share nodes: the two "
+                                f"bodies must be meshed separately (non-matching faces)")
+    kwargs = {"max_normal_angle": max_normal_angle}
+    if search_distance is not None:
+        kwargs["search_distance"] = float(search_distance)
+    try:
+        transfer = Transfer.assemble(FunctionSpace(master.mesh(), "P1"), FunctionSpace(slave.mesh(), "P1"),
+                                     "pseudo_l2", **kwargs)
+    except NoOverlapError as exc:
+        raise ContactSetupError(f"no slave node of {slave.name!r} faces the master {master.name!r} within the "
+                                f"search distance and normal angle: nothing can come into contact ({exc})") from exc
+    covered = transfer.covered
+    T = transfer.matrix()
+    normals = slave.nodal_normals()
+    projected = T @ master.points
+    gap = np.where(covered, np.einsum("ij,ij->i", normals, projected - slave.points), np.nan)
+    stats = dict(transfer.stats, slave_nodes=len(slave.nodes), master_nodes=len(master.nodes),
+                 covered_nodes=int(covered.sum()))
+    return Mortar(slave, master, T, np.where(covered, transfer.D.diagonal(), 0.0), covered, normals, gap, stats)

@@ -1,0 +1,175 @@
+"""Two-body mortar contact (solid_fenicsx.contact) on the Hertz problem: a
+half-sphere (slave, graded tet mesh) pressed by a prescribed displacement of its
+flat face onto a block (master), meshed separately (non-matching faces).
+
+Checked: the mortar operator on the faces, force balance (the reaction at the
+loaded face against the sum of the nodal contact forces), no interpenetration,
+non-negative pressure, complementarity, Hertz theory (contact radius and peak
+pressure from an elliptic fit of the nodal pressures), the two nonsmooth
+solvers agreeing, initial interpenetration, and the errors on bad set-ups.
+"""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+pytest.importorskip("gmsh")
+
+from nonsmooth.solvers import solve as solve_qp  # noqa: E402
+from solid_fenicsx import Elasticity, read_mesh  # noqa: E402
+from solid_fenicsx.contact import Contact  # noqa: E402
+from solid_fenicsx.contact_meshes import hertz_boundaries, hertz_mesh, hertz_solution  # noqa: E402
+from solid_fenicsx.mortar import ContactSetupError  # noqa: E402
+
+E, NU, R = 1.0e9, 0.3, 1.0
+PUSH = 0.02  # prescribed displacement of the flat face (m): a about 0.15 R
+
+
+def hertz_problem(path, h, push=PUSH, shift=0.0, master_ratio=1.0, **options):
+    hertz_mesh(path, radius=R, h_contact=h, h_far=0.3, refine_radius=0.25, master_ratio=master_ratio)
+    solid = read_mesh(path, boundaries=hertz_boundaries(R))
+    if shift:  # move the half-sphere (the body holding the highest node) down into the block
+        x = solid.mesh.geometry.x
+        cells = np.asarray(solid.mesh.geometry.dofmap.array).reshape(-1, 4)
+        edges = sp.csr_matrix((np.ones(cells.size * 3), (np.repeat(cells.ravel(), 3),
+                                                         np.repeat(cells, 4, axis=0)[:, 1:].ravel())),
+                              (len(x), len(x)))
+        _, body = connected_components(edges, directed=False)
+        x[body == body[np.argmax(x[:, 2])], 2] -= shift
+    s = Elasticity(solid, E=E, nu=NU)
+    s.add_dirichlet("block_bottom", 0.0)
+    s.add_dirichlet("load", [0.0, 0.0, -push])
+    return Contact(s, "slave", "block_top", search_distance=0.1, **options)
+
+
+def elliptic_fit(contact, state):
+    """(a, p0) of p(r)^2 = p0^2 (1 - r^2 / a^2) fitted to the nodal pressures above 20 % of the peak."""
+    pts = contact.mortar.slave.points
+    r2 = pts[:, 0] ** 2 + pts[:, 1] ** 2
+    p = state.pressure
+    sel = p > 0.2 * p.max()
+    slope, intercept = np.polyfit(r2[sel], p[sel] ** 2, 1)
+    return float(np.sqrt(-intercept / slope)), float(np.sqrt(intercept))
+
+
+@pytest.fixture(scope="module")
+def hertz(tmp_path_factory):
+    contact = hertz_problem(tmp_path_factory.mktemp("hertz") / "hertz.msh", h=0.04)
+    return contact, contact.solve()
+
+
+def test_mortar_operator_on_the_faces(hertz):
+    contact, _ = hertz
+    m = contact.mortar
+    assert m.covered.sum() > 100
+    T = m.T[m.covered]
+    assert np.allclose(T @ np.ones(T.shape[1]), 1.0, atol=1e-12)  # T reproduces constants
+    assert np.max(np.abs(T @ m.master.points[:, 2])) < 1e-14  # the flat master face stays at z = 0
+    # non-matching faces: no slave node coincides with a master node (except the touching point)
+    d = np.linalg.norm(m.slave.points[:, None, :] - m.master.points[None, :, :], axis=2).min(axis=1)
+    assert np.count_nonzero(d < 1e-9) <= 1
+    # the weighted gap is the distance to the plane along the slave normal, z / |n_z|
+    z = m.slave.points[m.covered, 2]
+    along_normal = z / np.abs(m.normals[m.covered, 2])
+    near = along_normal < 0.05  # half the search distance: the whole dual support is paired
+    assert near.sum() > 50
+    assert np.max(np.abs(m.gap[m.covered][near] - along_normal[near])) < 0.02 * along_normal[near].max()
+    centre = np.array([0.0, 0.0, R])
+    exact = (m.slave.points - centre) / np.linalg.norm(m.slave.points - centre, axis=1)[:, None]
+    fine = np.hypot(m.slave.points[:, 0], m.slave.points[:, 1]) < 0.2  # the graded zone, h = 0.04
+    assert np.max(np.linalg.norm(m.normals - exact, axis=1)[fine]) < 0.03  # outward sphere normals
+
+
+def test_force_balance(hertz):
+    contact, state = hertz
+    reaction = contact.reaction("load")
+    assert state.solution.converged
+    assert abs(state.force[2] + reaction[2]) <= 1e-6 * abs(reaction[2])
+    assert np.max(np.abs(state.force[:2])) <= 1e-3 * abs(state.force[2])  # symmetric up to the mesh
+    bottom = contact.reaction("block_bottom")
+    assert abs(bottom[2] - state.force[2]) <= 1e-6 * abs(bottom[2])
+
+
+def test_no_penetration_and_complementarity(hertz):
+    contact, state = hertz
+    covered = contact.mortar.covered
+    gap, p = state.gap[covered], state.pressure[covered]
+    tol = 1e-9 * PUSH
+    assert gap.min() >= -tol  # interpenetration below 1e-9 of the prescribed displacement
+    assert p.min() >= 0.0
+    assert np.max(np.abs(gap * p)) <= tol * p.max()
+    assert state.active.sum() > 30 and (~state.active[covered]).sum() > 30
+    assert np.all(state.pressure[~covered] == 0.0)
+
+
+def test_hertz_contact_radius_and_peak_pressure(hertz):
+    """At h = 0.04 (a / h about 3.8): a within 5 %, p0 of the fit within 10 % (the
+    documented 5 % mesh is h = 0.025, slow test below)."""
+    contact, state = hertz
+    ref = hertz_solution(state.force[2], R, E, NU)
+    a, p0 = elliptic_fit(contact, state)
+    assert abs(a / ref["a"] - 1) < 0.05, (a, ref["a"])
+    assert abs(p0 / ref["p0"] - 1) < 0.10, (p0, ref["p0"])
+    # the contact area (weights of the nodes in contact) is pi a^2 to within a cell
+    area = contact.mortar.weights[state.active].sum()
+    assert abs(np.sqrt(area / np.pi) - ref["a"]) < 0.04
+
+
+def test_solvers_agree_on_the_transformed_system(hertz):
+    contact, _ = hertz
+    qp = contact.problem()
+    a = solve_qp(qp, "active_set")
+    s = solve_qp(qp, "snes_vi")
+    assert np.max(np.abs(a.x - s.x)) <= 1e-8 * np.max(np.abs(a.x))
+    assert a.iterations <= 8 and not a.info["monotone_from"]
+
+
+def test_load_steps_start_from_the_last(hertz, tmp_path):
+    contact = hertz_problem(tmp_path / "h.msh", h=0.06)
+    holder = contact.elasticity._dirichlet[-1].value
+    forces = []
+    for push in (0.005, 0.01, 0.015):
+        holder.value[:] = [0.0, 0.0, -push]
+        forces.append(contact.solve().force[2])
+    assert np.all(np.diff(forces) > 0)
+    # the next step starts from the last solution: the same load again needs one solve
+    assert contact.solve().solution.iterations == 1
+
+
+def test_initial_interpenetration_is_pushed_out(tmp_path):
+    """The half-sphere starts 0.005 into the block, its face held in place: the bodies
+    separate to zero penetration and push on each other."""
+    contact = hertz_problem(tmp_path / "h.msh", h=0.06, push=0.0, shift=0.005)
+    assert np.nanmin(contact.mortar.gap) < -0.003
+    state = contact.solve()
+    covered = contact.mortar.covered
+    assert state.gap[covered].min() >= -1e-9 * 0.005
+    assert state.force[2] > 0 and state.solution.converged
+
+
+def test_bad_setups(tmp_path):
+    path = tmp_path / "h.msh"
+    hertz_mesh(path, h_contact=0.1, h_far=0.3)
+    solid = read_mesh(path, boundaries=hertz_boundaries())
+    s = Elasticity(solid, E=E, nu=NU)
+    s.add_dirichlet("block_bottom", 0.0)
+    s.add_dirichlet("load", [0.0, 0.0, -PUSH])
+    with pytest.raises(ValueError, match="unknown nonsmooth solver 'pdas'"):
+        Contact(s, "slave", "block_top", solver="pdas")
+    with pytest.raises(ContactSetupError, match="share nodes"):
+        Contact(s, "slave", "slave")
+    with pytest.raises(ContactSetupError, match="nothing can come into contact"):
+        Contact(s, "slave", "block_bottom", search_distance=0.1)
+    s.add_dirichlet("slave", 0.0)
+    with pytest.raises(ContactSetupError, match="slave contact nodes .* carry Dirichlet"):
+        Contact(s, "slave", "block_top", search_distance=0.1)
+
+
+@pytest.mark.slow
+def test_hertz_within_5_percent_at_h_0025(tmp_path):
+    contact = hertz_problem(tmp_path / "h.msh", h=0.025)
+    state = contact.solve()
+    ref = hertz_solution(state.force[2], R, E, NU)
+    a, p0 = elliptic_fit(contact, state)
+    assert abs(a / ref["a"] - 1) < 0.05 and abs(p0 / ref["p0"] - 1) < 0.05, (a / ref["a"], p0 / ref["p0"])
