@@ -57,6 +57,13 @@ class Hierarchy:
         """Unknowns per level, coarsest first (the last is the fine mesh)."""
         return [p.shape[1] for p in self.prolongations] + [self.prolongations[-1].shape[0]]
 
+    def in_basis(self, Q: sp.spmatrix) -> "Hierarchy":
+        """The hierarchy for fine unknowns ``y`` with ``x = Q y`` (Q orthogonal, e.g. the
+        rotation of contact nodes to normal/tangential coordinates, paper eq. 10): the
+        finest prolongation becomes ``Q^T P``."""
+        fine = sp.csr_matrix(Q.T @ self.prolongations[-1])
+        return Hierarchy(self.prolongations[:-1] + [fine], self.grids, self.kept, self.block_size, self.seconds)
+
     def galerkin(self, A: sp.spmatrix) -> list[sp.csr_matrix]:
         """Coarse operators ``A_{l} = P_l^T A_{l+1} P_l``, coarsest first, ending with A."""
         ops = [sp.csr_matrix(A)]

@@ -115,7 +115,7 @@ def asymptotic_rate(steps, last: int = 5) -> float:
     return float((s[-1] / s[0]) ** (1.0 / (len(s) - 1)))
 
 
-def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hierarchy: Hierarchy,
+def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hierarchy: Hierarchy | None = None,
                      tol: float = 1e-12, maxiter: int = 200, presmooth: int = 3, postsmooth: int = 3,
                      coarse_smooth: int = 3, callback=None) -> Solution:
     """Truncated nonsmooth multigrid (module docstring) on `hierarchy`, whose
@@ -125,6 +125,8 @@ def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hi
     ``Solution.history`` holds the step lengths; ``info`` the energies, the
     largest bound violation over all iterates, the asymptotic rate and the level sizes.
     """
+    if hierarchy is None:
+        raise ValueError("the multilevel solver needs hierarchy= (nonsmooth.hierarchy.semi_geometric_hierarchy)")
     if hierarchy.sizes[-1] != qp.size:
         raise ValueError(f"the hierarchy's fine level has {hierarchy.sizes[-1]} unknowns, the problem {qp.size}")
     start = time.perf_counter()

@@ -190,3 +190,30 @@ def test_iterations_grow_by_at_most_two_per_level():
 def test_five_levels_take_at_most_two_iterations_more_than_four():
     (n4, _), (n5, rate5) = _cube_iterations(4), _cube_iterations(5)
     assert n5 - n4 <= 2 and rate5 < 0.3, (n4, n5, rate5)
+
+
+def test_multilevel_in_a_rotated_basis_matches_the_active_set():
+    """The contact form (paper eq. 10): bottom nodes rotated to (t1, t2, n) of an inclined
+    plane, non-penetration a bound on the normal component; the hierarchy follows with
+    Q^T P. Both solvers see the same transformed problem."""
+    points, tets, qp = cube(8)
+    theta = 0.2
+    n = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    frame = np.array([[np.cos(theta), 0.0, np.sin(theta)], [0.0, 1.0, 0.0], n]).T  # columns t1, t2, n
+    bottom = np.flatnonzero(points[:, 2] == 0.0)
+    blocks = [np.eye(3)] * len(points)
+    for i in bottom:
+        blocks[i] = frame
+    Q = sp.block_diag(blocks, format="csr")
+    lower = np.full(qp.size, -np.inf)
+    fixed = qp.lower == qp.upper
+    lower[fixed] = qp.lower[fixed]
+    # the plane n . p = n . (size / 2, 0, 0) - 1e-4: the bottom at x < size / 2 comes into contact
+    lower[3 * bottom + 2] = n @ [SIZE / 2, 0.0, 0.0] - 1e-4 - points[bottom] @ n
+    qp_rot = BoundConstrainedQP(Q.T @ qp.A @ Q, Q.T @ qp.b, lower, np.where(fixed, qp.upper, np.inf), block_size=3)
+    H = hierarchy(points, tets, 3).in_basis(Q)
+    ml = solve(qp_rot, "multilevel", hierarchy=H)
+    ref = solve(qp_rot, "active_set", tol=1e-13)
+    assert ml.converged and 0 < np.count_nonzero(ml.active[3 * bottom + 2]) < len(bottom)
+    assert np.linalg.norm(ml.x - ref.x) < 1e-8 * np.linalg.norm(ref.x)
+    assert ml.iterations <= 20
