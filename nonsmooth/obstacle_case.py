@@ -4,7 +4,8 @@ solved on semi-geometric hierarchies; ``cases/cube_obstacle`` and ``cases/rock_o
 A case directory holds ``problem.toml`` (keys in :data:`KEYS`, documented in
 cases/README.md) and is run by its ``run.py``. Each entry of ``[hierarchy]
 levels`` is one run (with the matching entry of ``[body] cells``); the outputs
-are ``solution_L<levels>.vtu`` (displacement, contact, contact force),
+are ``solution_L<levels>.vtu`` (displacement, contact, contact force) with the
+hierarchy's grids beside it (``solution_L<levels>_grid<k>.vtu``),
 ``convergence.png`` (step length per iteration) and ``summary.json``.
 """
 
@@ -150,14 +151,23 @@ def solve_level(problem: dict, levels: int, cells, nthreads: int = 1) -> tuple[d
              "seconds": {**seconds, "solve": sol.seconds}}
     fields = {"points": points, "tets": tets, "displacement": u, "contact": contact.astype(np.uint8),
               "contact_force": force}
+    fields["grids"] = [(grid, kept) for grid, kept in zip(hierarchy.grids, hierarchy.kept)]
     return entry, fields
 
 
 def write_vtu(path: Path, fields: dict) -> None:
+    """The solution on the fine mesh, and each coarse grid of the hierarchy beside it
+    (``<stem>_grid<k>.vtu``, point data ``kept``: 0 where the basis function was dropped)."""
     import meshio
 
-    data = {k: v for k, v in fields.items() if k not in ("points", "tets")}
+    data = {k: v for k, v in fields.items() if k not in ("points", "tets", "grids")}
     meshio.Mesh(fields["points"], [("tetra", fields["tets"])], point_data=data).write(path)
+    for k, (grid, kept) in enumerate(fields.get("grids", [])):
+        mask = np.zeros(grid.num_points, np.uint8)
+        mask[kept] = 1
+        mesh = grid.to_meshio()
+        mesh.point_data["kept"] = mask
+        mesh.write(path.with_name(f"{path.stem}_grid{k}.vtu"))
 
 
 def plot_convergence(path: Path, runs: list[dict], title: str) -> None:

@@ -32,7 +32,9 @@ def test_cube_case_two_levels_writes_vtu_png_and_summary(tmp_path):
     case = copy_case("cube_obstacle", tmp_path)
     summary = run_case(case, only_levels=[2], log=lambda line: None)
     out = case / "results"
-    assert sorted(p.name for p in out.iterdir()) == ["convergence.png", "solution_L2.vtu", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["convergence.png", "solution_L2.vtu", "solution_L2_grid0.vtu",
+                                                     "summary.json"]
+    assert meshio.read(out / "solution_L2_grid0.vtu").point_data["kept"].sum() == 4**3
     assert json.loads((out / "summary.json").read_text()) == json.loads(json.dumps(summary))
     (run,) = summary["runs"]
     assert run["dofs"] == 3 * 7**3 and run["converged"] and run["final_step"] < 1e-12
