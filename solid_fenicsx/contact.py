@@ -103,10 +103,10 @@ class ContactState:
 
     def summary(self) -> dict:
         covered = np.isfinite(self.gap)
-        return {"active_nodes": int(self.active.sum()), "area_fraction": self.area_fraction,
+        return {**self.solution.as_dict(), "active_nodes": int(self.active.sum()), "area_fraction": self.area_fraction,
                 "max_pressure": float(np.max(self.pressure, initial=0.0)),
                 "min_gap": float(np.min(self.gap[covered], initial=np.inf)),
-                "contact_force": self.force.tolist(), "seconds": self.seconds, **self.solution.as_dict()}
+                "contact_force": self.force.tolist(), "phase_seconds": self.seconds}
 
 
 class Contact:
