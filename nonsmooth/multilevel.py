@@ -8,7 +8,8 @@ Krause) for ``min J(x) = 1/2 x^T A x - b^T x`` on ``lower <= x <= upper``:
 2. truncation: the components at a bound (the active set, which includes
    fixed components ``lower == upper``) are removed from the fine basis, and
    the coarse operators are the Galerkin products of the truncated fine matrix
-   through the projections of eq. 17 (rebuilt only when the active set changes);
+   through the projections of eq. 17 (updated from the untruncated product, only
+   when the active set changes);
 3. coarse correction: one linear V-cycle on the truncated problem (Gauss-Seidel
    on the coarse levels, a direct solve on the coarsest);
 4. the correction is projected onto the feasible set and scaled by an exact line
@@ -62,15 +63,47 @@ class _CoarseSolve:
         return v
 
 
+class _TruncatedGalerkin:
+    """``(D P)^T A (D P)`` for the truncation ``D = diag(free)`` of the finest prolongation P.
+
+    ``P^T A P`` and ``A P`` are formed once; with ``S`` the rows of P at the truncated
+    components, ``(P - S)^T A (P - S) = P^T A P - S^T A P - (S^T A P)^T + S^T A S`` costs
+    only as much as the truncated rows. Coarse functions left without support
+    (diagonal below :data:`SUPPORT_RTOL` of the untruncated one) are removed outright."""
+
+    def __init__(self, A: sp.csr_matrix, P: sp.csr_matrix):
+        self.A, self.P = A, P
+        self.AP = (A @ P).tocsr()
+        self.G = (P.T.tocsr() @ self.AP).tocsr()
+        self.diagonal = self.G.diagonal()
+
+    def __call__(self, free: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """(truncated prolongation D P, its Galerkin operator)."""
+        cut = np.flatnonzero(~free)
+        S = self.P[cut]
+        M = (S.T.tocsr() @ self.AP[cut]).tocsr()
+        Ac = self.G - M - M.T + S.T.tocsr() @ (self.A[cut][:, cut] @ S)
+        supported = (Ac.diagonal() > SUPPORT_RTOL * self.diagonal).astype(float)
+        Z = sp.diags(supported)
+        Ac = (Z @ Ac @ Z).tocsr()
+        Ac.eliminate_zeros()
+        return (sp.diags(free.astype(float)) @ self.P @ Z).tocsr(), Ac
+
+
+#: a coarse basis function whose truncated energy is below this fraction of its
+#: untruncated energy has lost its support on the free components
+SUPPORT_RTOL = 1e-10
+
+
 class _TruncatedCycle:
     """The linear V-cycle on the coarse levels of the truncated problem."""
 
-    def __init__(self, A: sp.csr_matrix, hierarchy: Hierarchy, free: np.ndarray, smoothing: int):
-        P_fine = sp.diags(free.astype(float)) @ hierarchy.prolongations[-1]
-        self.prolongations = hierarchy.prolongations[:-1] + [P_fine.tocsr()]
-        ops = [(P_fine.T @ A @ P_fine).tocsr()]
+    def __init__(self, galerkin: _TruncatedGalerkin, hierarchy: Hierarchy, free: np.ndarray, smoothing: int):
+        P_fine, A_coarse = galerkin(free)
+        self.prolongations = hierarchy.prolongations[:-1] + [P_fine]
+        ops = [A_coarse]
         for P in reversed(hierarchy.prolongations[:-1]):
-            ops.append((P.T @ ops[-1] @ P).tocsr())
+            ops.append((P.T.tocsr() @ ops[-1] @ P).tocsr())
         self.ops = [csr_int32(op) for op in ops[::-1]]  # coarsest first
         self.coarse = _CoarseSolve(self.ops[0])
         self.inf = [np.full(op.shape[0], np.inf) for op in self.ops]
@@ -133,6 +166,7 @@ def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hi
     A = csr_int32(qp.A)
     x = qp.project(np.zeros(qp.size) if x0 is None else np.asarray(x0, dtype=float))
     steps, energies, violation = [], [qp.energy(x)], 0.0
+    galerkin = _TruncatedGalerkin(A, hierarchy.prolongations[-1])
     cycle, free_prev, rebuilds = None, None, 0
     converged = False
     for k in range(1, maxiter + 1):
@@ -140,7 +174,7 @@ def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hi
         projected_gauss_seidel(A, qp.b, qp.lower, qp.upper, x, presmooth, "forward")
         free = (x > qp.lower) & (x < qp.upper)
         if cycle is None or not np.array_equal(free, free_prev):
-            cycle, free_prev = _TruncatedCycle(A, hierarchy, free, coarse_smooth), free
+            cycle, free_prev = _TruncatedCycle(galerkin, hierarchy, free, coarse_smooth), free
             rebuilds += 1
         r = qp.b - A @ x
         v = cycle.correction(np.where(free, r, 0.0))
