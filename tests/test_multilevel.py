@@ -217,3 +217,20 @@ def test_multilevel_in_a_rotated_basis_matches_the_active_set():
     assert ml.converged and 0 < np.count_nonzero(ml.active[3 * bottom + 2]) < len(bottom)
     assert np.linalg.norm(ml.x - ref.x) < 1e-8 * np.linalg.norm(ref.x)
     assert ml.iterations <= 20
+
+
+def test_truncated_galerkin_update_equals_the_direct_product():
+    from nonsmooth.multilevel import _TruncatedGalerkin
+
+    points, tets, qp = cube(5)
+    P = hierarchy(points, tets, 2).prolongations[-1]
+    A = sp.csr_matrix(qp.A)
+    free = np.random.default_rng(1).random(qp.size) > 0.3
+    free[np.repeat(points[:, 0] < 0.5 * SIZE, 3)] = False  # coarse nodes at x < 0 lose all support
+    DP, Ac = _TruncatedGalerkin(A, P)(free)
+    direct = (sp.diags(free.astype(float)) @ P).T @ A @ (sp.diags(free.astype(float)) @ P)
+    supported = Ac.diagonal() > 0
+    assert 0 < np.count_nonzero(~supported) and np.abs(direct.diagonal()[~supported]).max() < 1e-6 * direct.diagonal().max()
+    keep = sp.diags(supported.astype(float))
+    assert abs(Ac - keep @ direct @ keep).max() < 1e-12 * abs(direct).max()
+    assert abs(DP - sp.diags(free.astype(float)) @ P @ keep).max() == 0
