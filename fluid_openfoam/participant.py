@@ -33,9 +33,11 @@ Inputs of ``advance``: ``solid_fraction`` (n_cells,) in [0, 1] (clipped), and
 ``"solid_velocity": "bodies"`` (default) every solid body (connected solid-centred cells)
 moves rigidly with the fraction-weighted mean velocity of its wetted cell layer, through a
 ``vectorSemiImplicitSource`` on top of the penalization (:mod:`fluid_openfoam.zones`:
-what this represents and what not); ``"none"`` penalizes the solid towards rest. A zero
-velocity (quasi-static solids) adds nothing. A fixed-velocity inlet (xmin) is masked: each face gets ``u_in (1 - f)`` with f the
-solid fraction of the cell behind it. Outputs: ``pressure`` (n_cells,) in Pa
+what this represents and what not), except across a closed grid face the body touches (the
+component normal to it is dropped, with a warning: open the face with a fixed pressure to let
+the body move through it); ``"none"`` penalizes the solid towards rest. A zero velocity
+(quasi-static solids) adds nothing. A fixed-velocity inlet (xmin) is masked: each face gets
+``u_in (1 - f)`` with f the solid fraction of the cell behind it. Outputs: ``pressure`` (n_cells,) in Pa
 (OpenFOAM's kinematic p times rho) and ``velocity`` (n_cells, 3) in m/s, at cell
 centres, x fastest.
 

@@ -81,6 +81,7 @@ class OpenFOAMSolver:
         self.last_run: dict = {}
         self.parallel: Decomposition | None = None  # ranks > 1: the processor directories
         self.sources: list = []
+        self.warned_faces: set[str] = set()
 
     # -------------------------------------------------------------- running binaries
     def run(self, app: str, *args: str, log_name: str | None = None) -> float:
@@ -159,8 +160,18 @@ class OpenFOAMSolver:
             vel = np.asarray(velocity, dtype=np.float64).reshape(self.n, 3)
             if not np.all(np.isfinite(vel)):
                 raise ValueError(f"solid_velocity holds NaN/inf at cell {int(np.argmin(np.isfinite(vel).all(1)))}")
+            closed = [f for f, c in self.spec.faces.items() if c["kind"] != "pressure"]
             self.sources = body_sources(np.clip(fraction, 0.0, 1.0), vel, self.spec.grid.shape,
-                                        self.spec.drag_value())
+                                        self.spec.drag_value(), closed)
+            for src in self.sources:
+                for face, value in src.dropped.items():
+                    if face not in self.warned_faces:
+                        self.warned_faces.add(face)
+                        hint = "[flow] inlet_pressure" if face == "xmin" else f"[flow] faces = {{ {face} = " \
+                                                                               f"{{ pressure = p }} }}"
+                        log.warning("a solid body touches the closed grid face %s: its velocity normal to it "
+                                    "(%.3g m/s) is dropped; make the face open (%s) to let the body move "
+                                    "through it", face, value, hint)
         sets = self.case / "constant" / "polyMesh" / "sets"
         for src in self.sources:
             write_cell_set(sets / src.name, src.name, src.cells)
@@ -215,7 +226,8 @@ class OpenFOAMSolver:
             m = re.search(r"SIMPLE solution converged in (\S+) iterations", text)
             iters = int(round(float(end) - t0))  # the log names the converged *time*, not a count
         self.last_run = {"wall": wall, "iterations": iters, "converged": bool(m), "start": self.start, "end": end,
-                         "velocity_sources": [src.velocity.tolist() for src in self.sources]}
+                         "velocity_sources": [src.velocity.tolist() for src in self.sources],
+                         "dropped": [src.dropped for src in self.sources if src.dropped]}
         if not m:
             log.warning("%s: not converged to %g within %d %s (%s -> %s)", self.application, self.spec.tolerance,
                         self.spec.outer_correctors if self.spec.transient else budget,

@@ -49,6 +49,25 @@ def test_one_source_per_body_with_the_mean_velocity_of_its_wetted_layer():
     assert body_sources(f.ravel(), np.zeros((f.size, 3)), (nx, ny, nz), 10.0) == []
 
 
+def test_a_body_slides_along_a_closed_grid_face_and_moves_through_an_open_one():
+    """A body on the grid's zmin face moving up and sideways: through a closed face (wall, slip,
+    symmetry, inlet) incompressibility forbids the normal motion, so only the tangential part
+    is imposed, and the dropped part reported; through an open (pressure) face it moves."""
+    nx, ny, nz = 4, 3, 5
+    f = np.zeros((nz, ny, nx))
+    f[:2] = 1.0
+    v = np.zeros((nz, ny, nx, 3))
+    v[:2] = [0.5, 0.0, 2.0]
+    (src,) = body_sources(f.ravel(), v.reshape(-1, 3), (nx, ny, nz), 1.0, closed=["zmin", "zmax"])
+    assert src.velocity == pytest.approx([0.5, 0.0, 0.0]) and src.dropped == {"zmin": 2.0}
+    assert src.su == pytest.approx([0.5, 0.0, 0.0])
+    (src,) = body_sources(f.ravel(), v.reshape(-1, 3), (nx, ny, nz), 1.0, closed=["zmax", "ymin", "ymax"])
+    assert src.velocity == pytest.approx([0.5, 0.0, 2.0]) and src.dropped == {}
+    # closed on every side it touches: held at rest (a zero source), the drop reported
+    (src,) = body_sources(f.ravel(), v.reshape(-1, 3), (nx, ny, nz), 1.0, closed=["xmin", "zmin"])
+    assert not src.su.any() and src.dropped == {"xmin": 0.5, "zmin": 2.0}
+
+
 def test_transient_keys_are_checked():
     grid = {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [2, 2, 2]}
     with pytest.raises(ValueError, match="solid_velocity must be 'bodies' or 'none'"):
