@@ -234,3 +234,13 @@ def test_truncated_galerkin_update_equals_the_direct_product():
     keep = sp.diags(supported.astype(float))
     assert abs(Ac - keep @ direct @ keep).max() < 1e-12 * abs(direct).max()
     assert abs(DP - sp.diags(free.astype(float)) @ P @ keep).max() == 0
+
+
+def test_upper_bounds_mirror_lower_bounds():
+    """x -> -x turns the obstacle's lower bounds into upper ones (the contact form x_n <= gap)."""
+    points, tets, qp = cube(6, tilt=0.1)
+    mirrored = BoundConstrainedQP(qp.A, -qp.b, -qp.upper, -qp.lower, block_size=3)
+    H = hierarchy(points, tets, 2)
+    a, b = solve(qp, "multilevel", hierarchy=H), solve(mirrored, "multilevel", hierarchy=H)
+    assert a.converged and b.converged and a.iterations == b.iterations
+    np.testing.assert_allclose(b.x, -a.x, rtol=0, atol=1e-12 * np.abs(a.x).max())
