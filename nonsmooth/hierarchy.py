@@ -4,7 +4,8 @@ A fine tet mesh that cannot be coarsened is covered by simple structured grids:
 the coarsest encloses the mesh's bounding box (optionally with a margin), each
 finer grid halves its spacing. Consecutive levels are linked by the pseudo-L2
 projection of :mod:`transfer` from the coarser Q1 space onto the finer space
-(eq. 17 with the dual basis of eq. 4, so the projection is a sparse matrix).
+(eq. 17 with the dual basis of eq. 4, so the projection is a sparse matrix; with
+the full mass matrix of the L2 method it would be dense).
 Coarse basis functions whose support misses the fine mesh (the whole chain of
 projections gives them zero weight) are dropped, so the coarse spaces are the
 images of the projections restricted to what the fine mesh sees.
