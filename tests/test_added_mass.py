@@ -18,6 +18,10 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
+from coupler.coupled_run import participant_config
+from coupler.errors import SceneError
+from coupler.plan import make_plan
+from coupler.scene import load
 from vc_helpers import copy_case
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
@@ -31,6 +35,25 @@ def run(case, tmp_path, replace=None, capsys=None):
     out = tmp_path / "out"
     code = main(["run", str(copy), "--output", str(out)])
     return code, json.loads((out / "summary.json").read_text())
+
+
+def test_scene_keys_of_a_transient_fluid(tmp_path):
+    """Open faces ({ pressure = p }), substeps, outer_correctors, solid_velocity: read, passed
+    to the fluid, and bad values named by file, table and key."""
+    scene = load(CASES / "added_mass_heavy")
+    assert scene.flow["faces"]["zmin"] == {"pressure": 1.0e4}
+    config = participant_config(scene, "fluid")
+    assert config["transient"] and config["dt"] == 5.0e-5 and config["substeps"] == 1
+    assert config["outer_correctors"] == 50 and config["solid_velocity"] == "bodies"
+    assert config["boundaries"]["zmin"] == {"pressure": 1.0e4}
+    assert participant_config(scene, "solid")["fluid_density"] == 0.0  # the rock keeps rho_s
+    assert "pimpleFoam" in make_plan(scene).iteration
+    for old, new, match in (("zmin = { pressure = 1.0e4 }", 'zmin = { pressure = "high" }', r"\[flow.faces\] zmin"),
+                            ("substeps = 1", "substeps = 0", r"\[solvers.fluid\] substeps: must be an integer >= 1"),
+                            ("substeps = 1", 'solid_velocity = "cells"', r"\[solvers.fluid\] solid_velocity")):
+        bad = copy_case(CASES / "added_mass_heavy", tmp_path / new.split()[0], {old: new})
+        with pytest.raises(SceneError, match=match):
+            load(bad)
 
 
 def iterations(summary) -> list[int]:
