@@ -6,8 +6,10 @@ drives ``U`` to zero). What it has is ``vectorSemiImplicitSource``: a source ``S
 uniform over a cell set. With ``Su = D_max U_s`` and ``Sp = 0`` on cells the penalization
 already holds with ``-D_max U`` (implicit), the momentum balance there becomes
 ``D_max (U_s - U) = grad p - ...`` and ``U -> U_s`` up to ``1 / D_max`` (about 1e-4 of
-the other rates). ``Sp < 0`` is not needed (and diverged in v1912 when tried as the
-whole penalization; not used).
+the other rates). ``Sp < 0`` is not needed, and does not work in v1912: tried as the whole
+penalization (``U ((D_max U_s) -D_max)`` with no porosity, D_max = 1e6 1/s, on the 1D piston
+of tests/test_fluid_transient.py) pimpleFoam ran 50 unconverged PIMPLE iterations and
+returned U ~ 1e4 m/s and p ~ 1e11 Pa after one step, against U = 0.1 m/s, p ~ 800 Pa.
 
 A body is a connected set (face neighbours) of solid-centred cells (fraction >= 1/2, the
 cells the penalization stops: :mod:`fluid_openfoam.penalization`). Its velocity ``U_s`` is
