@@ -91,6 +91,8 @@ def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, to
     if np.any(diag <= 0):
         raise NonsmoothSolveError(f"A has {int(np.sum(diag <= 0))} non-positive diagonal entries: not SPD")
     dinv = 1.0 / diag
+    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(A.data))):
+        raise NonsmoothSolveError("the problem contains NaN or inf")
     finite = np.concatenate([qp.lower[np.isfinite(qp.lower)], qp.upper[np.isfinite(qp.upper)]])
     x = qp.project(np.zeros(n) if x0 is None else np.asarray(x0, float).copy())
     bound = np.where(qp.lower == qp.upper, qp.lower, 0.0)

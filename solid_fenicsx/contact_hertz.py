@@ -1,0 +1,72 @@
+"""The Hertz contact problem (paper 4.1, figure 5) with :class:`Contact`: a half-sphere
+pushed onto a block (:func:`solid_fenicsx.contact_meshes.hertz_mesh`), compared with
+Hertz theory for the measured contact force. Used by cases/hertz/hertz_study.py and
+bench/contact.py."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .contact import Contact
+from .contact_meshes import hertz_boundaries, hertz_mesh, hertz_solution
+from .elasticity import Elasticity
+from .mesh import read_mesh
+
+#: the case's parameters (cases/hertz/scene.toml)
+RADIUS, E, NU, PUSH = 1.0, 1.0e9, 0.3, 0.02
+
+
+def hertz_contact(directory, h: float, solver: str = "active_set", push: float = PUSH, **options) -> Contact:
+    """The Contact of the Hertz case with contact cells of size h (mesh written to `directory`)."""
+    path = Path(directory) / f"hertz_h{h:g}.msh"
+    hertz_mesh(path, radius=RADIUS, h_contact=h, h_far=0.3, refine_radius=0.25)
+    s = Elasticity(read_mesh(path, boundaries=hertz_boundaries(RADIUS)), E=E, nu=NU)
+    s.add_dirichlet("block_bottom", 0.0)
+    s.add_dirichlet("load", [0.0, 0.0, -push])
+    return Contact(s, "slave", "block_top", solver=solver, search_distance=0.1, **options)
+
+
+def compare(contact: Contact, state) -> dict:
+    """Hertz figures: contact radius a and peak pressure p0 from the elliptic fit
+    p^2 = p0^2 (1 - r^2/a^2) of the nodal pressures above 20 % of the peak, the
+    largest nodal pressure, the contact radius from the area in contact, and the
+    weighted L2 error of the pressure profile, all against Hertz for the measured force."""
+    m = contact.mortar
+    r = np.hypot(m.slave.points[:, 0], m.slave.points[:, 1])
+    p = state.pressure
+    force = float(state.force[2])
+    ref = hertz_solution(force, RADIUS, E, NU)
+    sel = p > 0.2 * p.max()
+    slope, intercept = np.polyfit(r[sel] ** 2, p[sel] ** 2, 1)
+    a_fit, p0_fit = float(np.sqrt(-intercept / slope)), float(np.sqrt(intercept))
+    a_area = float(np.sqrt(m.weights[state.active].sum() / np.pi))
+    exact = ref["p0"] * np.sqrt(np.clip(1 - (r / ref["a"]) ** 2, 0, None))
+    w = m.weights
+    profile = float(np.sqrt(np.sum(w * (p - exact) ** 2) / np.sum(w * exact ** 2)))
+    return {"force": force, "a_hertz": ref["a"], "p0_hertz": ref["p0"], "a_fit": a_fit, "p0_fit": p0_fit,
+            "p_max": float(p.max()), "a_area": a_area,
+            "error_a": abs(a_fit / ref["a"] - 1), "error_p0": abs(p0_fit / ref["p0"] - 1),
+            "error_p_max": abs(p.max() / ref["p0"] - 1), "error_a_area": abs(a_area / ref["a"] - 1),
+            "error_profile": profile}
+
+
+def run(directory, h: float, solver: str = "active_set", steps: int = 1, **options) -> dict:
+    """Solve the Hertz case in `steps` load steps; the comparison, sizes and solver figures."""
+    t0 = time.perf_counter()
+    contact = hertz_contact(directory, h, solver, **options)
+    setup = time.perf_counter() - t0
+    holder = contact.elasticity._dirichlet[-1].value
+    per_step = []
+    for k in range(1, steps + 1):
+        holder.value[:] = [0.0, 0.0, -PUSH * k / steps]
+        state = contact.solve()
+        per_step.append({"iterations": state.solution.iterations, "krylov_iterations": state.solution.krylov_iterations,
+                         "seconds": state.seconds["solve"] + state.seconds["assemble"]})
+    out = {"h": h, "dofs": contact.num_dofs, "slave_nodes": len(contact.mortar.slave.nodes),
+           "master_nodes": len(contact.mortar.master.nodes), "active_nodes": int(state.active.sum()),
+           "setup_seconds": setup, "steps": per_step, **compare(contact, state)}
+    out["reaction_balance"] = float(abs(contact.reaction("load")[2] + state.force[2]) / abs(state.force[2]))
+    return out, contact, state
