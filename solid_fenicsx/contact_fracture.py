@@ -116,19 +116,23 @@ class ClosureTest:
         on the platen displacement, from the current one, safeguarded in a bracket); returns
         (state, figures)."""
         first = len(self.solves)
-        d0, s0 = (self.solves[-1]["displacement"], self.solves[-1]["stress"]) if self.solves else (0.0, 0.0)
-        # bracket the platen displacement: from the current one (stress below the target),
-        # steps of the elastic column of twice the block height (plus the smallest gap) doubling
-        lo, s_lo = d0, s0
+        if not self.solves:  # the unloaded state (faces crossing at the start already push)
+            self._solve(0.0)
+        d0, s0 = self.solves[-1]["displacement"], self.solves[-1]["stress"]
+        # bracket the platen displacement: steps of the elastic column of twice the block
+        # height (plus the smallest gap), doubling, towards the target
         step = (stress - s0) * 2 * self.spec.height / self.spec.E + (self.min_gap if s0 <= 0 else 0.0)
-        d = lo + step
-        state, s1 = self._solve(d)
-        while s1 < stress * (1 - rtol):
-            lo, s_lo, step = d, s1, 2 * step
-            d = lo + step
-            self._check_budget(first, max_solves, stress, s1)
+        lo, s_lo, hi, s_hi = (d0, s0, None, None) if s0 < stress else (None, None, d0, s0)
+        state, s1 = None, s0
+        while lo is None or hi is None:
+            self._check_budget(first, max_solves, stress, s0)
+            d = (lo if hi is None else hi) + step
             state, s1 = self._solve(d)
-        hi, s_hi = d, s1
+            if s1 < stress:
+                lo, s_lo = d, s1
+            else:
+                hi, s_hi = d, s1
+            step *= 2
         # then regula falsi in the bracket (the stress grows monotonically with the displacement)
         while abs(s1 - stress) > rtol * stress:
             self._check_budget(first, max_solves, stress, s1)
