@@ -2,8 +2,8 @@
 width through a gap between two solid blocks that do not align with the grid, against the
 cubic law Q = w^3 dp / (12 mu L).
 
-Measured (cases/parallel_plates/results/summary.json, offsets 0, 0.25, 0.3, 0.5, 0.75 of a
-cell), error of Q:
+Measured (``varcouple run cases/parallel_plates`` with ``[study] methods = ["binary", "linear",
+"wall"]`` and ``offsets = [0.0, 0.25, 0.3, 0.5, 0.75]`` of a cell), error of Q:
 
     cells across        4        8        16       32
     binary mask      +87.5%   +40.6%   +19.5%   +9.6%   (any offset: the aperture grows by ~1 cell)
