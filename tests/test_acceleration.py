@@ -247,3 +247,40 @@ def test_factory_and_bad_parameters():
     acc.update(np.zeros(3), np.ones(3))
     with pytest.raises(ValueError, match="size"):
         acc.update(np.zeros(4), np.ones(4))
+
+
+# ------------------------------------------------------------------- a limited number of columns
+
+
+def test_column_limit_keeps_the_newest_secants():
+    """``max_columns`` (scene: ``[coupling] columns``): at most that many secant pairs, the
+    newest first, so that secants made far from the solution of a nonlinear map are forgotten."""
+    A, b, _ = linear_problem(12, 0.3, 0.95)
+    acc = IQNILS(omega0=0.5, max_columns=3, filter="none")
+    x, r_prev, Hx_prev = np.zeros(12), None, None
+    for k in range(6):
+        Hx = A @ x + b
+        r = Hx - x
+        x_next = acc.update(x, Hx)
+        assert acc.columns == min(k, 3)
+        if r_prev is not None:
+            np.testing.assert_allclose(acc.V[:, 0], r - r_prev, rtol=1e-14)
+            np.testing.assert_allclose(acc.W[:, 0], Hx - Hx_prev, rtol=1e-14)
+        r_prev, Hx_prev, x = r, Hx, x_next
+    limited, x_limited = iterations(A, b, IQNILS(omega0=0.5, max_columns=3, filter_eps=1e-8))
+    full, _ = iterations(A, b, IQNILS(omega0=0.5, filter_eps=1e-8))
+    assert np.allclose(x_limited, np.linalg.solve(np.eye(12) - A, b), atol=1e-8)
+    assert full <= 15 < 30 < limited, (full, limited)  # a linear map wants every column (measured 15 and 60)
+
+
+def test_scene_columns_reach_the_accelerator(tmp_path):
+    from coupler.errors import SceneError
+    from coupler.scene import load
+    from test_scene_plan import FLUID, scene_text, write
+
+    scene = load(write(tmp_path, scene_text('["elasticity", "flow"]', FLUID + "columns = 3\n")))
+    assert scene.coupling["columns"] == 3
+    assert make_accelerator("iqn-ils", max_columns=scene.coupling["columns"]).max_columns == 3
+    assert load(write(tmp_path, scene_text('["elasticity", "flow"]', FLUID))).coupling["columns"] == 100
+    with pytest.raises(SceneError, match=r"\[coupling\] columns: must be an integer >= 1"):
+        load(write(tmp_path, scene_text('["elasticity", "flow"]', FLUID + "columns = 0\n")))
