@@ -20,9 +20,11 @@ RADIUS, E, NU, PUSH = 1.0, 1.0e9, 0.3, 0.02
 
 
 def hertz_contact(directory, h: float, solver: str = "active_set", push: float = PUSH, **options) -> Contact:
-    """The Contact of the Hertz case with contact cells of size h (mesh written to `directory`)."""
+    """The Contact of the Hertz case with contact cells of size h (mesh written to
+    `directory` unless there already)."""
     path = Path(directory) / f"hertz_h{h:g}.msh"
-    hertz_mesh(path, radius=RADIUS, h_contact=h, h_far=0.3, refine_radius=0.25)
+    if not path.exists():
+        hertz_mesh(path, radius=RADIUS, h_contact=h, h_far=0.3, refine_radius=0.25)
     s = Elasticity(read_mesh(path, boundaries=hertz_boundaries(RADIUS)), E=E, nu=NU)
     s.add_dirichlet("block_bottom", 0.0)
     s.add_dirichlet("load", [0.0, 0.0, -push])

@@ -79,7 +79,7 @@ def hertz_mesh(path, radius: float = 1.0, half_width: float = 1.0, depth: float 
         gmsh.model.mesh.field.setAsBackgroundMesh(size)
         for key in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature"):
             gmsh.option.setNumber(key, 0)
-        gmsh.option.setNumber("Mesh.Algorithm3D", 10)  # HXT
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay (HXT gave different meshes run to run)
         gmsh.model.mesh.generate(3)
         gmsh.option.setNumber("Mesh.Binary", 1)
         Path(path).parent.mkdir(parents=True, exist_ok=True)

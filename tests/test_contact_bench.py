@@ -1,0 +1,36 @@
+"""Smoke run of the contact benchmark (bench/contact.py --quick): both problems, both
+solvers, every figure in the JSON, the solvers agreeing on the same problems."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("gmsh")
+
+BENCH = Path(__file__).resolve().parent.parent / "bench" / "contact.py"
+
+
+def test_quick_run_writes_every_figure(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("bench_contact", BENCH)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    out = tmp_path / "c.json"
+    bench.main(["--quick", "-o", str(out)])
+    printed = capsys.readouterr().out
+    assert "PASS" in printed or "MISS" in printed
+    data = json.loads(out.read_text())
+    assert {"meta", "args", "hertz", "fracture", "goals"} <= set(data)
+    assert "load_average_before" in data["meta"] and "load_average_after" in data["meta"]
+    for problem in ("hertz", "fracture"):
+        levels = data[problem]
+        assert len(levels) == 2 and levels[0]["dofs"] < levels[1]["dofs"]
+        for level in levels:
+            assert level["solver_difference"] < 1e-8  # the same problem, solved twice
+            for solver in ("active_set", "snes_vi"):
+                figures = level[solver]
+                assert len(figures["iterations"]) == len(figures["steps"]) == 2
+                assert figures["wall_seconds"] > 0 and figures["krylov_iterations"] > 0
+        for goal in ("active_set_iterations_do_not_grow", "time_2x_below_snes_vi_at_finest"):
+            assert data["goals"][problem][goal]["status"] in ("PASS", "MISS")
