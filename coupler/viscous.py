@@ -161,7 +161,11 @@ class FluidTraction:
         wall = np.zeros_like(n) if wall_velocity is None else np.asarray(wall_velocity, float)
         samples = []
         for surface in (near, *on_grid.deeper):
+            if surface is None:  # a deeper surface entirely outside the grid (a thin channel): no sample
+                samples.append((np.full_like(n, np.nan), np.full(len(n), np.nan), np.zeros(len(n), bool)))
+                continue
             distance = np.sum((surface.from_fluid(centres) - surface.points) * n, axis=1)
+            # a vertex outside the grid (partial surface) reads NaN: not valid
             samples.append((surface.from_fluid(velocity) - wall, distance,
                             np.abs(surface.from_fluid(fluid) - 1.0) < 1e-9))
         # the samples' intended spacing along the normal (DEPTHS in units of the pressure surface's offset)

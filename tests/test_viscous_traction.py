@@ -152,6 +152,24 @@ def test_wall_shear_fallbacks_when_samples_reach_solid_cells():
     assert fits["unresolved"] == nv and np.all(np.isfinite(shear))
 
 
+def test_a_thin_channel_drops_the_samples_beyond_the_grid():
+    """A block's top at z = 0.37 under a grid ending at 0.6 (cells of 0.1): the deepest sample
+    (0.29 above the wall) leaves the grid, so every vertex takes the quadratic through the wall
+    and two samples, exact for the linear (Couette) profile u_x = 2 (z - 0.37)."""
+    G = StructuredGrid.from_bounds((0, 0, 0), (1, 1, 0.6), (10, 10, 6))
+    m = box_tetrahedra((4, 4, 2), (0.0, 0.0, 0.0), (1.0, 1.0, 0.37))
+    S = Mesh(m.points, m.cells, "tetra")
+    on_grid = SolidOnGrid(S, G, face_triangles(S, 2, 0.37, +1), "test", deform=False, traction="full")
+    assert on_grid.deeper[0] is not None and on_grid.deeper[1] is None
+    c = G.cell_centers()
+    u = np.zeros((len(c), 3))
+    u[:, 0] = np.where(on_grid.fraction < 0.5, 2 * (c[:, 2] - 0.37), 0.0)
+    traction = FluidTraction(0.5)
+    t_v = traction.parts(on_grid, np.zeros(len(c)), u)[1]
+    assert traction.fits["wall and two samples"] == on_grid.interface.size
+    np.testing.assert_allclose(t_v, np.tile([1.0, 0.0, 0.0], (len(t_v), 1)), atol=1e-12)
+
+
 # ---------------------------------------------------------------- OpenFOAM's immersed plates
 @needs_foam
 def test_openfoam_plates_wall_shear_and_force_balance(tmp_path):
