@@ -117,16 +117,22 @@ def main(argv=None) -> dict:
         parser.error(f"levels {unknown} are not in {CASE.name}/problem.toml (has {sorted(cells)})")
     load_start = list(os.getloadavg())
     print(f"cube obstacle, {os.cpu_count()} CPUs, load average {load_start}")
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
     rows = []
     for lv in levels:
         rows.append(run_level(problem, lv, cells[lv], not args.no_baselines, args.threads))
         print(_table(rows)[-1] if len(rows) > 1 else "\n".join(_table(rows)), flush=True)
-    goals = _goals(rows)
-    for name, g in goals.items():
+        result = _write(out, rows, args, levels, load_start, complete=len(rows) == len(levels))
+    for name, g in result["goals"].items():
         print(f"{name:<28} {'PASS' if g['pass'] else 'MISS'}  measured {g.get('measured', g.get('seconds'))}  "
               f"goal {g['goal']}")
-    out = Path(args.output)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    print(f"wrote {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out} and {result['figure']}")
+    return result
+
+
+def _write(out: Path, rows, args, levels, load_start, complete: bool) -> dict:
+    """JSON and PNG of the levels done so far (rewritten after each, so a long run leaves its figures)."""
     png = out.with_suffix(".png")
     plot_convergence(png, [{"levels": r["levels"], "dofs": r["dofs"], "step_history": r["multilevel"]["step_history"]}
                            for r in rows], "cube obstacle: truncated nonsmooth multigrid")
@@ -136,13 +142,12 @@ def main(argv=None) -> dict:
                  "load_average_at_start": load_start, "load_average_at_end": list(os.getloadavg()),
                  "shared_machine_note": "other engineers load the machine; single runs, not over-interpreted"},
         "args": {"levels": levels, "quick": args.quick, "baselines": not args.no_baselines, "threads": args.threads},
-        "case": "cases/cube_obstacle/problem.toml", "criterion": "step length ||x_k+1 - x_k||_2 < 1e-12",
-        "paper": PAPER, "goals": goals, "rows": rows, "figure": png.name,
+        "complete": complete, "case": "cases/cube_obstacle/problem.toml",
+        "criterion": "step length ||x_k+1 - x_k||_2 < 1e-12", "paper": PAPER, "goals": _goals(rows), "rows": rows,
+        "figure": png.name,
     }
     out.write_text(json.dumps(result, indent=1))
-    print(f"wrote {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out} and {png.name}")
     return result
-
 
 if __name__ == "__main__":
     main()
