@@ -34,7 +34,8 @@ _PROCESSOR_VECTOR = b'\n    "procBoundary.*" { type processor; value uniform (0 
 
 def simple_split(ranks: int, shape) -> tuple[int, int, int]:
     """Blocks per axis (nx, ny, nz), nx ny nz = ranks, with the fewest faces between blocks
-    (sum over axes of (n_d - 1) times the grid's cross-section normal to d); ties go to x.
+    (sum over axes of (n_d - 1) times the grid's cross-section normal to d); on a tie the
+    split along the later axis (z before y before x).
     Raises ValueError when an axis would get fewer cells than blocks."""
     shape = [int(s) for s in shape]
     best = None

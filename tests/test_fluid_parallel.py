@@ -41,14 +41,14 @@ def test_bad_ranks_or_method_are_rejected():
         CaseSpec.from_config({"grid": grid, "ranks": 0})
 
 
-def channel(ranks: int) -> CaseSpec:
+def channel(ranks: int, **extra) -> CaseSpec:
     """A 3D duct (16 x 8 x 4 cells of 1 mm) with a velocity inlet and an immersed step (a
     solid layer with a sub-cell wall): inlet masking, penalization and the pressure solve
     all cross the processor boundary."""
     return CaseSpec.from_config({"grid": {"origin": [0, 0, 0], "spacing": [1e-3] * 3, "shape": [16, 8, 4]},
                                  "inlet": {"velocity": [0.01, 0, 0]}, "mu": 1e-3, "rho": 1000.0,
                                  "tolerance": 1e-10, "max_iterations": 3000,
-                                 "ranks": ranks})
+                                 "ranks": ranks, **extra})
 
 
 def step_fraction(spec: CaseSpec, height: float) -> np.ndarray:
@@ -129,9 +129,12 @@ def test_coupled_small_fracture_with_two_fluid_ranks(tmp_path, capsys):
 @needs_mpi_foam
 def test_two_ranks_with_a_moving_body(tmp_path):
     """A solid body moving at a uniform velocity (one velocity source on its cellSet,
-    fluid_openfoam/zones.py): each processor gets its part of the set; the fields match."""
-    serial = OpenFOAMSolver(tmp_path / "serial", channel(1))
-    parallel = OpenFOAMSolver(tmp_path / "parallel", channel(2))
+    fluid_openfoam/zones.py): each processor gets its part of the set; the fields match. The body
+    spans z from face to face and moves in z, so those faces are open (fixed pressure): through
+    closed ones the participant drops the normal velocity (incompressibility)."""
+    open_z = {"boundaries": {"zmin": {"pressure": 0.0}, "zmax": {"pressure": 0.0}}}
+    serial = OpenFOAMSolver(tmp_path / "serial", channel(1, **open_z))
+    parallel = OpenFOAMSolver(tmp_path / "parallel", channel(2, **open_z))
     serial.setup()
     parallel.setup()
     frac = step_fraction(serial.spec, 2.3e-3)
