@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from nonsmooth import BoundConstrainedQP, Solution
+from nonsmooth import BoundConstrainedQP, NonsmoothSolveError, Solution
 from nonsmooth import solvers as nonsmooth_solvers
 
 from .mortar import ContactSetupError, Mortar, boundary_face, mortar
@@ -43,8 +43,8 @@ def tangent_frames(normals: np.ndarray) -> np.ndarray:
     return np.stack([n, t1, t2], axis=2)
 
 
-def transformation(m: Mortar, num_dofs: int) -> sp.csr_matrix:
-    """``P = O Q`` of eq. 10-11 for block size 3 (u = P x)."""
+def transformation(m: Mortar, num_dofs: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """``O`` and ``Q`` of eq. 10-11 for block size 3 (u = O Q x)."""
     s_nodes, m_nodes = m.slave.nodes, m.master.nodes
     T = m.T.tocoo()
     rows, cols, vals = [np.arange(num_dofs)], [np.arange(num_dofs)], [np.ones(num_dofs)]
@@ -65,7 +65,7 @@ def transformation(m: Mortar, num_dofs: int) -> sp.csr_matrix:
     idx = np.flatnonzero(keep)
     Q = sp.csr_matrix((np.concatenate(qv + [np.ones(idx.size)]), (np.concatenate(qr + [idx]), np.concatenate(qc + [idx]))),
                       (num_dofs, num_dofs))
-    return sp.csr_matrix(O @ Q)
+    return O, Q
 
 
 def rigid_body_modes(points: np.ndarray, K: sp.csr_matrix) -> np.ndarray:
@@ -140,7 +140,10 @@ class Contact:
             raise ContactSetupError(f"no slave node of {slave!r} faces the master {master!r} within the search "
                                     f"distance and normal angle: nothing can come into contact")
         self.num_dofs = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
-        self.P = transformation(m, self.num_dofs)
+        O, Q = transformation(m, self.num_dofs)
+        self.P = sp.csr_matrix(O @ Q)  # u = P x
+        # O = I + N with N^2 = 0 (slave rows, master columns): O^-1 = 2 I - O
+        self.P_inverse = sp.csr_matrix(Q.T @ (2 * sp.identity(self.num_dofs, format="csr") - O))
         fixed = np.asarray(elasticity.dirichlet_dofs, np.int64)
         on_slave = np.intersect1d(fixed // 3, m.slave.nodes)
         if on_slave.size:
@@ -150,8 +153,10 @@ class Contact:
         self.normal_dofs = 3 * m.slave.nodes[m.covered]
         self.points = V.tabulate_dof_coordinates()[: self.num_dofs // 3]
         self.x: np.ndarray | None = None  # the last transformed solution (next step's start)
-        self.setup_seconds = time.perf_counter() - t0
         self._nullspace = None
+        if solver == "multilevel" and "hierarchy" not in options:
+            options["hierarchy"] = self.multilevel_hierarchy(options.pop("levels", 3))
+        self.setup_seconds = time.perf_counter() - t0
         self._internal = None
 
     def problem(self) -> BoundConstrainedQP:
@@ -168,19 +173,18 @@ class Contact:
         upper[self.normal_dofs] = self.mortar.gap[self.mortar.covered]
         lower[self.fixed] = upper[self.fixed] = f[self.fixed]  # Dirichlet values (set_bc put them into F)
         if self.near_nullspace and self._nullspace is None:  # rigid body modes of each body, transformed
-            self._nullspace = self._inverse_apply(rigid_body_modes(self.points, Ks))
+            self._nullspace = self.P_inverse @ rigid_body_modes(self.points, Ks)
         return BoundConstrainedQP(A, b, lower, upper, block_size=3, near_nullspace=self._nullspace)
 
-    def _inverse_apply(self, Z: np.ndarray) -> np.ndarray:
-        """P^-1 Z = Q^T (Z - N Z), N = O - I (nilpotent: slave rows, master columns)."""
-        m = self.mortar
-        W = Z.copy()
-        for c in range(3):
-            W[3 * m.slave.nodes + c] -= m.T @ Z[3 * m.master.nodes + c]
-        R = tangent_frames(m.normals)
-        blocks = W[(3 * m.slave.nodes[:, None] + np.arange(3)).ravel()].reshape(len(m.slave.nodes), 3, -1)
-        W[(3 * m.slave.nodes[:, None] + np.arange(3)).ravel()] = np.einsum("kji,kjc->kic", R, blocks).reshape(-1, Z.shape[1])
-        return W
+    def multilevel_hierarchy(self, levels: int = 3, coarse_shape=(2, 2, 2)):
+        """The semi-geometric hierarchy (paper 2.4, :mod:`nonsmooth.hierarchy`) of the mesh
+        for the transformed unknowns: its finest prolongation times P^-1 (x = P^-1 u)."""
+        from nonsmooth.hierarchy import Hierarchy, semi_geometric_hierarchy
+
+        tets = np.asarray(self.elasticity.V.dofmap.list.array).reshape(-1, 4)
+        h = semi_geometric_hierarchy(self.points, tets, levels, coarse_shape, block_size=3)
+        return Hierarchy(h.prolongations[:-1] + [sp.csr_matrix(self.P_inverse @ h.prolongations[-1])], h.grids,
+                         h.kept, h.block_size, h.seconds)
 
     def solve(self) -> ContactState:
         """Solve with the current loads, starting from the last solution (load stepping)."""
@@ -189,6 +193,9 @@ class Contact:
         t1 = time.perf_counter()
         sol = nonsmooth_solvers.solve(qp, self.solver, x0=self.x, **self.options)
         t2 = time.perf_counter()
+        if not sol.converged:  # solvers that return instead of raising (multilevel)
+            raise NonsmoothSolveError(f"contact: {self.solver} did not converge in {sol.iterations} iterations "
+                                      f"(last criterion {sol.history[-1] if sol.history else float('nan'):.3e})")
         self.x = sol.x
         u = self.P @ sol.x
         self.elasticity.u.x.array[: self.num_dofs] = u
