@@ -69,21 +69,6 @@ def configure_cg_amg(ksp: PETSc.KSP, rtol: float, atol: float = 1e-50, max_it: i
         pc.setHYPREType("boomeramg")
 
 
-_prefixes = iter(range(1 << 30))
-
-
-def _set_options(obj, options: dict) -> None:
-    """Options for one PETSc object only (a fresh prefix, removed again from the database)."""
-    prefix = f"nonsmooth_{next(_prefixes)}_"
-    obj.setOptionsPrefix(prefix)
-    db = PETSc.Options()
-    for key, value in options.items():
-        db[prefix + key] = value
-    obj.setFromOptions()
-    for key in options:
-        db.delValue(prefix + key)
-
-
 def petsc_bounds(qp: BoundConstrainedQP) -> tuple[PETSc.Vec, PETSc.Vec]:
     """The bounds with infinite entries replaced by -+PETSC_INFINITY (free for SNES VI)."""
     lower = np.where(np.isfinite(qp.lower), qp.lower, PETSc.NINFINITY)
@@ -125,7 +110,8 @@ def solve_snes_vi(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, rtol:
     snes.setJacobian(lambda snes, xv, J, P: None, A, A)
     snes.setVariableBounds(*petsc_bounds(qp))
     snes.setTolerances(rtol=rtol, atol=atol, stol=1e-14, max_it=max_iter)
-    _set_options(snes, {"snes_linesearch_type": "basic"})  # a QP: the full Newton step is exact
+    # PETSc's default backtracking line search: with full steps ("basic") vinewtonrsls cycles on
+    # SPD problems that are not M-matrices (tests/test_nonsmooth_active_set.py, CYCLING_A)
     snes.setMonitor(lambda snes, it, norm: history.append(float(norm)))
     configure_cg_amg(snes.getKSP(), ksp_rtol, amg=amg)
     snes.solve(None, x)

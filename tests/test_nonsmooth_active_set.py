@@ -163,3 +163,60 @@ def test_bad_input():
         BoundConstrainedQP(A, np.ones(3), 1.0, 0.0)
     with pytest.raises(NonsmoothSolveError, match="non-positive diagonal"):
         solve(BoundConstrainedQP(-A, np.ones(3), 0.0, 1.0), "active_set")
+
+
+#: an SPD matrix (not an M-matrix) on which the plain primal-dual active set method cycles
+#: from x0 = P(0) (found by a random search: 1 in about 10^4 such 5 x 5 problems)
+CYCLING_A = np.array([
+    [7.001236226624374, 1.116107403581959, -2.2140706015474585, 3.9516559421011435, -4.0366122285584805],
+    [1.116107403581959, 3.780446123450858, -1.1852003568894014, 0.37666880309182516, 1.8617726397071714],
+    [-2.2140706015474585, -1.1852003568894014, 2.6005681560796523, -2.0514295738680546, 2.100918989302311],
+    [3.9516559421011435, 0.37666880309182516, -2.0514295738680546, 3.054487935648484, -3.8931193728929876],
+    [-4.0366122285584805, 1.8617726397071714, 2.100918989302311, -3.8931193728929876, 7.207663747964706]])
+CYCLING_B = np.array([0.6973044656302902, -0.7457827487686597, -2.0307685221136045, -0.5268024802656868,
+                      1.412202582702718])
+CYCLING_U = np.array([-0.07124536981239166, 0.6289389934711002, 0.03892925989839267, 0.3072766808838656,
+                      0.45871587374734807])
+
+
+def enumerate_kkt(A, b, upper):
+    """The solution of min 1/2 x'Ax - b'x, x <= upper, by trying every active set."""
+    n = len(b)
+    for mask in range(1 << n):
+        act = np.array([(mask >> i) & 1 for i in range(n)], bool)
+        x = np.where(act, upper, 0.0)
+        free = ~act
+        if free.any():
+            x[free] = np.linalg.solve(A[np.ix_(free, free)], b[free] - A[np.ix_(free, act)] @ upper[act])
+        lam = b - A @ x
+        if np.all(x <= upper + 1e-12) and np.all(lam[act] >= -1e-12):
+            return x
+    raise AssertionError("no KKT point")
+
+
+def plain_pdas_cycles(A, b, upper, iterations=30):
+    """True when the unsafeguarded method (sets from y = x + lam / diag(A)) revisits a set."""
+    d, x, seen = np.diag(A), np.minimum(0.0, upper), set()
+    act = x + (b - A @ x) / d > upper
+    for _ in range(iterations):
+        if act.tobytes() in seen:
+            return True
+        seen.add(act.tobytes())
+        x = np.where(act, upper, 0.0)
+        free = ~act
+        x[free] = np.linalg.solve(A[np.ix_(free, free)], b[free] - A[np.ix_(free, act)] @ upper[act])
+        lam = np.where(free, 0.0, b - A @ x)
+        new = x + lam / d > upper
+        if np.array_equal(new, act):
+            return False
+        act = new
+    return False
+
+
+def test_cycling_is_detected_and_the_safeguard_converges():
+    assert plain_pdas_cycles(CYCLING_A, CYCLING_B, CYCLING_U)
+    qp = BoundConstrainedQP(CYCLING_A, CYCLING_B, -np.inf, CYCLING_U)
+    sol = solve(qp, "active_set")
+    assert sol.converged and sol.info["monotone_from"] is not None
+    assert np.max(np.abs(sol.x - enumerate_kkt(CYCLING_A, CYCLING_B, CYCLING_U))) < 1e-10
+    assert np.max(np.abs(solve(qp, "snes_vi").x - sol.x)) < 1e-10  # with its backtracking line search
