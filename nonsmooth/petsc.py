@@ -4,7 +4,8 @@ the baseline solver, PETSc's SNES VI (reduced-space active set Newton,
 
 SNES VI solves F(x) = A x - b = 0 subject to lower <= x <= upper, i.e. the
 KKT system of the QP; each Newton step solves the system restricted to the
-inactive set with the same CG + GAMG as :mod:`nonsmooth.active_set`.
+inactive set with CG + algebraic multigrid (BoomerAMG by default: GAMG fails
+inside vinewtonrsls in PETSc 3.18, see :func:`solve_snes_vi`).
 """
 
 from __future__ import annotations
