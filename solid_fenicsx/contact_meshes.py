@@ -1,8 +1,9 @@
 """Meshes of contact problems made with gmsh (Debian's python3-gmsh).
 
-:func:`hertz_mesh`: a half-sphere of radius R (flat face up at z = 2R... see
-below) resting on a block (paper figure 5), the two bodies meshed separately
-(non-matching at the contact face) and graded toward the contact point.
+:func:`hertz_mesh`: a half-sphere of radius R (curved face down, touching the
+block at the origin, flat face up at z = R) resting on a block (paper figure 5),
+the two bodies meshed separately (non-matching at the contact face) and graded
+toward the contact point; :func:`hertz_solution`: Hertz theory.
 """
 
 from __future__ import annotations

@@ -20,8 +20,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-import dolfinx
-
 from transfer import FunctionSpace, Mesh, NoOverlapError, Transfer
 
 
