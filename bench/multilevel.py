@@ -47,7 +47,7 @@ def _relative(x, ref) -> float:
     return float(np.linalg.norm(x - ref) / np.linalg.norm(ref))
 
 
-def run_level(problem: dict, levels: int, cells: int, baselines: bool, threads: int) -> dict:
+def run_level(problem: dict, levels: int, cells: int, baselines, threads: int) -> dict:
     _, _, _, qp, hierarchy, setup = build(problem, levels, cells, threads)
     ml = solve(qp, "multilevel", **options(problem, hierarchy))
     row = {"levels": levels, "cells": cells, "dofs": qp.size, "paper_dofs": PAPER["dofs"].get(levels),
@@ -58,10 +58,8 @@ def run_level(problem: dict, levels: int, cells: int, baselines: bool, threads: 
                           "seconds": setup["hierarchy"] + ml.seconds, "coarse_rebuilds": ml.info["coarse_rebuilds"],
                           "max_infeasibility": ml.info["max_infeasibility"], "kkt_residual": ml.info["kkt_residual"],
                           "energy": qp.energy(ml.x), "active": int(ml.active.sum())}}
-    for name, opts in BASELINES.items():
-        if not baselines:
-            continue
-        sol = solve(qp, name, **opts)
+    for name in baselines:
+        sol = solve(qp, name, **BASELINES[name])
         row[name] = {"iterations": sol.iterations, "converged": sol.converged, "seconds": sol.seconds,
                      "krylov_iterations": sol.krylov_iterations, "history": sol.history,
                      "asymptotic_rate": asymptotic_rate(sol.history), "energy": qp.energy(sol.x),
@@ -105,7 +103,8 @@ def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--levels", type=int, nargs="+", default=[2, 3, 4, 5])
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3 only (smoke test)")
-    parser.add_argument("--no-baselines", action="store_true", help="multilevel only")
+    parser.add_argument("--baselines", nargs="*", choices=list(BASELINES), default=list(BASELINES),
+                        help="baseline solvers to run beside the multilevel one (none: multilevel only)")
     parser.add_argument("--threads", type=int, default=2, help="threads of the projection assembly")
     parser.add_argument("-o", "--output", default=str(ROOT / "bench" / "results" / "multilevel.json"))
     args = parser.parse_args(argv)
@@ -121,7 +120,7 @@ def main(argv=None) -> dict:
     out.parent.mkdir(parents=True, exist_ok=True)
     rows = []
     for lv in levels:
-        rows.append(run_level(problem, lv, cells[lv], not args.no_baselines, args.threads))
+        rows.append(run_level(problem, lv, cells[lv], args.baselines, args.threads))
         print(_table(rows)[-1] if len(rows) > 1 else "\n".join(_table(rows)), flush=True)
         result = _write(out, rows, args, levels, load_start, complete=len(rows) == len(levels))
     for name, g in result["goals"].items():
@@ -141,7 +140,7 @@ def _write(out: Path, rows, args, levels, load_start, complete: bool) -> dict:
                  "platform": platform.platform(), "cpu_count": os.cpu_count(), "numpy": np.__version__,
                  "load_average_at_start": load_start, "load_average_at_end": list(os.getloadavg()),
                  "shared_machine_note": "other engineers load the machine; single runs, not over-interpreted"},
-        "args": {"levels": levels, "quick": args.quick, "baselines": not args.no_baselines, "threads": args.threads},
+        "args": {"levels": levels, "quick": args.quick, "baselines": args.baselines, "threads": args.threads},
         "complete": complete, "case": "cases/cube_obstacle/problem.toml",
         "criterion": "step length ||x_k+1 - x_k||_2 < 1e-12", "paper": PAPER, "goals": _goals(rows), "rows": rows,
         "figure": png.name,
