@@ -64,8 +64,7 @@ def load_steps(contact, holder, values) -> dict:
 def hertz_level(tmp, h, steps) -> dict:
     out = {"h": h}
     for name, (solver, options) in SOLVERS.items():
-        contact = hertz_contact(tmp, h, solver, **options)
-        holder = contact.elasticity._dirichlet[-1].value
+        contact, holder = hertz_contact(tmp, h, solver, **options)
         out[name] = load_steps(contact, holder, [PUSH * k / steps for k in range(1, steps + 1)])
     return out
 

@@ -19,16 +19,16 @@ from .mesh import read_mesh
 RADIUS, E, NU, PUSH = 1.0, 1.0e9, 0.3, 0.02
 
 
-def hertz_contact(directory, h: float, solver: str = "active_set", push: float = PUSH, **options) -> Contact:
+def hertz_contact(directory, h: float, solver: str = "active_set", push: float = PUSH, **options):
     """The Contact of the Hertz case with contact cells of size h (mesh written to
-    `directory` unless there already)."""
+    `directory` unless there already) and the platen's displacement (a Constant)."""
     path = Path(directory) / f"hertz_h{h:g}.msh"
     if not path.exists():
         hertz_mesh(path, radius=RADIUS, h_contact=h, h_far=0.3, refine_radius=0.25)
     s = Elasticity(read_mesh(path, boundaries=hertz_boundaries(RADIUS)), E=E, nu=NU)
     s.add_dirichlet("block_bottom", 0.0)
-    s.add_dirichlet("load", [0.0, 0.0, -push])
-    return Contact(s, "slave", "block_top", solver=solver, search_distance=0.1, **options)
+    platen = s.add_dirichlet("load", [0.0, 0.0, -push])
+    return Contact(s, "slave", "block_top", solver=solver, search_distance=0.1, **options), platen
 
 
 def compare(contact: Contact, state) -> dict:
@@ -58,9 +58,8 @@ def compare(contact: Contact, state) -> dict:
 def run(directory, h: float, solver: str = "active_set", steps: int = 1, **options) -> dict:
     """Solve the Hertz case in `steps` load steps; the comparison, sizes and solver figures."""
     t0 = time.perf_counter()
-    contact = hertz_contact(directory, h, solver, **options)
+    contact, holder = hertz_contact(directory, h, solver, **options)
     setup = time.perf_counter() - t0
-    holder = contact.elasticity._dirichlet[-1].value
     per_step = []
     for k in range(1, steps + 1):
         holder.value[:] = [0.0, 0.0, -PUSH * k / steps]

@@ -19,6 +19,7 @@ pytest.importorskip("gmsh")
 from nonsmooth.solvers import solve as solve_qp  # noqa: E402
 from solid_fenicsx import Elasticity, read_mesh  # noqa: E402
 from solid_fenicsx.contact import Contact  # noqa: E402
+from solid_fenicsx.contact_hertz import hertz_contact  # noqa: E402
 from solid_fenicsx.contact_meshes import hertz_boundaries, hertz_mesh, hertz_solution  # noqa: E402
 from solid_fenicsx.mortar import ContactSetupError  # noqa: E402
 
@@ -149,8 +150,7 @@ def test_multilevel_solver_on_the_contact_system(tmp_path):
 
 
 def test_load_steps_start_from_the_last(hertz, tmp_path):
-    contact = hertz_problem(tmp_path / "h.msh", h=0.06)
-    holder = contact.elasticity._dirichlet[-1].value
+    contact, holder = hertz_contact(tmp_path, 0.06)
     forces = []
     for push in (0.005, 0.01, 0.015):
         holder.value[:] = [0.0, 0.0, -push]
