@@ -25,7 +25,7 @@ CONSTRAINTS="$VENV/debian-constraints.txt"
 APT_PACKAGES=(
   openfoam
   python3-dolfinx python3-mpi4py python3-petsc4py
-  python3-scipy python3-numpy python3-meshio python3-vtk9 python3-matplotlib
+  python3-scipy python3-numpy python3-meshio python3-vtk9 python3-matplotlib python3-gmsh
   python3-venv python3-dev python3-pip
   build-essential cmake ninja-build git
 )
