@@ -6,7 +6,7 @@ non-penetration (eq. 11) is ``x_normal <= gap`` at each slave node. For the
 obstacle problem ``x`` are nodal displacements and the bounds the obstacle.
 The KKT conditions, with multiplier ``lam = b - A x``::
 
-    lower <= x <= upper,   lam >= 0 where x = lower,   lam <= 0 where x = upper,
+    lower <= x <= upper,   lam <= 0 where x = lower,   lam >= 0 where x = upper,
     lam = 0 where lower < x < upper.
 """
 
