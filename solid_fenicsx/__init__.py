@@ -14,7 +14,11 @@ Modules: :mod:`.mesh` (meshes and boundary tags), :mod:`.constitutive`
 (material, stress), :mod:`.timestepping` (Newmark, generalized-alpha),
 :mod:`.linear_solver` (KSP set-up), :mod:`.elasticity` (the solver),
 :mod:`.vertex_io` (arrays for the coupler), :mod:`.output` (XDMF, VTU),
-:mod:`.cases` (block compression, penny crack, bar, cantilever).
+:mod:`.cases` (block compression, penny crack, bar, cantilever); two-body
+frictionless mortar contact (paper 2.2, eq. 7-11): :mod:`.mortar` (contact faces,
+slave normals, ``T = D^-1 B`` with the dual basis, weighted gap), :mod:`.contact`
+(the transformed system of eq. 10 as a bound-constrained QP, pressure, load steps),
+:mod:`.contact_meshes`, :mod:`.contact_hertz`, :mod:`.contact_fracture` (the cases).
 """
 
 from .constitutive import LockingWarning, Material

@@ -422,6 +422,24 @@ class Elasticity:
 
     solve = solve_static
 
+    @property
+    def dirichlet_dofs(self) -> np.ndarray:
+        """Owned (unrolled) dof indices with a Dirichlet condition."""
+        return self._bc_dofs_owned()
+
+    def static_system(self) -> tuple[PETSc.Mat, PETSc.Vec]:
+        """The static stiffness matrix K and load vector F with the Dirichlet
+        conditions applied (their rows and columns identity, values lifted into
+        F), for solvers that work on the algebraic system (contact). K belongs to
+        this object and changes with it; F is new (destroy it)."""
+        self._check_ready()
+        K, _ = self._operator(0.0, 1.0)
+        F = self._assemble(self._forms["load"])
+        dolfinx.fem.petsc.apply_lifting(F, [self._forms["a"]], bcs=[self.bcs])
+        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        dolfinx.fem.petsc.set_bc(F, self.bcs)
+        return K, F
+
     # -- dynamic --------------------------------------------------------------
     def _require_dynamic(self, dt):
         if self.scheme is None:

@@ -7,8 +7,9 @@ box), named boundaries (box faces, expressions in x, y, z on facet midpoints,
 or tags of the file), the material, the loads, the solver and whether the
 problem is dynamic (paper eq. 13). ``advance`` solves one step (static: one
 solve) with the coupler's inputs (``pressure`` at the vertices, applied on the
-wetted boundary) and returns the displacement, velocity and von Mises stress
-at the vertices, in the numbering of ``geometry``. ``geometry`` also returns the
+wetted boundary; with config ``traction = "full"`` the vector ``traction``
+instead) and returns the displacement, velocity and von Mises stress at the
+vertices, in the numbering of ``geometry``. ``geometry`` also returns the
 wetted boundary's facets as ``interface_triangles`` (outward oriented), so the
 coupler can sample the fluid pressure on that surface (paper 2.3, Steps 2-3).
 """
@@ -26,6 +27,9 @@ from .elasticity import Elasticity
 from .mesh import BOX_FACES, from_arrays, read_mesh
 
 _AXES = {"x": 0, "y": 1, "z": 2}
+#: the figures of a contact step returned as the field ``contact_stats`` (in this order)
+CONTACT_STATS = ("iterations", "krylov_iterations", "seconds", "active_nodes", "area_fraction", "max_pressure",
+                 "force_x", "force_y", "force_z", "min_gap")
 
 
 def _face_predicate(face: str, lower, upper):
@@ -51,7 +55,7 @@ class SolidParticipant(Participant):
 
     def announce(self) -> dict:
         return {"kind": self.kind, "provides": ["displacement", "velocity", "von_mises"],
-                "accepts": ["pressure"]}
+                "accepts": ["pressure", "traction"]}
 
     def configure(self, config: dict) -> None:
         comm = self.comm or MPI.COMM_WORLD
@@ -87,26 +91,44 @@ class SolidParticipant(Participant):
         def where(name):
             return tags.get(name, name)
 
+        self.loads = []  # (value holder, full value): contact ramps them over the steps
         for load in config.get("loads", []):
             kind, value = load["type"], load.get("value")
             if kind == "dirichlet":
-                s.add_dirichlet(where(load["boundary"]), value, components=[_AXES[c] for c in load["components"]])
+                holder = s.add_dirichlet(where(load["boundary"]), value,
+                                         components=[_AXES[c] for c in load["components"]])
             elif kind == "pressure":
-                s.add_pressure(where(load["boundary"]), value)
+                holder = s.add_pressure(where(load["boundary"]), value)
             elif kind == "traction":
-                s.add_traction(where(load["boundary"]), value)
+                holder = s.add_traction(where(load["boundary"]), value)
             elif kind == "body_force":
-                s.add_body_force(value)
+                holder = s.add_body_force(value)
             else:
                 raise ValueError(f"unknown load type {kind!r}")
+            self.loads.append((holder, np.array(holder.value, dtype=float, copy=True)))
         self.wetted = config.get("wetted")
         self.wetted_boundary = None
         if self.wetted is not None:
             # one boundary, or a list of them (e.g. both faces of a fracture)
             self.wetted_boundary = (where(self.wetted) if isinstance(self.wetted, (str, int))
                                     else [where(w) for w in self.wetted])
-            s.add_pressure_field(self.wetted_boundary, "pressure")
+            # the fluid's pressure (-p n), or its full traction (-p I + tau) n as a vector (coupler/viscous.py)
+            if config.get("traction", "pressure") == "full":
+                s.add_traction_field(self.wetted_boundary, "traction")
+            else:
+                s.add_pressure_field(self.wetted_boundary, "pressure")
         self.solver, self.states = s, {}
+        self.contact, self.steps = None, int(config.get("steps", 1))
+        if config.get("contact"):
+            from .contact import Contact
+
+            c = config["contact"]
+            options = {"active_set": {"tol": c["tolerance"], "max_iter": c["max_iterations"]},
+                       "snes_vi": {"rtol": c["tolerance"], "max_iter": c["max_iterations"]},
+                       "multilevel": {"tol": c["tolerance"], "maxiter": c["max_iterations"]}}[c["solver"]]
+            self.contact = Contact(s, where(c["slave"]), where(c["master"]), solver=c["solver"],
+                                   search_distance=c.get("search_distance"),
+                                   max_normal_angle=c.get("max_normal_angle", 45.0), **options)
 
     def geometry(self):
         """The mesh in input numbering: ``points`` (n, 3), ``cells`` (m, 4) and, with a
@@ -132,19 +154,46 @@ class SolidParticipant(Participant):
 
     def advance(self, window, iteration, t, dt, inputs):
         s = self.solver
-        if "pressure" in inputs:
-            if self.wetted is None:
-                raise ValueError("input 'pressure' needs a wetted boundary (config 'wetted')")
-            s.set_vertex_field("pressure", inputs["pressure"].data if self.rank == 0 else None)
-        if self.dynamic:
+        for name in ("pressure", "traction"):
+            if name not in inputs:
+                continue
+            if name not in s.fields:
+                raise ValueError(f"input {name!r} needs a wetted boundary (config 'wetted') with "
+                                 f"traction = {'full' if name == 'traction' else 'pressure'!r}")
+            s.set_vertex_field(name, inputs[name].data if self.rank == 0 else None)
+        extra = {}
+        if self.contact is not None:
+            extra = self._contact_step(window)
+        elif self.dynamic:
             s.step(dt)
         else:
             s.solve_static()
         out = {what: s.vertex_values(what) for what in ("displacement", "velocity", "von_mises")}
+        out.update({k: s.vertices.gather(f) if k != "contact_stats" else f for k, f in extra.items()})
         if self.rank != 0:
             return {}
-        units = {"displacement": "m", "velocity": "m/s", "von_mises": "Pa"}
+        units = {"displacement": "m", "velocity": "m/s", "von_mises": "Pa", "contact_pressure": "Pa", "gap": "m",
+                 "contact_stats": "1"}
         return {k: Field(k, v, units[k]) for k, v in out.items()}
+
+    def _contact_step(self, window) -> dict:
+        """Load step ``window`` of ``steps`` (loads at (window + 1) / steps of their value),
+        from the last step's solution; the slave face's pressure and gap as vertex fields."""
+        import dolfinx.fem
+
+        factor = (int(window) + 1) / self.steps
+        for holder, value in self.loads:
+            holder.value = factor * value
+        state = self.contact.solve()
+        W = dolfinx.fem.FunctionSpace(self.solver.mesh, ("Lagrange", 1))  # same vertex dofs as the P1 vectors
+        nodes = self.contact.mortar.slave.nodes
+        pressure, gap = dolfinx.fem.Function(W), dolfinx.fem.Function(W)
+        pressure.x.array[nodes] = state.pressure
+        gap.x.array[nodes] = np.nan_to_num(state.gap, nan=0.0)
+        stats = state.summary()
+        figures = [stats["iterations"], stats["krylov_iterations"], stats["phase_seconds"]["solve"], stats["active_nodes"],
+                   stats["area_fraction"], stats["max_pressure"], *state.force, stats["min_gap"]]
+        return {"contact_pressure": pressure, "gap": gap, "contact_stats": np.array(figures, float)}
 
     def save_state(self, window):
         self.states[int(window)] = self.solver.save_state()
