@@ -12,7 +12,9 @@ the pressure is read in fluid cells, not in the penalized ones inside the solid;
 the solid gets it at those vertices and zero elsewhere. A solid that gives no
 triangles (the ``spring_solid`` stand-in) gets the fallback, the volume
 projection onto all its vertices (:class:`VolumeInterface`). The interface value
-of the fixed point is that pressure, accelerated as the scene says. Two-way
+of the fixed point is that pressure, accelerated as the scene says (``[coupling]
+traction = "full"``: the traction (-p I + tau) n with the viscous wall shear, three
+values per vertex, :mod:`coupler.viscous`). Two-way
 coupling (:class:`SolidOnGrid`): in every coupling iteration the solid fraction on
 the grid, the velocity transfer and the sampling surface are rebuilt from the
 deformed solid (points + displacement), so the fluid sees the aperture the pressure
@@ -46,6 +48,7 @@ from .messaging import CouplerSession, new_run_id
 from .plan import Plan, make_plan
 from .progress import ProgressBar
 from .interface import SolidOnGrid, WettedInterface
+from .viscous import FluidTraction, traction_figures
 from .protocol import Field
 from .results import Series, check_displacement, residual_plot, write_summary
 
@@ -91,8 +94,14 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
         config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material,
                   "loads": loads, "degree": solver["degree"], "linear_solver": solver["linear_solver"],
                   "rtol": solver["rtol"], "dynamic": "dynamics" in scene.effects,
-                  "fluid_density": (scene.fluid_material or {}).get("density", 0.0) if "flow" in scene.effects else 0.0,
-                  "wetted": scene.coupling["interface"]}
+                  # rho_f of eq. 13 is for a volume-coupled immersed solid; here the fluid loads the rock
+                  # through its wetted surface only (the penalized fluid inside it passes its inertia to
+                  # the penalty, not to the surface pressure: tests/test_fluid_transient.py, piston), so
+                  # the rock keeps its own inertia rho_s
+                  "fluid_density": 0.0,
+                  "wetted": scene.coupling["interface"], "traction": scene.coupling["traction"]}
+        if scene.contact is not None:  # loads ramped over the steps (solid_fenicsx/participant.py)
+            config.update(contact=scene.contact, steps=scene.time["steps"])
         if solver["participant"] == "spring_solid":
             config["k"] = solver["stiffness"]
         return config
@@ -106,7 +115,9 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
     if solver["participant"] == "openfoam":
         flow = scene.flow or {}
         config.update({k: solver[k] for k in ("penalization", "penalization_exponent", "drag", "max_iterations",
-                                              "tolerance")})
+                                              "tolerance", "decomposition", "substeps", "outer_correctors",
+                                              "solid_velocity")}, ranks=solver["solver_ranks"])
+        config.update(transient="dynamics" in scene.effects, dt=scene.time["dt"])
         if flow:
             config.update(inlet=flow["inlet"], outlet=flow["outlet"], walls=flow["walls"],
                           boundaries=dict(flow["faces"]))
@@ -188,10 +199,12 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         start = time.perf_counter()
         triangles = geometry_fields["solid"].get("interface_triangles")
         triangles = None if triangles is None else np.asarray(triangles.data)
+        full = scene.coupling["traction"] == "full"  # the viscous stress too (coupler/viscous.py)
         on_grid = SolidOnGrid(S, G, triangles, f"{scene.path}: [geometry.fluid]",
-                              deform=scene.coupling["deformation"])
+                              deform=scene.coupling["deformation"], traction=scene.coupling["traction"])
+        traction = FluidTraction((scene.fluid_material or {"viscosity": 1e-3})["viscosity"]) if full else None
         interface = on_grid.interface
-        summary["interface"] = interface.describe()
+        summary["interface"] = {**interface.describe(), "traction": scene.coupling["traction"]}
         if isinstance(interface, WettedInterface):
             log(f"interface {scene.coupling['interface']}: {interface.num_vertices} vertices, "
                 f"{interface.num_triangles} triangles, pressure sampled up to {interface.offset:.3g} m into the fluid")
@@ -211,10 +224,14 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             f"{np.count_nonzero(on_grid.fraction > 0)} fluid cells"
             f"{'; rebuilt from the deformed solid every iteration' if on_grid.deform else ''}")
 
+        def to_solid(x):
+            if full:  # x: the traction (-p I + tau) n per interface vertex, flattened
+                return {"traction": Field("traction", on_grid.interface.to_solid_vertices(x.reshape(-1, 3)), "Pa")}
+            return {"pressure": Field("pressure", on_grid.interface.to_solid_vertices(x), "Pa")}
+
         def iterate(window, iteration, x):
-            pressure = on_grid.interface.to_solid_vertices(x)
             solid_out = _as_arrays(phases.remote("solid", solid, "advance", window.index, iteration, window.t_start,
-                                                window.dt, {"pressure": Field("pressure", pressure, "Pa")}))
+                                                window.dt, to_solid(x)))
             # two-way: the fluid sees the deformed solid (fractions, velocity transfer, sampling surface)
             try:
                 phases.timed("geometry update", on_grid.update, solid_out.get("displacement"))
@@ -229,6 +246,13 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             fluid_out = _as_arrays(phases.remote("fluid", fluid, "advance", window.index, iteration, window.t_start,
                                                 window.dt, fluid_in))
             last.update(solid=solid_out, fluid=fluid_out, fluid_in=velocity, fraction=on_grid.fraction)
+            if full:
+                wall = solid_out["velocity"][on_grid.interface.vertices]
+                parts = phases.timed("transfer", traction.parts, on_grid, fluid_out["pressure"],
+                                     fluid_out["velocity"], wall)
+                last["traction"] = {**traction_figures(on_grid.interface.weights, *parts),
+                                    "fits": traction.fits}
+                return (parts[0] + parts[1]).ravel()
             return phases.timed("transfer", on_grid.interface.from_fluid, fluid_out["pressure"])
 
         class Checkpoint:
@@ -240,9 +264,12 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
                 for c in clients.values():
                     phases.remote("checkpoint", c, "restore_state", window.index)
 
-        x0 = np.zeros(interface.size)
+        x0 = np.zeros(interface.size * (3 if full else 1))
+        if full:
+            weights = np.repeat(weights, 3)
         c = scene.coupling
-        accelerator = make_accelerator(c["acceleration"], relaxation=c["relaxation"], reuse=c["reuse"])
+        accelerator = make_accelerator(c["acceleration"], relaxation=c["relaxation"], reuse=c["reuse"],
+                                       max_columns=c["columns"])
         mode, checkpoint = "implicit", Checkpoint()
     else:
         weights, x0, accelerator, mode, checkpoint = None, np.zeros(0), None, "explicit", None
@@ -256,9 +283,10 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         record = {"step": window.index, "t": window.t_end}
         if window.index % every == 0 or window.index == steps - 1:
             start = time.perf_counter()
-            solid_fields = dict(last["solid"])
-            if coupled:
-                solid_fields["pressure"] = interface.to_solid_vertices(x)
+            solid_fields = {k: v for k, v in last["solid"].items() if k != "contact_stats"}
+            if coupled:  # the coupled load: the pressure, or with traction 'full' the traction vector
+                solid_fields["traction" if full else "pressure"] = interface.to_solid_vertices(
+                    x.reshape(-1, 3) if full else x)
                 fluid_fields = {"pressure": last["fluid"]["pressure"], "solid_fraction": last["fraction"],
                                 "solid_velocity": last["fluid_in"]}
                 if "velocity" in last["fluid"]:
@@ -266,6 +294,13 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
                 series["fluid"].write(window.index, window.t_end, cell_data=fluid_fields)
             series["solid"].write(window.index, window.t_end, point_data=solid_fields)
             phases.add("output", time.perf_counter() - start)
+        stats = last["solid"].get("contact_stats")
+        if stats is not None:  # figures of the contact solve (solid_fenicsx/participant.py CONTACT_STATS)
+            from solid_fenicsx.participant import CONTACT_STATS
+
+            record["contact"] = dict(zip(CONTACT_STATS, (float(v) for v in stats)))
+        if "traction" in last:  # how much the viscous part matters ([coupling] traction = "full")
+            record["traction"] = last["traction"]
         u = last["solid"].get("displacement")
         if u is not None:
             record["max_displacement"] = float(np.max(np.linalg.norm(u, axis=1)))

@@ -23,16 +23,22 @@ EFFECTS = {
     "flow": "fluid flow on a structured grid, coupled to the solid (fluid participant, paper 2.3)",
     "contact": "contact between fracture faces (mortar coupling, paper 2.2)",
 }
+#: nonsmooth solvers of [contact] solver (nonsmooth.solvers)
+CONTACT_SOLVERS = ("active_set", "snes_vi", "multilevel")
 #: participant kinds -> the module started as ``python -m MODULE``
 SOLID_PARTICIPANTS = {"solid_fenicsx": "solid_fenicsx", "spring_solid": "coupler.standins"}
 FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "replay_fluid": "coupler.standins"}
 LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure")
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
+#: [coupling] traction: the fluid's pressure only, or its full stress with the viscous part (coupler/viscous.py)
+TRACTIONS = ("pressure", "full")
 BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 #: conditions of the fluid grid's side faces ([flow] walls, faces); xmin is the inlet, xmax the outlet
 FACE_CONDITIONS = ("wall", "slip", "symmetry", "empty")
 #: how the openfoam participant turns solid fractions into drag (fluid_openfoam/penalization.py)
 PENALIZATIONS = ("wall", "linear", "power")
+#: decomposePar methods of a parallel openfoam fluid (fluid_openfoam/parallel.py)
+DECOMPOSITIONS = ("simple",)  # scotch: only a dummy library in Debian's OpenFOAM v1912
 
 @dataclass
 class SolidGeometry:
@@ -75,6 +81,7 @@ class CoupledScene:
     output: dict
     check: dict | None = None  # expected displacement: {"x"|"y"|"z": expr, "where": expr, "tolerance": float}
     flow: dict | None = None  # fluid boundary conditions: inlet, outlet, walls, faces ([flow])
+    contact: dict | None = None  # [contact]: slave, master, solver, tolerances (effect 'contact')
 
     def error(self, table: str, key: str, reason: str) -> SceneError:
         return SceneError(f"{self.path}: [{table}] {key}: {reason}")
@@ -91,15 +98,28 @@ TABLES = {
     "coupling": {"acceleration": f"one of {', '.join(ACCELERATIONS)}", "relaxation": "initial relaxation",
                  "tolerance": "relative interface residual (mass-weighted L2)",
                  "max_iterations": "per time step", "reuse": "IQN-ILS: past time windows reused",
+                 "columns": "IQN-ILS: at most this many secant columns, newest first (default 100)",
                  "interface": "the solid boundary (or list of boundaries) the fluid pressure acts on (flow)",
-                 "deformation": "true: the fluid sees the deformed solid (two-way); false: the undeformed one"},
+                 "deformation": "true: the fluid sees the deformed solid (two-way); false: the undeformed one",
+                 "traction": "what of the fluid's stress loads the rock: 'pressure' (default, -p n) or 'full' "
+                             "((-p I + tau) n with the viscous wall shear)"},
     "messaging": {"mode": "zenoh mode: peer (default) or client", "connect": "zenoh endpoints to connect to",
                   "timeout": "seconds to wait for a participant's answer"},
     "flow": {"inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
              "inlet_pressure": "fixed inlet pressure on the grid face xmin [Pa]",
              "outlet_pressure": "fixed outlet pressure on the grid face xmax [Pa] (default 0)",
              "walls": f"condition of the other grid faces: one of {', '.join(FACE_CONDITIONS)} (default wall)",
-             "faces": "table: face (ymin ... zmax) -> condition, overriding walls"},
+             "faces": "table: face (ymin ... zmax) -> condition ({ pressure = p } for an open face), "
+                      "overriding walls"},
+    "contact": {"slave": "the boundary carrying the contact pressure (dual basis; the finer or curved side)",
+                "master": "the opposite boundary (another body of the same mesh)",
+                "solver": f"nonsmooth solver, one of {', '.join(CONTACT_SOLVERS)} (default active_set)",
+                "tolerance": "active_set: scaled KKT residual (default 1e-10); snes_vi: relative residual; "
+                             "multilevel: step length [m]",
+                "max_iterations": "nonsmooth iterations per load step (default 100)",
+                "search_distance": "how far along the slave normal the master is looked for [m] (default: "
+                                   "half the slave's mean edge); at least the largest gap that may close",
+                "max_normal_angle": "largest angle between paired slave and master faces [deg] (default 45)"},
     "output": {"directory": "output directory, relative to the case (default 'results')",
                "every": "write fields every N steps (default 1)"},
     "check": {"x": "expected x displacement (expression in x, y, z)", "y": "expected y displacement",
@@ -123,8 +143,13 @@ SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI 
                "penalization": f"openfoam: solid fractions -> drag, one of {', '.join(PENALIZATIONS)}",
                "penalization_exponent": "openfoam: exponent of penalization 'power'",
                "drag": "openfoam: maximum penalization drag [1/s] (default 1e4 x the fastest cell rate)",
+               "decomposition": f"openfoam with ranks > 1: decomposePar method, one of {', '.join(DECOMPOSITIONS)}",
                "max_iterations": "openfoam: simpleFoam iterations per coupling iteration",
-               "tolerance": "openfoam: simpleFoam residual tolerance (p and U)"}
+               "tolerance": "openfoam: simpleFoam (PIMPLE with dynamics) residual tolerance (p and U)",
+               "substeps": "openfoam with dynamics: pimpleFoam time steps per coupling step (default 1)",
+               "outer_correctors": "openfoam with dynamics: PIMPLE outer iterations per time step at most (default 50)",
+               "solid_velocity": "openfoam: 'bodies' (each solid body moves rigidly with its wetted layer's mean "
+                                 "velocity, default) or 'none' (penalized towards rest)"}
 
 
 def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
@@ -183,8 +208,15 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                     "tolerance": coupling.number("tolerance", 1e-6, positive=True),
                     "max_iterations": coupling.integer("max_iterations", 50),
                     "reuse": coupling.integer("reuse", 8, minimum=0),
+                    "columns": coupling.integer("columns", 100),
                     "interface": _interface(coupling),
-                    "deformation": coupling.boolean("deformation", True)}
+                    "deformation": coupling.boolean("deformation", True),
+                    "traction": coupling.string("traction", "pressure", TRACTIONS)}
+    if coupling_cfg["traction"] == "full" and "flow" not in effects:
+        raise coupling.error("traction", "'full' (the viscous stress of a flow) needs the effect 'flow'")
+    if coupling_cfg["traction"] == "full" and solver_cfg["solid"]["participant"] != "solid_fenicsx":
+        raise coupling.error("traction", "'full' needs a solid with a wetted surface (solid_fenicsx), got "
+                                         f"{solver_cfg['solid']['participant']!r}")
     if "flow" in effects:
         if coupling_cfg["interface"] is None:
             raise coupling.error("interface", "missing: the solid boundary the fluid pressure acts on")
@@ -214,13 +246,46 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
             raise t.error("z", "give the expected displacement of at least one component (x, y or z)")
         check["tolerance"] = t.number("tolerance", positive=True)
 
+    contact = _contact(path, data.get("contact"), solid, effects, solver_cfg["solid"])
+
     out = Table(path, "output", data.get("output", {}), TABLES["output"])
     output_dir = output_directory(case_dir, out, output)
     return CoupledScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
                         effects=effects, solid=solid, fluid=fluid, material=material,
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
-                        output={"every": out.integer("every", 1)}, check=check, flow=flow)
+                        output={"every": out.integer("every", 1)}, check=check, flow=flow,
+                        contact=contact)
+
+
+def _contact(path, data, solid: SolidGeometry, effects, solid_solver: dict) -> dict | None:
+    """[contact]: the two contact boundaries and the nonsmooth solver (effect 'contact')."""
+    if data is None:
+        if "contact" in effects:
+            raise SceneError(f"{path}: [contact] slave: missing: the effect 'contact' needs a [contact] table "
+                             f"with slave and master boundaries")
+        return None
+    t = Table(path, "contact", data, TABLES["contact"])
+    if "contact" not in effects:
+        raise t.error("slave", "a [contact] table needs the effect 'contact' in [physics] effects")
+    for other in ("flow", "dynamics"):
+        if other in effects:
+            raise SceneError(f"{path}: [physics] effects: 'contact' with '{other}' is not supported "
+                             f"(contact is static: load steps over [time] steps)")
+    if solid_solver["participant"] != "solid_fenicsx" or solid_solver["ranks"] != 1 or solid_solver["degree"] != 1:
+        raise SceneError(f"{path}: [solvers.solid]: contact needs participant solid_fenicsx, ranks = 1, degree = 1")
+    cfg = {"slave": t.string("slave"), "master": t.string("master"),
+           "solver": t.string("solver", "active_set", CONTACT_SOLVERS),
+           "tolerance": t.number("tolerance", 1e-10, positive=True),
+           "max_iterations": t.integer("max_iterations", 100),
+           "search_distance": t.number("search_distance", None, positive=True),
+           "max_normal_angle": t.number("max_normal_angle", 45.0, positive=True, maximum=90.0)}
+    for key in ("slave", "master"):
+        if cfg[key] not in solid.boundaries:
+            raise t.error(key, f"unknown boundary {cfg[key]!r}; named boundaries: {', '.join(solid.boundaries)}")
+    if cfg["slave"] == cfg["master"]:
+        raise t.error("master", f"the same boundary as slave ({cfg['slave']!r}): contact is between two bodies")
+    return cfg
 
 
 def _interface(coupling: Table):
@@ -311,9 +376,15 @@ def _flow(path, data, fluid: FluidGeometry | None, effects) -> dict:
                              f"faces sets {', '.join(sides)}")
         if face not in sides:
             raise SceneError(f"{where}: unknown face; use one of {', '.join(sides)}")
+        if isinstance(condition, dict):  # an open face: { pressure = p } (Pa), e.g. where a moving body leaves the grid
+            if set(condition) != {"pressure"} or isinstance(condition["pressure"], bool) \
+                    or not isinstance(condition["pressure"], (int, float)):
+                raise SceneError(f"{where}: a table condition is {{ pressure = p }} (Pa), got {condition!r}")
+            faces[face] = {"pressure": float(condition["pressure"])}
+            continue
         if condition not in FACE_CONDITIONS:
             raise SceneError(f"{where}: unknown condition {condition!r}; use one of "
-                             f"{', '.join(map(repr, FACE_CONDITIONS))}")
+                             f"{', '.join(map(repr, FACE_CONDITIONS))} or {{ pressure = p }}")
         faces[face] = condition
     for axis, (lo, hi) in ((1, ("ymin", "ymax")), (2, ("zmin", "zmax"))):
         a, b = faces.get(lo, walls), faces.get(hi, walls)
@@ -379,9 +450,11 @@ def _solver(path, part, data, participants, default) -> dict:
         cfg["pressure"] = t.number("pressure", 0.0)
         cfg["feedback"] = t.number("feedback", 0.0)
     if part == "fluid" and cfg["participant"] == "openfoam":
-        if cfg["ranks"] != 1:
-            raise t.error("ranks", f"the openfoam participant runs on one rank for now (decomposed runs are "
-                                   f"not available yet), got {cfg['ranks']}")
+        # one participant process; the solver runs decomposed on `ranks` MPI ranks (fluid_openfoam/parallel.py)
+        cfg["solver_ranks"], cfg["ranks"] = cfg["ranks"], 1
+        cfg["decomposition"] = t.string("decomposition", "simple", DECOMPOSITIONS)
+        if "decomposition" in t.data and cfg["solver_ranks"] == 1:
+            raise t.error("decomposition", "applies to a parallel fluid (ranks > 1) only")
         cfg["penalization"] = t.string("penalization", "wall", PENALIZATIONS)
         cfg["penalization_exponent"] = t.number("penalization_exponent", 2.0, positive=True)
         if "penalization_exponent" in t.data and cfg["penalization"] != "power":
@@ -389,4 +462,7 @@ def _solver(path, part, data, participants, default) -> dict:
         cfg["drag"] = t.number("drag", None, positive=True)
         cfg["max_iterations"] = t.integer("max_iterations", 2000)
         cfg["tolerance"] = t.number("tolerance", 1e-7, positive=True)
+        cfg["substeps"] = t.integer("substeps", 1)
+        cfg["outer_correctors"] = t.integer("outer_correctors", 50)
+        cfg["solid_velocity"] = t.string("solid_velocity", "bodies", ("bodies", "none"))
     return cfg

@@ -30,7 +30,7 @@ class WettedInterface:
     method = "surface trace"
 
     def __init__(self, S, triangles: np.ndarray, G: StructuredGrid, where: str = "[geometry.fluid]",
-                 points=None):
+                 points=None, depth: float = 1.0, partial: bool = False):
         triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
         self.num_points = S.num_points
         self.vertices, local = np.unique(triangles, return_inverse=True)
@@ -47,11 +47,13 @@ class WettedInterface:
             raise CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel "
                                f"(a folded surface)")
         self.normals = normals / length[:, None]
+        self.points = points  # the wall: the interface vertices where the solid is now
         # half the cell's extent along the normal, scaled so that it is half the cell diagonal on
         # a cubic grid: 0.5 sqrt(3) |(n_i h_i)|; on anisotropic grids (thin cells across a fracture)
         # a vertical normal moves by 0.87 h_z, not by half the long diagonal
         h = np.asarray(G.spacing, float)
-        self.offsets = 0.5 * np.sqrt(3.0) * np.linalg.norm(self.normals * h[None, :], axis=1)
+        # (times `depth`: deeper surfaces sample the near-wall velocity profile, coupler/viscous.py)
+        self.offsets = depth * 0.5 * np.sqrt(3.0) * np.linalg.norm(self.normals * h[None, :], axis=1)
         self.offset = float(self.offsets.max())
         moved = points + self.offsets[:, None] * self.normals
         # a vertex on a face of the grid's box (e.g. a fracture face meeting the inlet) stays on it
@@ -74,7 +76,8 @@ class WettedInterface:
                 first = f"; first at {np.array2string(moved[self.transfer.uncovered[0]], precision=6)}"
         except NoOverlapError:
             pass
-        if uncovered:
+        # partial (the deeper velocity samples of coupler/viscous.py): vertices outside the grid read NaN
+        if uncovered == len(self.vertices) or (uncovered and not partial):
             raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled "
                                f"up to {self.offset:.3g} m outside the solid ({uncovered} of {len(self.vertices)} "
                                f"vertices outside the grid{first}): extend the grid beyond the wetted boundary")
@@ -96,8 +99,9 @@ class WettedInterface:
         return self.transfer.apply(pressure)
 
     def to_solid_vertices(self, x) -> np.ndarray:
-        """The interface pressure at all solid vertices (zero off the interface)."""
-        full = np.zeros(self.num_points)
+        """The interface pressure (nv,) or traction (nv, 3) at all solid vertices (zero off the interface)."""
+        x = np.asarray(x)
+        full = np.zeros((self.num_points,) + x.shape[1:])
         full[self.vertices] = x
         return full
 
@@ -133,6 +137,11 @@ class VolumeInterface:
                 "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
 
 
+#: depths of the velocity samples beyond the pressure's surface (traction 'full'), in units of its
+#: offset: 1.2 offsets = 1.04 cells apart along a grid axis, so consecutive samples lie in different cells
+DEPTHS = (2.2, 3.4)
+
+
 class SolidOnGrid:
     """The solid as the fluid sees it, from the solid's current shape (two-way coupling).
 
@@ -145,11 +154,19 @@ class SolidOnGrid:
     unchanged since the last build, and always with ``deform=False`` or the volume fallback.
     The interface vector keeps its size and vertex order (one value per interface vertex),
     so accelerators see the same unknowns; the residual norm uses the undeformed weights.
+    With ``traction="full"`` (the viscous stress too, :mod:`coupler.viscous`) the surfaces
+    ``deeper`` sample the fluid further from the wall (``DEPTHS`` times the pressure's offset).
     """
 
-    def __init__(self, S, G: StructuredGrid, triangles, where: str, deform: bool = True):
+    def __init__(self, S, G: StructuredGrid, triangles, where: str, deform: bool = True,
+                 traction: str = "pressure"):
         self.S, self.G, self.where = S, G, where
         self.triangles = None if triangles is None or not len(triangles) else np.asarray(triangles)
+        if traction == "full" and self.triangles is None:
+            raise CouplerError(f"{where}: [coupling] traction = 'full' needs the solid's wetted boundary "
+                               f"triangles (the viscous stress acts on a surface); this solid gives none")
+        self.traction = traction
+        self.deeper = []
         self.deform = bool(deform) and self.triangles is not None
         self.threshold = 1e-12 * float(np.min(G.spacing))
         self.builds, self.build_seconds, self.skipped = 0, 0.0, 0
@@ -176,6 +193,8 @@ class SolidOnGrid:
         if self.triangles is not None:
             interface = WettedInterface(self.S, self.triangles, self.G, self.where,
                                         points=None if u is None else S.points)
+            if self.traction == "full":
+                self.deeper = [self._deeper(depth, None if u is None else S.points) for depth in DEPTHS]
         else:
             if self.outside > 1e-9:
                 raise CouplerError(f"{self.where}: the fluid grid does not cover the solid "
@@ -184,6 +203,14 @@ class SolidOnGrid:
         self.to_fluid, self.fraction, self.interface = to_fluid, volumes / self.G.cell_measures(), interface
         self.builds += 1
         self.build_seconds += time.perf_counter() - start
+
+    def _deeper(self, depth: float, points):
+        """A deeper sampling surface, or None where it leaves the grid entirely (a thin channel)."""
+        try:
+            return WettedInterface(self.S, self.triangles, self.G, self.where, points=points, depth=depth,
+                                   partial=True)
+        except CouplerError:
+            return None
 
     def update(self, u) -> bool:
         """Rebuild from the displacement u (num_points, 3) if it changed; True if rebuilt."""

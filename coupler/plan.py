@@ -77,8 +77,6 @@ def make_plan(scene: CoupledScene) -> Plan:
     unknown = [e for e in scene.effects if e not in EFFECTS]
     if unknown:
         raise SceneError(f"{scene.path}: [physics] effects: unknown {unknown}")
-    if "contact" in scene.effects:
-        raise scene.error("physics", "effects", "'contact' (mortar contact, paper 2.2) is not available yet")
     solid_cfg = scene.solvers["solid"]
     participants = [PlannedParticipant("solid", solid_cfg["participant"], solid_cfg["module"], solid_cfg["ranks"])]
     couplings = []
@@ -95,23 +93,43 @@ def make_plan(scene: CoupledScene) -> Plan:
                             f"Q0 (fluid grid) -> P1 on the wetted boundary '{scene.coupling['interface']}' moved "
                             f"half a fluid cell into the fluid, pseudo_l2 trace (solids without boundary "
                             f"triangles: Q0 -> P1 on all solid vertices)", "steps 2-3"),
+            *([PlannedCoupling("fluid.velocity", "solid.traction",
+                               "viscous wall shear mu du_t/dn: Q0 velocity traced on the pressure's surface and "
+                               "two deeper ones, quadratic through the three samples (coupler/viscous.py)",
+                               "steps 2-3")] if scene.coupling.get("traction") == "full" else []),
             PlannedCoupling("solid.velocity", "fluid.solid_velocity",
                             "P1 (solid mesh) -> Q0 (fluid cells), pseudo_l2", "step 6"),
         ]
         c = scene.coupling
-        quasi = ", quasi-static: steady simpleFoam and a static solid per step" \
-            if fluid_cfg["participant"] == "openfoam" and "dynamics" not in scene.effects else ""
+        quasi = ""
+        if fluid_cfg["participant"] == "openfoam":
+            quasi = (f", transient: pimpleFoam over each step ({fluid_cfg['substeps']} time step"
+                     f"{'s' * (fluid_cfg['substeps'] > 1)}) and an elastodynamic solid"
+                     if "dynamics" in scene.effects else ", quasi-static: steady simpleFoam and a static solid per step")
         iteration = (f"{scene.time['steps']} time steps of {scene.time['dt']:g} s{quasi}; implicit fixed point per "
                      f"step ({c['acceleration']}, tolerance {c['tolerance']:g}, at most {c['max_iterations']} "
                      f"iterations)")
     notes = []
+    if scene.contact is not None:
+        c = scene.contact
+        couplings.append(PlannedCoupling(f"solid.{c['master']}", f"solid.{c['slave']}",
+                                         "P1 -> P1 mortar projection T = D^-1 B, dual basis on the slave "
+                                         "(pseudo_l2, surface segmentation)", "contact, eq. 9-11"))
+        steps = scene.time["steps"]
+        iteration = (f"contact: {steps} load step{'s' * (steps > 1)} (loads ramped linearly, each step starts "
+                     f"from the last), {c['solver']} on the transformed system of eq. 10 per step")
     if "flow" in scene.effects and scene.solvers["fluid"]["participant"] == "openfoam":
-        notes.append("openfoam: the solid velocity is not applied (penalization towards rest)"
-                     + ("" if scene.coupling.get("deformation", True) else
-                        "; [coupling] deformation = false: the solid fraction comes from the undeformed solid"))
-        if "dynamics" in scene.effects:
-            notes.append("openfoam runs simpleFoam (steady) per time step: the fluid is quasi-static even "
-                         "with 'dynamics'")
+        velocity = ("openfoam: the solid velocity is applied per solid body (a rigid translation with the mean "
+                    "velocity of its wetted cells; rotation and deformation within a body are not)"
+                    if scene.solvers["fluid"]["solid_velocity"] == "bodies" else
+                    "openfoam: the solid velocity is not applied (penalization towards rest)")
+        notes.append(velocity + ("" if scene.coupling.get("deformation", True) else
+                                 "; [coupling] deformation = false: the solid fraction comes from the undeformed solid"))
+        fluid_cfg = scene.solvers["fluid"]
+        if fluid_cfg["solver_ranks"] > 1:
+            notes.append(f"openfoam: the fluid solver runs on {fluid_cfg['solver_ranks']} MPI ranks "
+                         f"({fluid_cfg['decomposition']} decomposition by decomposePar once; fields written and "
+                         f"read per processor, no reconstructPar)")
     if scene.material["nu"] > 0.49 and solid_cfg.get("degree", 1) == 1:
         notes.append(f"nu = {scene.material['nu']:g} is nearly incompressible: P1 tetrahedra lock; "
                      f"use [solvers.solid] degree = 2")

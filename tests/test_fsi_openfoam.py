@@ -121,7 +121,10 @@ BAD_FLOW = [
      "integer >= 1"),
     ("\n[flow]\ninlet_pressure = 1.0\n[solvers.fluid]\ntolerance = -1.0\n", "[solvers.fluid] tolerance",
      "must be positive"),
-    ("\n[flow]\ninlet_pressure = 1.0\n[solvers.fluid]\nranks = 4\n", "[solvers.fluid] ranks", "one rank"),
+    ("\n[flow]\ninlet_pressure = 1.0\n[solvers.fluid]\nranks = 2\ndecomposition = \"scotch\"\n",
+     "[solvers.fluid] decomposition", "unknown value 'scotch'"),
+    ("\n[flow]\ninlet_pressure = 1.0\n[solvers.fluid]\ndecomposition = \"simple\"\n",
+     "[solvers.fluid] decomposition", "ranks > 1"),
     ("\n[flow]\ninlet_pressure = 1.0\n[solvers.fluid]\npenalization_exponent = 3.0\n",
      "[solvers.fluid] penalization_exponent", '"power" only'),
 ]

@@ -135,10 +135,11 @@ def test_bad_scenes_name_file_key_and_reason(tmp_path, capsys, effects, extra, w
     assert err.startswith("varcouple: error: ") and "Traceback" not in err
 
 
-def test_contact_is_refused_until_it_exists(tmp_path):
-    scene = load(write(tmp_path, scene_text('["elasticity", "contact"]')))
-    with pytest.raises(SceneError, match=r"\[physics\] effects: 'contact'"):
-        make_plan(scene)
+def test_contact_needs_its_table(tmp_path):
+    """The effect 'contact' exists now (tests/test_contact_scene.py); without a [contact]
+    table naming the two boundaries the scene is refused."""
+    with pytest.raises(SceneError, match=r"\[contact\] slave: missing: the effect 'contact' needs a \[contact\]"):
+        load(write(tmp_path, scene_text('["elasticity", "contact"]')))
 
 
 def test_missing_supports_are_an_error(tmp_path):
