@@ -4,22 +4,18 @@ phases, the load average, and the 2-rank velocity equals the 1-rank one."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
-from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parent.parent / "bench" / "fsi.py"
+from vc_helpers import load_bench
 
 
 @pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil.which("mpirun") is None,
                     reason="OpenFOAM or mpirun not installed")
 def test_quick_run_writes_goals_and_phases(tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location("bench_fsi", BENCH)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_bench("fsi")
     out = tmp_path / "fsi.json"
     bench.main(["--quick", "-o", str(out)])
     printed = capsys.readouterr().out

@@ -3,21 +3,16 @@ TCP and shared memory; the JSON has every size, both round trip and one way, and
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parent.parent / "bench" / "messaging.py"
+from vc_helpers import load_bench
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_messaging", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_bench("messaging")
 
 
 def test_quick_run_writes_the_table(bench, tmp_path, capsys):

@@ -1,21 +1,17 @@
 """Smoke run of the contact benchmark (bench/contact.py --quick): both problems, both
 solvers, every figure in the JSON, the solvers agreeing on the same problems."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-pytest.importorskip("gmsh")
+from vc_helpers import load_bench
 
-BENCH = Path(__file__).resolve().parent.parent / "bench" / "contact.py"
+pytest.importorskip("gmsh")
 
 
 def test_quick_run_writes_every_figure(tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location("bench_contact", BENCH)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_bench("contact")
     out = tmp_path / "c.json"
     bench.main(["--quick", "-o", str(out)])
     printed = capsys.readouterr().out

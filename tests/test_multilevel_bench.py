@@ -3,17 +3,13 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
-BENCH = Path(__file__).resolve().parent.parent / "bench" / "multilevel.py"
+from vc_helpers import load_bench
 
 
 def test_quick_run_writes_every_figure(tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location("bench_multilevel", BENCH)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_bench("multilevel")
     out = tmp_path / "m.json"
     returned = bench.main(["--quick", "-o", str(out)])
     printed = capsys.readouterr().out

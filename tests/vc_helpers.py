@@ -1,9 +1,11 @@
-"""Helpers shared by the transfer tests (independent of the library where it matters:
-geometry and quadrature here are written from scratch, not taken from `transfer`)."""
+"""Helpers shared by the tests (for the transfer tests, independent of the library where it
+matters: geometry and quadrature here are written from scratch, not taken from `transfer`)."""
 
 from __future__ import annotations
 
+import importlib.util
 from itertools import combinations
+from pathlib import Path
 
 import numpy as np
 
@@ -11,6 +13,16 @@ from transfer import Mesh
 
 #: shift of the partially overlapping target box (tests/conftest.py: shifted_tets)
 SHIFT = np.array([0.37, 0.21, -0.13])
+
+
+# -- benchmarks ---------------------------------------------------------------
+def load_bench(name: str):
+    """The module bench/NAME.py (benchmarks are scripts, not a package), for smoke runs of --quick."""
+    path = Path(__file__).resolve().parent.parent / "bench" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 # -- fields ------------------------------------------------------------------
