@@ -1,5 +1,5 @@
 """Nonsmooth multilevel benchmark (issue 6, paper section 4.3, figure 14 left): the cube of
-cases/cube_obstacle on 2 to 5 levels, solved by the truncated nonsmooth multigrid on the
+cases/cube_obstacle_large on 2 to 5 levels, solved by the truncated nonsmooth multigrid on the
 semi-geometric hierarchy, by the primal-dual active set method with CG + GAMG and by PETSc's
 SNES VI, on the same problems in the same run. Prints a table, writes JSON and a PNG of the
 multigrid's convergence histories.
@@ -32,10 +32,11 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from nonsmooth.multilevel import asymptotic_rate  # noqa: E402
-from nonsmooth.obstacle_case import build, load, options, plot_convergence  # noqa: E402
+from coupler.obstacle_case import build, options, plot_convergence  # noqa: E402
+from coupler.scene import load  # noqa: E402
 from nonsmooth.solvers import solve  # noqa: E402
 
-CASE = ROOT / "cases" / "cube_obstacle"
+CASE = ROOT / "cases" / "cube_obstacle_large"
 #: paper figure 14 (left): dofs per level count, about 10 more iterations per added level
 PAPER = {"dofs": {2: 1107, 3: 7395, 4: 53955, 5: 412035}, "iterations_per_added_level": 10}
 GOALS = {"max_added_iterations_per_level": 2, "max_asymptotic_rate": 0.3,
@@ -47,7 +48,7 @@ def _relative(x, ref) -> float:
     return float(np.linalg.norm(x - ref) / np.linalg.norm(ref))
 
 
-def run_level(problem: dict, levels: int, cells: int, baselines, threads: int) -> dict:
+def run_level(problem, levels: int, cells: int, baselines, threads: int) -> dict:
     _, _, _, qp, hierarchy, setup = build(problem, levels, cells, threads)
     ml = solve(qp, "multilevel", **options(problem, hierarchy))
     row = {"levels": levels, "cells": cells, "dofs": qp.size, "paper_dofs": PAPER["dofs"].get(levels),
@@ -110,10 +111,10 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     levels = [2, 3] if args.quick else args.levels
     problem = load(CASE)
-    cells = dict(zip(problem["levels"], problem["cells"]))
+    cells = dict(zip(problem.levels, problem.cells))
     unknown = [lv for lv in levels if lv not in cells]
     if unknown:
-        parser.error(f"levels {unknown} are not in {CASE.name}/problem.toml (has {sorted(cells)})")
+        parser.error(f"levels {unknown} are not in {CASE.name}/scene.toml (has {sorted(cells)})")
     load_start = list(os.getloadavg())
     print(f"cube obstacle, {os.cpu_count()} CPUs, load average {load_start}")
     out = Path(args.output)
@@ -141,7 +142,7 @@ def _write(out: Path, rows, args, levels, load_start, complete: bool) -> dict:
                  "load_average_at_start": load_start, "load_average_at_end": list(os.getloadavg()),
                  "shared_machine_note": "other engineers load the machine; single runs, not over-interpreted"},
         "args": {"levels": levels, "quick": args.quick, "baselines": args.baselines, "threads": args.threads},
-        "complete": complete, "case": "cases/cube_obstacle/problem.toml",
+        "complete": complete, "case": "cases/cube_obstacle_large/scene.toml",
         "criterion": "step length ||x_k+1 - x_k||_2 < 1e-12", "paper": PAPER, "goals": _goals(rows), "rows": rows,
         "figure": png.name,
     }
