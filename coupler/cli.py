@@ -103,11 +103,15 @@ def check(args: argparse.Namespace) -> int:
     from . import scene as scenes
 
     scene = scenes.load(args.case)
+    study = scenes.study_module(scene)
     print(f"scene         {scene.path}: valid")
     if isinstance(scene, scenes.TransferScene):
         print(f"transfer      {scene.source.name} -> {scene.target.name}: field {scene.field!r}, "
               f"methods {', '.join(scene.methods)}")
         print("participants  none (a transfer runs in the coupler, no solver is started)")
+    elif study is not None:
+        for line in study.plan_lines(scene):
+            print(line)
     else:
         from .plan import make_plan
 
@@ -130,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     scene = scenes.load(args.case, output=args.output)
+    study = scenes.study_module(scene)
 
     def log(line):
         print(line, flush=True)
@@ -139,9 +144,12 @@ def run(args: argparse.Namespace) -> int:
 
         run_transfer(scene, log=log)
     else:
-        from .coupled_run import run as run_coupled_case
+        if study is not None:
+            summary = study.run(scene, log=log)
+        else:
+            from .coupled_run import run as run_coupled_case
 
-        summary = run_coupled_case(scene, log=log)
+            summary = run_coupled_case(scene, log=log)
         if not summary.get("check", {}).get("passed", True):
             log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}; the [check] FAILED")
             return 1

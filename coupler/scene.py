@@ -12,6 +12,7 @@ the table and key, and the reason::
 from __future__ import annotations
 
 import ast
+import importlib
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -218,6 +219,17 @@ def evaluate_expression(text: str, points: np.ndarray) -> np.ndarray:
     return np.broadcast_to(np.asarray(value, dtype=np.float64), x.shape).copy()
 
 
+# Scenes that are studies run inside the coupler process (no participants), recognised by
+# a marker table: marker -> module. Each module provides ``parse(path, case_dir, data,
+# output)`` -> a scene with ``path`` and ``output_dir``, ``plan_lines(scene)`` -> the plan
+# as text (``varcouple check``) and ``run(scene, log)`` -> the summary dict (a failed
+# ``[check]`` is ``summary["check"]["passed"] == False``).
+STUDIES = {
+    "plates": "coupler.plates_case",  # immersed parallel plates against the cubic law
+    "obstacle": "coupler.obstacle_case",  # a body pressed onto a plane, nonsmooth multilevel
+}
+
+
 def load(case, output: str | Path | None = None):
     """Read and validate the scene of `case` (a case directory or its scene.toml):
     a :class:`TransferScene` or a :class:`coupler.coupled_scene.CoupledScene`.
@@ -234,15 +246,24 @@ def load(case, output: str | Path | None = None):
         from .coupled_scene import parse
 
         return parse(path, case_dir, data, output)
+    for marker, module in STUDIES.items():
+        if marker in data:
+            return importlib.import_module(module).parse(path, case_dir, data, output)
     return _load_transfer(path, case_dir, data, output)
+
+
+def study_module(scene):
+    """The module of a study scene (one of :data:`STUDIES`), or None for coupled and transfer scenes."""
+    module = type(scene).__module__
+    return importlib.import_module(module) if module in STUDIES.values() else None
 
 
 def _load_transfer(path: Path, case_dir: Path, data: dict, output) -> TransferScene:
     for table, value in data.items():
         if table not in KEYS:
             raise SceneError(f"{path}: unknown table [{table}]; known tables: "
-                             f"{', '.join(f'[{t}]' for t in KEYS)} (a transfer scene) or [physics] "
-                             f"and the tables of a coupled scene")
+                             f"{', '.join(f'[{t}]' for t in KEYS)} (a transfer scene), [physics] "
+                             f"and the tables of a coupled scene, or a study's {', '.join(f'[{m}]' for m in STUDIES)}")
     if "transfer" not in data:
         raise SceneError(f"{path}: [transfer]: missing table (keys: {', '.join(KEYS['transfer'])})")
     tr = Table(path, "transfer", data["transfer"], KEYS["transfer"])
