@@ -1,7 +1,10 @@
 """Fracture closure under normal stress (paper 4.1, figures 6-10): two rock blocks
 around a synthetic self-affine fracture (:mod:`transfer.fracture`), meshed on
 different lattices (the lower face ``ratio`` times finer: non-matching faces), closed
-by frictionless mortar contact (:class:`Contact`).
+by frictionless mortar contact (:class:`Contact`). The specimen is a square box or,
+as in the paper, a cylinder: the square lattice mapped onto a disc by the concentric
+map (:func:`square_to_disc`) after the rough faces are built, so the face heights stay
+the generator's functions of the lattice's (x, y).
 
 Loading: the bottom face rests on a fixed platen and the top face is moved down
 by a rigid platen (both platens hold the faces laterally, which removes the rigid
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from transfer.fracture import FACE_TAGS, fracture_blocks, fracture_pair, surface_mean
+from transfer.mesh import Mesh
 
 from .contact import Contact
 from .elasticity import Elasticity
@@ -30,9 +34,10 @@ from .mesh import from_arrays
 class Specimen:
     """The parameters of a fracture closure specimen (SI units)."""
 
-    shape: tuple = (16, 16, 5)  # lattice of the lower (slave) block: nx, ny, layers per block
+    shape: str = "box"  # or "cylinder" (paper 4.1)
+    lattice: tuple = (16, 16, 5)  # lattice of the lower (slave) block: nx, ny, layers per block
     ratio: int = 2  # the upper (master) face's lattice is `ratio` times coarser
-    size: float = 0.1  # side of the square specimen [m]
+    size: float = 0.1  # side of the square, or diameter of the cylinder [m]
     height: float = 0.04  # each block's thickness [m]
     aperture: float = 2.0e-4  # mean initial aperture [m]
     rms: float = 2.0e-4  # RMS roughness of each face [m]
@@ -43,14 +48,39 @@ class Specimen:
     E: float = 1.0e10
     nu: float = 0.33
 
+    def __post_init__(self):
+        if self.shape not in SHAPES:
+            raise ValueError(f"specimen shape {self.shape!r}: use one of {', '.join(SHAPES)}")
+
+    @property
+    def area(self) -> float:
+        """Cross-section: size^2, or pi (size / 2)^2 for the cylinder."""
+        return self.size ** 2 if self.shape == "box" else np.pi * (self.size / 2) ** 2
+
+
+SHAPES = ("box", "cylinder")
+
+
+def square_to_disc(x, y):
+    """Shirley's concentric map of the square [-1, 1]^2 onto the unit disc: the square
+    of half-side m = max(|x|, |y|) goes to the circle of radius m, uniformly in angle
+    along each side. Continuous, piecewise smooth, with the constant Jacobian pi/4
+    (equal-area: no cell inverts or collapses; shapes shear towards the square's corners)."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    wide = np.abs(x) >= np.abs(y)
+    radius = np.where(wide, x, y)  # signed: a negative radius turns the angle by pi
+    safe = np.where(radius != 0, radius, 1.0)
+    angle = np.where(wide, np.pi / 4 * y / safe, np.pi / 2 - np.pi / 4 * x / safe)
+    return radius * np.cos(angle), radius * np.sin(angle)
+
 
 def specimen_mesh(spec: Specimen):
     """The two blocks as one dolfinx mesh with boundaries bottom, top, fracture_lower,
     fracture_upper (and the sides); the lower face is the fine one."""
-    nx, ny, nz = spec.shape
+    nx, ny, nz = spec.lattice
     r = int(spec.ratio)
     if nx % r or ny % r:
-        raise ValueError(f"shape {spec.shape} is not divisible by ratio {r}")
+        raise ValueError(f"lattice {spec.lattice} is not divisible by ratio {r}")
     size = (spec.size, spec.size)
     lower, upper = fracture_pair((nx, ny), size, aperture=spec.aperture, hurst=spec.hurst, rms=spec.rms,
                                  mismatch_length=spec.mismatch_length, seed=spec.seed,
@@ -62,6 +92,11 @@ def specimen_mesh(spec: Specimen):
     offset = len(fine.points)
     points = np.concatenate([fine.points, coarse.points])
     cells = np.concatenate([fine.cells, coarse.cells + offset])
+    if spec.shape == "cylinder":
+        half = spec.size / 2
+        x, y = square_to_disc(points[:, 0] / half - 1, points[:, 1] / half - 1)
+        points[:, 0], points[:, 1] = half * (1 + x), half * (1 + y)
+        Mesh(points, cells, "tetra", name=f"cylindrical specimen {spec.lattice}")  # raises on a bad cell
     tris, tags = [], []
     for block, shift in ((fine, 0), (coarse, offset)):
         for name, faces in block.faces.items():
@@ -84,7 +119,7 @@ class ClosureTest:
         aperture = self.heights[1] - self.heights[0]
         self.contact = Contact(s, "fracture_lower", "fracture_upper", solver=solver,
                                search_distance=2.0 * float(aperture.max()) + spec.rms, **options)
-        self.area = spec.size ** 2
+        self.area = spec.area
         m = self.contact.mortar
         self.weights = np.where(m.covered, m.weights, 0.0)
         self.initial_aperture = self._mean(m.gap)

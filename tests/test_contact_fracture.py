@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from nonsmooth import NonsmoothSolveError
-from solid_fenicsx.contact_fracture import ClosureTest, Specimen, bandis_fit
+from solid_fenicsx.contact_fracture import ClosureTest, Specimen, bandis_fit, specimen_mesh, square_to_disc
 
-SMALL = dict(shape=(8, 8, 3))
+SMALL = dict(lattice=(8, 8, 3))
 
 
 def check_state(test, state, stress):
@@ -27,8 +27,9 @@ def check_state(test, state, stress):
     assert state.solution.converged and state.solution.info["monotone_from"] is None
 
 
-def test_loading_curve_stiffens():
-    test = ClosureTest(Specimen(**SMALL))
+@pytest.mark.parametrize("shape", ["box", "cylinder"])
+def test_loading_curve_stiffens(shape):
+    test = ClosureTest(Specimen(**SMALL, shape=shape))
     rows = []
     for mpa in (1, 2, 5, 10, 20):
         state, row = test.load_to(mpa * 1e6, rtol=5e-3)
@@ -43,6 +44,51 @@ def test_loading_curve_stiffens():
     assert closure[-1] < test.initial_aperture
     fit = bandis_fit(stress, closure)
     assert fit["k_ni"] > 0 and closure[-1] < fit["d_max"] < test.initial_aperture
+
+
+def test_square_to_disc_is_equal_area_onto_the_disc():
+    """The square's boundary lands on the unit circle, uniformly in angle along each
+    side; the Jacobian (finite differences, off the diagonals) is pi/4 everywhere."""
+    t = np.linspace(-1, 1, 9)
+    for x, y in ((t, np.ones(9)), (t, -np.ones(9)), (np.ones(9), t), (-np.ones(9), t)):
+        X, Y = square_to_disc(x, y)
+        assert np.allclose(np.hypot(X, Y), 1.0)
+        assert np.allclose(np.diff(np.unwrap(np.arctan2(Y, X))), np.diff(np.unwrap(np.arctan2(Y, X)))[0])
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-1, 1, (2, 200))
+    x, y = x[np.abs(np.abs(x) - np.abs(y)) > 1e-3], y[np.abs(np.abs(x) - np.abs(y)) > 1e-3]
+    h = 1e-6
+    dxx, dyx = (np.subtract(square_to_disc(x + h, y), square_to_disc(x - h, y))) / (2 * h)
+    dxy, dyy = (np.subtract(square_to_disc(x, y + h), square_to_disc(x, y - h))) / (2 * h)
+    assert np.allclose(dxx * dyy - dxy * dyx, np.pi / 4, rtol=1e-6)
+    assert np.allclose(square_to_disc(0.0, 0.0), 0.0)
+
+
+def test_cylinder_specimen_mesh_is_valid():
+    """Positive tet volumes, a circular outline of the specimen's radius, the volume of
+    the cylinder, the contact faces still non-matching; mean stress over pi r^2."""
+    spec = Specimen(lattice=(8, 8, 3), shape="cylinder", size=0.122)
+    solid, _ = specimen_mesh(spec)
+    x = solid.mesh.geometry.x
+    p = x[solid.mesh.geometry.dofmap.array.reshape(-1, 4)]
+    a, b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
+    volume = np.abs(np.einsum("ij,ij->i", a, np.cross(b, c))) / 6
+    assert volume.min() > 1e-4 * volume.mean()
+    radius = np.hypot(x[:, 0] - 0.061, x[:, 1] - 0.061)
+    assert radius.max() == pytest.approx(0.061, rel=1e-12)
+    height = x[:, 2].max() - x[:, 2].min()
+    # the polygonal outline (32 chords) holds a little less than the cylinder
+    assert volume.sum() == pytest.approx(np.pi * 0.061 ** 2 * height, rel=0.02)
+    assert spec.area == pytest.approx(np.pi * 0.061 ** 2)
+    test = ClosureTest(spec)
+    m = test.contact.mortar
+    assert len(m.slave.nodes) == 81 and len(m.master.nodes) == 25
+    assert test.area == spec.area
+
+
+def test_unknown_shape_is_a_clear_error():
+    with pytest.raises(ValueError, match="specimen shape 'sphere': use one of box, cylinder"):
+        Specimen(shape="sphere")
 
 
 def test_bandis_fit_recovers_its_own_law():
@@ -64,7 +110,7 @@ def test_20_mpa_near_full_closure_in_one_step():
 
 
 def test_mesh_size_ratio_5_to_1():
-    test = ClosureTest(Specimen(shape=(15, 15, 2), ratio=5))
+    test = ClosureTest(Specimen(lattice=(15, 15, 2), ratio=5))
     assert len(test.contact.mortar.slave.nodes) == 16 * 16 and len(test.contact.mortar.master.nodes) == 4 * 4
     state, _ = test.load_to(10e6, rtol=5e-3)
     check_state(test, state, 10e6)
@@ -81,7 +127,7 @@ def test_nearly_flat_faces_close_everywhere():
 def test_very_rough_faces_touch_in_many_patches():
     """RMS 1 mm against a 0.2 mm mean aperture and a short mismatch length: many small
     contact patches (starting interpenetrated where the faces cross)."""
-    spec = Specimen(shape=(16, 16, 3), rms=1e-3, aperture=2e-4, mismatch_length=0.005, min_aperture=1e-6)
+    spec = Specimen(lattice=(16, 16, 3), rms=1e-3, aperture=2e-4, mismatch_length=0.005, min_aperture=1e-6)
     test = ClosureTest(spec)
     state, _ = test.load_to(5e6, rtol=5e-3)
     check_state(test, state, 5e6)
