@@ -64,8 +64,10 @@ SHAPES = ("box", "cylinder")
 def square_to_disc(x, y):
     """Shirley's concentric map of the square [-1, 1]^2 onto the unit disc: the square
     of half-side m = max(|x|, |y|) goes to the circle of radius m, uniformly in angle
-    along each side. Continuous, piecewise smooth, with the constant Jacobian pi/4
-    (equal-area: no cell inverts or collapses; shapes shear towards the square's corners)."""
+    along each side. Continuous, piecewise smooth (kinks on the diagonals), with the
+    constant Jacobian pi/4 (equal-area: cell volumes scale uniformly). Cells on the
+    diagonals get an angle near 180 degrees: where the lattice's diagonal edges cross the
+    ray, tets flatten to a quality of about pi / (2 n) at the outline (n cells across)."""
     x, y = np.asarray(x, float), np.asarray(y, float)
     wide = np.abs(x) >= np.abs(y)
     radius = np.where(wide, x, y)  # signed: a negative radius turns the angle by pi
