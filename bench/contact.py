@@ -2,13 +2,14 @@
 (vinewtonrsls, CG + BoomerAMG) on the same transformed contact problems (paper eq. 10-11).
 
 Hertz (cases/hertz: half-sphere on a block, contact cells h = 0.06, 0.04, 0.025 m) and the
-rough fracture (cases/fracture_closure: lattices 8, 16, 24 per side, upper face 2x coarser)
-at three refinements, each in load steps that start from the previous step (Hertz:
-platen displacement 0.02 m in 3 steps; fracture: 0.08 .. 0.32 mm in 4 steps, about 2 to
-20 MPa). Per level and solver: dofs, iterations per load step, Krylov iterations, wall
-time, and the largest difference between the two solvers' displacements. The active set
-method is also run with BoomerAMG (the AMG SNES VI has to use: GAMG fails inside
-vinewtonrsls in PETSc 3.18), to tell the method's share of the speed-up from the AMG's.
+rough fracture (the box specimen of solid_fenicsx.contact_fracture, 0.1 m side; lattices 8,
+16, 24 per side, upper face 2x coarser) at three refinements, each in load steps that start
+from the previous step (Hertz: platen displacement 0.02 m in 3 steps; fracture: 0.08 ..
+0.32 mm in 4 steps, about 2 to 20 MPa). Per level and solver: dofs, iterations per load
+step, Krylov iterations, wall time, and the largest difference between the two solvers'
+displacements. The active set method is also run with BoomerAMG (the AMG SNES VI has to
+use: GAMG fails inside vinewtonrsls in PETSc 3.18), to tell the method's share of the
+speed-up from the AMG's.
 
 Goals (issue 5): active-set iterations per load step that do not grow with refinement
 (finest level's largest count at most the coarsest's + 1); time to solution at least 2x
@@ -72,7 +73,7 @@ def hertz_level(tmp, h, steps) -> dict:
 def fracture_level(shape, displacements) -> dict:
     out = {"shape": list(shape)}
     for name, (solver, options) in SOLVERS.items():
-        test = ClosureTest(Specimen(shape=shape), solver=solver, **options)
+        test = ClosureTest(Specimen(lattice=shape), solver=solver, **options)  # the box specimen
         out[name] = load_steps(test.contact, test.platen, displacements)
     return out
 

@@ -227,6 +227,7 @@ def evaluate_expression(text: str, points: np.ndarray) -> np.ndarray:
 STUDIES = {
     "plates": "coupler.plates_case",  # immersed parallel plates against the cubic law
     "obstacle": "coupler.obstacle_case",  # a body pressed onto a plane, nonsmooth multilevel
+    "closure": "coupler.closure_case",  # fracture closure under normal stress, mortar contact
 }
 
 
