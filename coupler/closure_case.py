@@ -20,8 +20,7 @@ import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from .errors import SceneError
-from .scene import Table, output_directory
+from .scene import Table, check_tables, output_directory
 
 #: [closure] key -> one-line description (also the list of allowed keys); cases/README.md
 CLOSURE_KEYS = {
@@ -62,28 +61,13 @@ class ClosureScene:
     output_dir: Path
 
 
-def _stresses(t: Table, key: str, default, within=None) -> list[float]:
-    value = t.data.get(key, default)
-    if (not isinstance(value, list) or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)
-            or within is None and not value):
-        raise t.error(key, f"must be a {'non-empty ' * (within is None)}list of numbers [MPa], got {value!r}")
-    value = [float(v) for v in value]
-    if within is None and (min(value) <= 0 or any(b <= a for a, b in zip(value, value[1:]))):
-        raise t.error(key, f"must be positive and increasing, got {value!r}")
-    if within is not None and any(v not in within for v in value):
-        raise t.error(key, f"{value!r}: every value must be one of stresses {within!r}")
-    return value
-
 
 def parse(path: Path, case_dir: Path, data: dict, output=None) -> ClosureScene:
     """Validate a ``[closure]`` scene (already read from TOML)."""
     from nonsmooth.solvers import available
     from solid_fenicsx.contact_fracture import SHAPES, Specimen
 
-    for name in data:
-        if name not in TABLES:
-            raise SceneError(f"{path}: unknown table [{name}]; known tables of a [closure] scene: "
-                             f"{', '.join(f'[{t}]' for t in TABLES)}")
+    check_tables(path, data, TABLES, "a [closure] scene")
     case = Table(path, "case", data.get("case", {}), TABLES["case"])
     t = Table(path, "closure", data["closure"], CLOSURE_KEYS)
     d = {f.name: f.default for f in fields(Specimen)}
@@ -99,11 +83,11 @@ def parse(path: Path, case_dir: Path, data: dict, output=None) -> ClosureScene:
                     nu=t.number("nu", d["nu"], minimum=0.0, maximum=0.499))
     if spec.min_aperture >= spec.aperture:
         raise t.error("min_aperture", f"{spec.min_aperture:g} m must be below the mean aperture {spec.aperture:g} m")
-    stresses = _stresses(t, "stresses", None)
+    stresses = t.numbers("stresses", positive=True, increasing=True)
     out = Table(path, "output", data.get("output", {}), TABLES["output"])
     return ClosureScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
-                        specimen=spec, stresses=stresses, faces_at=_stresses(t, "faces_at", [], stresses),
-                        von_mises_at=_stresses(t, "von_mises_at", [], stresses),
+                        specimen=spec, stresses=stresses, faces_at=t.numbers("faces_at", [], within=stresses),
+                        von_mises_at=t.numbers("von_mises_at", [], within=stresses),
                         solver=t.string("solver", "active_set", tuple(available())),
                         tolerance=t.number("tolerance", 5e-3, positive=True, maximum=0.1),
                         output_dir=output_directory(case_dir, out, output))
@@ -114,7 +98,7 @@ def plan_lines(scene: ClosureScene) -> list[str]:
     s = scene.specimen
     nx, ny, nz = s.lattice
     outline = f"cylinder, diameter {s.size:g} m" if s.shape == "cylinder" else f"box, side {s.size:g} m"
-    return [f"study         fracture closure under normal stress (paper 4.1), solid alone, mortar contact",
+    return ["study         fracture closure under normal stress (paper 4.1), solid alone, mortar contact",
             f"specimen      {outline}, two blocks {s.height:g} m thick; E {s.E:g} Pa, nu {s.nu:g}",
             f"fracture      self-affine, Hurst {s.hurst:g}, RMS {s.rms:g} m per face, mean aperture {s.aperture:g} m, "
             f"seed {s.seed}",

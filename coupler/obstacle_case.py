@@ -26,8 +26,7 @@ from transfer.fracture import fracture_blocks, rough_surface
 from transfer.grid import StructuredGrid
 from transfer.mesh import lattice_tetrahedra
 
-from .errors import SceneError
-from .scene import Table, output_directory
+from .scene import Table, check_tables, output_directory
 
 #: table -> key -> one-line description (also the list of allowed keys); cases/README.md
 TABLES = {
@@ -75,35 +74,27 @@ class ObstacleScene:
     output_dir: Path
 
 
-def _int_list(table: Table, key: str, entry) -> list:
-    value = table.data.get(key)
-    if not isinstance(value, list) or not value or not all(entry(v) for v in value):
-        raise table.error(key, f"must be a non-empty list ({table.keys[key]}), got {value!r}")
-    return value
-
-
 def parse(path: Path, case_dir: Path, data: dict, output=None) -> ObstacleScene:
     """Validate an ``[obstacle]`` scene (already read from TOML); SceneError naming file, table and key."""
-    for name in data:
-        if name not in TABLES:
-            raise SceneError(f"{path}: unknown table [{name}]; known tables of an [obstacle] scene: "
-                             f"{', '.join(f'[{t}]' for t in TABLES)}")
+    check_tables(path, data, TABLES, "an [obstacle] scene")
     t = {name: Table(path, name, data.get(name, {}), keys) for name, keys in TABLES.items()}
     body, h, s = t["body"], t["hierarchy"], t["solver"]
     shape = body.string("shape", choices=("cube", "rock"))
-    is_int = lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1
     if shape == "cube":
-        cells, size = _int_list(body, "cells", is_int), body.number("size", positive=True)
+        cells, size = body.numbers("cells", integer=True, minimum=1), body.number("size", positive=True)
     else:
-        cells = _int_list(body, "cells", lambda v: isinstance(v, list) and len(v) == 3 and all(map(is_int, v)))
+        cells = body.data.get("cells")
+        if not isinstance(cells, list) or not cells or any(
+                not isinstance(c, list) or len(c) != 3 or any(isinstance(n, bool) or not isinstance(n, int) or n < 1
+                                                              for n in c) for c in cells):
+            raise body.error("cells", f"must be a non-empty list of [nx, ny, nz] lists of positive integers, "
+                                      f"got {cells!r}")
         size = body.vector("size")
         if min(size) <= 0:
             raise body.error("size", f"must be positive, got {size}")
-    levels = _int_list(h, "levels", lambda v: is_int(v) and v >= 2)
+    levels = h.numbers("levels", integer=True, minimum=2)  # distinct: the outputs are named by it
     if len(levels) != len(cells):
         raise h.error("levels", f"{len(levels)} entries but [body] cells has {len(cells)}: one each per run")
-    if len(set(levels)) != len(levels):
-        raise h.error("levels", f"a value is listed twice in {levels!r} (the outputs are named by it)")
     return ObstacleScene(
         path=path, case_dir=case_dir, description=t["case"].string("description", None) or "", shape=shape,
         size=size, cells=cells, rms=body.number("rms", 0.0, minimum=0.0), hurst=body.number("hurst", 0.8),

@@ -23,8 +23,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import SceneError
-from .scene import Table, output_directory
+from .scene import Table, check_tables, output_directory
 
 #: table -> key -> one-line description (also the list of allowed keys); cases/README.md
 TABLES = {
@@ -60,27 +59,12 @@ class PlatesScene:
     output_dir: Path
 
 
-def _numbers(t: Table, key: str, default, integer=False, minimum=None, below=None) -> list:
-    value = t.data.get(key, default)
-    kind = int if integer else (int, float)
-    if (not isinstance(value, list) or not value
-            or any(isinstance(v, bool) or not isinstance(v, kind) for v in value)):
-        raise t.error(key, f"must be a non-empty list of {'integers' if integer else 'numbers'}, got {value!r}")
-    if minimum is not None and min(value) < minimum or below is not None and max(value) >= below:
-        raise t.error(key, f"values must lie in [{minimum}, {below if below is not None else 'inf'}), got {value!r}")
-    if len(set(value)) != len(value):
-        raise t.error(key, f"a value is listed twice in {value!r}")
-    return list(value)
-
 
 def parse(path: Path, case_dir: Path, data: dict, output=None) -> PlatesScene:
     """Validate a ``[plates]`` scene (already read from TOML)."""
     from fluid_openfoam.plates import METHODS, Plates
 
-    for name in data:
-        if name not in TABLES:
-            raise SceneError(f"{path}: unknown table [{name}]; known tables of a [plates] scene: "
-                             f"{', '.join(f'[{t}]' for t in TABLES)}")
+    check_tables(path, data, TABLES, "a [plates] scene")
     case = Table(path, "case", data.get("case", {}), TABLES["case"])
     geo = Table(path, "plates", data["plates"], TABLES["plates"])
     materials = Table(path, "materials", data.get("materials", {}), TABLES["materials"])
@@ -91,11 +75,11 @@ def parse(path: Path, case_dir: Path, data: dict, output=None) -> PlatesScene:
                     mu=water.number("viscosity", default=1e-3, positive=True),
                     rho=water.number("density", default=1000.0, positive=True))
     study = Table(path, "study", data.get("study", {}), TABLES["study"])
-    cells = _numbers(study, "cells_across", None, integer=True, minimum=1)
+    cells = study.numbers("cells_across", integer=True, minimum=1)
     methods = study.strings("methods", ["wall"], choices=METHODS)
     if not methods:
         raise study.error("methods", f"name at least one of {', '.join(METHODS)}")
-    offsets = _numbers(study, "offsets", [0.3], minimum=0.0, below=1.0)
+    offsets = study.numbers("offsets", [0.3], minimum=0.0, below=1.0)
     solvers = Table(path, "solvers", data.get("solvers", {}), TABLES["solvers"])
     fluid = Table(path, "solvers.fluid", solvers.data.get("fluid", {}), SOLVER_KEYS)
     solver = {"tolerance": fluid.number("tolerance", 1e-7, positive=True),

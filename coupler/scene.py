@@ -155,6 +155,30 @@ class Table:
             raise self.error(key, f"must be a list of 3 positive integers, got {value!r}")
         return list(value)
 
+    def numbers(self, key, default=_REQUIRED, integer=False, positive=False, minimum=None, below=None,
+                increasing=False, within=None):
+        """A list of numbers (integers with `integer`), distinct, in [minimum, below) (and > 0 with
+        `positive`); with `increasing` strictly increasing; with `within` each one of those values
+        (may then be empty)."""
+        value = self._value(key, default)
+        kind = int if integer else (int, float)
+        if (not isinstance(value, list) or not value and within is None
+                or any(isinstance(v, bool) or not isinstance(v, kind) for v in value)):
+            raise self.error(key, f"must be a {'non-empty ' * (within is None)}list of "
+                                  f"{'integers' if integer else 'numbers'}, got {value!r}")
+        if value and (minimum is not None and min(value) < minimum or below is not None and max(value) >= below):
+            raise self.error(key, f"values must lie in [{minimum}, {below if below is not None else 'inf'}), "
+                                  f"got {value!r}")
+        if positive and value and not min(value) > 0:
+            raise self.error(key, f"values must be positive, got {value!r}")
+        if len(set(value)) != len(value):
+            raise self.error(key, f"a value is listed twice in {value!r}")
+        if increasing and any(b <= a for a, b in zip(value, value[1:])):
+            raise self.error(key, f"must be increasing, got {value!r}")
+        if within is not None and any(v not in within for v in value):
+            raise self.error(key, f"{value!r}: every value must be one of {list(within)!r}")
+        return list(value) if integer else [float(v) for v in value]
+
     def file(self, key, case_dir: Path) -> Path:
         """A file named relative to the case directory, which must exist."""
         name = self.string(key)
@@ -251,6 +275,14 @@ def load(case, output: str | Path | None = None):
         if marker in data:
             return importlib.import_module(module).parse(path, case_dir, data, output)
     return _load_transfer(path, case_dir, data, output)
+
+
+def check_tables(path: Path, data: dict, tables, kind: str) -> None:
+    """SceneError unless every table of `data` is one of `tables` (a scene of `kind`)."""
+    for name in data:
+        if name not in tables:
+            raise SceneError(f"{path}: unknown table [{name}]; known tables of {kind}: "
+                             f"{', '.join(f'[{t}]' for t in tables)}")
 
 
 def study_module(scene):
