@@ -13,15 +13,22 @@ images of the projections restricted to what the fine mesh sees.
 Vector fields (displacements, ``block_size`` components per node, node-major:
 ``x[block_size * node + component]``) use the block prolongation
 ``kron(P, I_block_size)``.
+
+A mesh of several bodies (connected components of the tet graph, e.g. the two
+bodies of a contact problem) gets one set of grids per body
+(:func:`per_body_hierarchy`, block-diagonal prolongations), as in Krause's and
+Dickopf's contact multigrid: a grid enclosing both bodies has coarse functions
+spanning the gap, which tie the bodies together in the coarse spaces.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from transfer import FunctionSpace, Mesh, StructuredGrid, Transfer
 
@@ -41,6 +48,8 @@ class Hierarchy:
     ``prolongations[l]`` maps level ``l`` to level ``l + 1`` (rows: dofs of the
     finer level, columns: kept dofs of the coarser); ``grids[l]`` is the grid of
     coarse level ``l`` and ``kept[l]`` its nodes that survive the dropping.
+    A hierarchy of several bodies (:func:`per_body_hierarchy`) has no grids of
+    its own: ``bodies`` holds each body's hierarchy and ``body_nodes`` its fine nodes.
     """
 
     prolongations: list[sp.csr_matrix]
@@ -48,6 +57,8 @@ class Hierarchy:
     kept: list[np.ndarray]
     block_size: int
     seconds: float = 0.0
+    bodies: list["Hierarchy"] = field(default_factory=list)
+    body_nodes: list[np.ndarray] = field(default_factory=list)
 
     @property
     def levels(self) -> int:
@@ -63,7 +74,7 @@ class Hierarchy:
         rotation of contact nodes to normal/tangential coordinates, paper eq. 10): the
         finest prolongation becomes ``Q^T P``."""
         fine = sp.csr_matrix(Q.T @ self.prolongations[-1])
-        return Hierarchy(self.prolongations[:-1] + [fine], self.grids, self.kept, self.block_size, self.seconds)
+        return replace(self, prolongations=self.prolongations[:-1] + [fine])
 
     def galerkin(self, A: sp.spmatrix) -> list[sp.csr_matrix]:
         """Coarse operators ``A_{l} = P_l^T A_{l+1} P_l``, coarsest first, ending with A."""
@@ -125,3 +136,39 @@ def semi_geometric_hierarchy(points: np.ndarray, tets: np.ndarray, levels: int, 
     eye = sp.identity(block_size, format="csr")
     prolongations = [sp.kron(P, eye, format="csr") for P in reversed(scalar)]
     return Hierarchy(prolongations, grids, kept[::-1], block_size, time.perf_counter() - start)
+
+
+def connected_bodies(num_points: int, tets: np.ndarray) -> np.ndarray:
+    """The body (connected component of the tet mesh) of each of `num_points` nodes."""
+    tets = np.asarray(tets, dtype=np.int64)
+    rows = np.repeat(tets, 4, axis=1).ravel()
+    cols = np.tile(tets, (1, 4)).ravel()
+    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), (num_points, num_points))
+    return connected_components(graph, directed=False)[1]
+
+
+def per_body_hierarchy(points: np.ndarray, tets: np.ndarray, levels: int, coarse_shape=(2, 2, 2), *,
+                       margin: float = 0.0, block_size: int = 3, nthreads: int = 1) -> Hierarchy:
+    """:func:`semi_geometric_hierarchy` built separately for every connected body of
+    the mesh (its own enclosing grids), joined with block-diagonal prolongations, so
+    no coarse function couples two bodies; one body gives the plain hierarchy."""
+    points, tets = np.asarray(points, dtype=float), np.asarray(tets, dtype=np.int64)
+    body = connected_bodies(len(points), tets)
+    if body.max() == 0:
+        return semi_geometric_hierarchy(points, tets, levels, coarse_shape, margin=margin, block_size=block_size,
+                                        nthreads=nthreads)
+    start = time.perf_counter()
+    parts, nodes = [], []
+    local = np.empty(len(points), dtype=np.int64)
+    for b in range(body.max() + 1):
+        on = np.flatnonzero(body == b)
+        local[on] = np.arange(on.size)
+        parts.append(semi_geometric_hierarchy(points[on], local[tets[body[tets[:, 0]] == b]], levels, coarse_shape,
+                                              margin=margin, block_size=block_size, nthreads=nthreads))
+        nodes.append(on)
+    prolongations = [sp.block_diag([h.prolongations[l] for h in parts], format="csr") for l in range(levels - 1)]
+    dofs = (block_size * np.concatenate(nodes)[:, None] + np.arange(block_size)).ravel()
+    row_of = np.empty(dofs.size, dtype=np.int64)
+    row_of[dofs] = np.arange(dofs.size)  # global fine dof -> row of the body-ordered block
+    prolongations[-1] = prolongations[-1][row_of]
+    return Hierarchy(prolongations, [], [], block_size, time.perf_counter() - start, parts, nodes)

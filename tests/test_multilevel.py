@@ -12,7 +12,8 @@ import scipy.sparse as sp
 from scipy.optimize import lsq_linear
 
 from nonsmooth import BoundConstrainedQP
-from nonsmooth.hierarchy import HierarchyError, enclosing_grids, semi_geometric_hierarchy
+from nonsmooth.hierarchy import (HierarchyError, connected_bodies, enclosing_grids, per_body_hierarchy,
+                                 semi_geometric_hierarchy)
 from nonsmooth.multilevel import solve_multilevel
 from nonsmooth.obstacle import box_obstacle, p1_elasticity_stiffness, rigid_body_modes
 from nonsmooth.smoothers import csr_int32, projected_gauss_seidel
@@ -61,6 +62,33 @@ def test_coarse_dofs_without_support_on_the_fine_mesh_are_dropped():
     assert np.all(np.any((p < -spacing + 1e-12) | (p > 1 + spacing - 1e-12), axis=1))
     for P in H.prolongations:
         assert np.all(abs(P).sum(axis=0) > 0)
+
+
+def test_per_body_hierarchy_has_no_coarse_function_on_two_bodies():
+    """Two boxes 0.1 apart (a contact pair): each gets its own grids, so every coarse
+    function lives on one body, and each body's affine field is carried exactly."""
+    grid = StructuredGrid.from_bounds([0, 0, 0], [1, 1, 0.5], [4, 4, 2])
+    tets = lattice_tetrahedra(grid.shape)
+    upper = grid.points * [0.8, 0.8, 1.0] + [0.1, 0.1, 0.6]  # the upper body, a smaller box
+    points = np.vstack([upper, grid.points])  # upper body first: fine rows are permuted back
+    tets = np.vstack([tets, tets + len(grid.points)])
+    body = connected_bodies(len(points), tets)
+    assert np.array_equal(body, np.repeat([0, 1], len(grid.points)))
+    H = per_body_hierarchy(points, tets, 3, 2, block_size=1)
+    assert len(H.bodies) == 2 and H.sizes[0] == sum(h.sizes[0] for h in H.bodies)
+    chain = H.prolongations[-1] @ H.prolongations[0]
+    columns_on = [np.diff((abs(chain[body == b]).tocsc() > 0).indptr) > 0 for b in (0, 1)]
+    assert not np.any(columns_on[0] & columns_on[1]) and np.all(columns_on[0] | columns_on[1])
+    f = [lambda p: 1.0 + p[:, 0] - 2 * p[:, 2], lambda p: -3.0 + 0.5 * p[:, 1]]
+    u = np.concatenate([fb(h.grids[0].points[h.kept[0]]) for fb, h in zip(f, H.bodies)])
+    for P in H.prolongations:
+        u = P @ u
+    expected = np.where(body == 0, f[0](points), f[1](points))
+    np.testing.assert_allclose(u, expected, atol=1e-12)
+    # one body: the plain hierarchy
+    single = per_body_hierarchy(grid.points, lattice_tetrahedra(grid.shape), 3, 2, block_size=1)
+    plain = semi_geometric_hierarchy(grid.points, lattice_tetrahedra(grid.shape), 3, 2, block_size=1)
+    assert not single.bodies and all((a != b).nnz == 0 for a, b in zip(single.prolongations, plain.prolongations))
 
 
 def test_p1_stiffness_passes_the_patch_test():
