@@ -177,14 +177,16 @@ class Contact:
         return BoundConstrainedQP(A, b, lower, upper, block_size=3, near_nullspace=self._nullspace)
 
     def multilevel_hierarchy(self, levels: int = 3, coarse_shape=(2, 2, 2)):
-        """The semi-geometric hierarchy (paper 2.4, :mod:`nonsmooth.hierarchy`) of the mesh
-        for the transformed unknowns: its finest prolongation times P^-1 (x = P^-1 u)."""
-        from nonsmooth.hierarchy import Hierarchy, semi_geometric_hierarchy
+        """The semi-geometric hierarchy (paper 2.4, :mod:`nonsmooth.hierarchy`), one set of
+        grids per body, for the transformed unknowns: its finest prolongation times P^-1
+        (x = P^-1 u)."""
+        from dataclasses import replace
+
+        from nonsmooth.hierarchy import per_body_hierarchy
 
         tets = np.asarray(self.elasticity.V.dofmap.list.array).reshape(-1, 4)
-        h = semi_geometric_hierarchy(self.points, tets, levels, coarse_shape, block_size=3)
-        return Hierarchy(h.prolongations[:-1] + [sp.csr_matrix(self.P_inverse @ h.prolongations[-1])], h.grids,
-                         h.kept, h.block_size, h.seconds)
+        h = per_body_hierarchy(self.points, tets, levels, coarse_shape, block_size=3)
+        return replace(h, prolongations=h.prolongations[:-1] + [sp.csr_matrix(self.P_inverse @ h.prolongations[-1])])
 
     def solve(self) -> ContactState:
         """Solve with the current loads, starting from the last solution (load stepping)."""
