@@ -30,6 +30,13 @@ def _rel_max(err_local: float, ref_local: float, comm: MPI.Comm) -> float:
 
 
 # -- block compression ----------------------------------------------------------
+def add_rollers(s: Elasticity) -> None:
+    """Rollers on the three lower box faces: u_x = 0 on xmin, u_y = 0 on ymin, u_z = 0 on
+    zmin (no rigid motion and no other restraint)."""
+    for axis in "xyz":
+        s.add_dirichlet(f"{axis}min", 0.0, components=axis)
+
+
 def block_exact(x: np.ndarray, E: float, nu: float, p: float) -> np.ndarray:
     """Exact displacement (n, 3) of the block under pressure p on top, on rollers
     at x=0, y=0, z=0: uniaxial stress sigma_zz = -p."""
@@ -53,9 +60,7 @@ def block_compression(E: float = 1e9, nu: float = 0.3, p: float = 1e6, size=(1.0
     t0 = time.perf_counter()
     solid = solid or box_mesh(upper=size, shape=shape, comm=comm)
     s = Elasticity(solid, E=E, nu=nu, degree=degree, solver=solver, rtol=rtol)
-    s.add_dirichlet("zmin", 0.0, components="z")
-    s.add_dirichlet("xmin", 0.0, components="x")
-    s.add_dirichlet("ymin", 0.0, components="y")
+    add_rollers(s)
     s.add_pressure("zmax", p)
     s.solve_static()
     x = s.V.tabulate_dof_coordinates()
@@ -153,9 +158,7 @@ def penny_crack(a: float = 0.1, E: float = 10e9, nu: float = 0.25, p: float = 1e
     t0 = time.perf_counter()
     solid = penny_crack_mesh(a, extent, h_tip, growth, comm)
     s = Elasticity(solid, E=E, nu=nu, degree=degree, solver=solver, rtol=rtol)
-    s.add_dirichlet("zmin", 0.0, components="z")
-    s.add_dirichlet("xmin", 0.0, components="x")
-    s.add_dirichlet("ymin", 0.0, components="y")
+    add_rollers(s)
     s.add_pressure("crack", p)
     s.solve_static()
     r = np.linspace(0.0, profile_rmax * a, samples)
@@ -195,9 +198,7 @@ def bar_oscillation(E: float = 1e9, density: float = 2000.0, fluid_density: floa
     solid = box_mesh(upper=(length, width, width), shape=(cells, 1, 1), comm=comm)
     s = Elasticity(solid, Material(E, 0.0, density), scheme=scheme, rho_inf=rho_inf,
                    fluid_density=fluid_density, solver=solver, rtol=1e-14)
-    s.add_dirichlet("xmin", 0.0, components="x")
-    s.add_dirichlet("ymin", 0.0, components="y")
-    s.add_dirichlet("zmin", 0.0, components="z")
+    add_rollers(s)
     traction = s.add_traction("xmax", (load, 0.0, 0.0))
     s.solve_static()
     traction.value[:] = 0.0  # release
