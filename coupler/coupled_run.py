@@ -49,7 +49,7 @@ from .plan import Plan, make_plan
 from .progress import ProgressBar
 from .interface import SolidOnGrid, WettedInterface
 from .viscous import FluidTraction, traction_figures
-from .protocol import Field
+from .protocol import CONTACT_STATS, Field
 from .results import Series, check_displacement, residual_plot, write_summary
 
 
@@ -295,9 +295,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             series["solid"].write(window.index, window.t_end, point_data=solid_fields)
             phases.add("output", time.perf_counter() - start)
         stats = last["solid"].get("contact_stats")
-        if stats is not None:  # figures of the contact solve (solid_fenicsx/participant.py CONTACT_STATS)
-            from solid_fenicsx.participant import CONTACT_STATS
-
+        if stats is not None:  # figures of the contact solve (protocol.CONTACT_STATS)
             record["contact"] = dict(zip(CONTACT_STATS, (float(v) for v in stats)))
         if "traction" in last:  # how much the viscous part matters ([coupling] traction = "full")
             record["traction"] = last["traction"]

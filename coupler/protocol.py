@@ -36,6 +36,9 @@ ALIGN = 64
 _LEN = struct.Struct("<Q")
 #: numpy kinds that may travel: bool, signed/unsigned int, float, complex.
 _KINDS = "biufc"
+#: The figures of a contact step a solid returns as the field ``contact_stats``, in this order.
+CONTACT_STATS = ("iterations", "krylov_iterations", "seconds", "active_nodes", "area_fraction", "max_pressure",
+                 "force_x", "force_y", "force_z", "min_gap")
 #: Header keys :func:`check_reply` compares between a request and its reply.
 MATCH_KEYS = ("run_id", "participant", "verb", "window", "iteration")
 

@@ -20,16 +20,13 @@ import numpy as np
 from mpi4py import MPI
 
 from coupler.participant import Participant
-from coupler.protocol import Field
+from coupler.protocol import CONTACT_STATS, Field
 from coupler.scene import evaluate_expression
 
 from .elasticity import Elasticity
 from .mesh import BOX_FACES, from_arrays, read_mesh
 
 _AXES = {"x": 0, "y": 1, "z": 2}
-#: the figures of a contact step returned as the field ``contact_stats`` (in this order)
-CONTACT_STATS = ("iterations", "krylov_iterations", "seconds", "active_nodes", "area_fraction", "max_pressure",
-                 "force_x", "force_y", "force_z", "min_gap")
 
 
 def _face_predicate(face: str, lower, upper):
@@ -191,9 +188,12 @@ class SolidParticipant(Participant):
         pressure.x.array[nodes] = state.pressure
         gap.x.array[nodes] = np.nan_to_num(state.gap, nan=0.0)
         stats = state.summary()
-        figures = [stats["iterations"], stats["krylov_iterations"], stats["phase_seconds"]["solve"], stats["active_nodes"],
-                   stats["area_fraction"], stats["max_pressure"], *state.force, stats["min_gap"]]
-        return {"contact_pressure": pressure, "gap": gap, "contact_stats": np.array(figures, float)}
+        figures = {"iterations": stats["iterations"], "krylov_iterations": stats["krylov_iterations"],
+                   "seconds": stats["phase_seconds"]["solve"], "active_nodes": stats["active_nodes"],
+                   "area_fraction": stats["area_fraction"], "max_pressure": stats["max_pressure"],
+                   **dict(zip(("force_x", "force_y", "force_z"), state.force)), "min_gap": stats["min_gap"]}
+        return {"contact_pressure": pressure, "gap": gap,
+                "contact_stats": np.array([figures[k] for k in CONTACT_STATS], float)}
 
     def save_state(self, window):
         self.states[int(window)] = self.solver.save_state()

@@ -77,7 +77,7 @@ def test_solid_participant_ramps_the_load_with_contact():
     scene = load(HERTZ)
     p, outs = _advance(participant_config(scene, "solid"), 2)
     assert p.contact is not None
-    from solid_fenicsx.participant import CONTACT_STATS
+    from coupler.protocol import CONTACT_STATS
 
     stats = [dict(zip(CONTACT_STATS, o["contact_stats"].data)) for o in outs]
     assert stats[0]["force_z"] > 0 and stats[1]["force_z"] > 2 * stats[0]["force_z"]  # a stiffening contact
