@@ -16,6 +16,7 @@ from coupler.cli import main
 from fluid_openfoam.case import CaseSpec
 from fluid_openfoam.parallel import simple_split
 from fluid_openfoam.solver import OpenFOAMSolver, time_dirs
+from vc_helpers import copy_case
 
 ROOT = Path(__file__).resolve().parents[1]
 needs_mpi_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil.which("mpirun") is None
@@ -91,17 +92,6 @@ def test_two_ranks_give_the_serial_fields(tmp_path):
 SMALL = ROOT / "cases" / "small_fracture"
 
 
-def copy_case(tmp_path: Path, name: str, replace: dict) -> Path:
-    case = tmp_path / name
-    shutil.copytree(SMALL, case, ignore=shutil.ignore_patterns("results"))
-    scene = (case / "scene.toml").read_text()
-    for old, new in replace.items():
-        assert old in scene, old
-        scene = scene.replace(old, new)
-    (case / "scene.toml").write_text(scene)
-    return case
-
-
 @needs_mpi_foam
 def test_coupled_small_fracture_with_two_fluid_ranks(tmp_path, capsys):
     """small_fracture, one step, fluid on 2 ranks: the plan says so, the run converges and
@@ -109,8 +99,8 @@ def test_coupled_small_fracture_with_two_fluid_ranks(tmp_path, capsys):
     results = {}
     for ranks in (1, 2):
         extra = f"\nranks = {ranks}\ndecomposition = \"simple\"" if ranks > 1 else ""
-        case = copy_case(tmp_path, f"r{ranks}", {"steps = 2": "steps = 1",
-                                                 'participant = "openfoam"': f'participant = "openfoam"{extra}'})
+        case = copy_case(SMALL, tmp_path / f"r{ranks}",
+                         {"steps = 2": "steps = 1", 'participant = "openfoam"': f'participant = "openfoam"{extra}'})
         if ranks > 1:
             assert main(["check", str(case)]) == 0
             printed = capsys.readouterr().out

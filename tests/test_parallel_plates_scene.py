@@ -15,20 +15,10 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
+from vc_helpers import copy_case
 
 CASE = Path(__file__).resolve().parents[1] / "cases" / "parallel_plates"
 needs_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")
-
-
-def scene_copy(tmp_path: Path, replace: dict) -> Path:
-    case = tmp_path / "plates"
-    case.mkdir()
-    text = (CASE / "scene.toml").read_text()
-    for old, new in replace.items():
-        assert old in text, old
-        text = text.replace(old, new)
-    (case / "scene.toml").write_text(text)
-    return case
 
 
 def test_check_prints_the_study(capsys):
@@ -50,7 +40,7 @@ def test_check_prints_the_study(capsys):
     ("tolerance = 1.0e-7", "tolerance = 1.0e-7\nranks = 2", "[solvers.fluid] ranks: unknown key"),
 ])
 def test_bad_keys_are_named(tmp_path, capsys, old, new, message):
-    case = scene_copy(tmp_path, {old: new})
+    case = copy_case(CASE, tmp_path, {old: new})
     assert main(["check", str(case)]) == 2
     err = capsys.readouterr().err
     assert message in err and "scene.toml" in err, err
@@ -58,8 +48,8 @@ def test_bad_keys_are_named(tmp_path, capsys, old, new, message):
 
 @needs_foam
 def test_run_writes_the_study(tmp_path, capsys):
-    case = scene_copy(tmp_path, {"cells_across = [4, 8, 16, 32]": "cells_across = [4, 8]",
-                                 "offsets = [0.0, 0.25, 0.5, 0.75]": "offsets = [0.0, 0.3]"})
+    case = copy_case(CASE, tmp_path, {"cells_across = [4, 8, 16, 32]": "cells_across = [4, 8]",
+                                      "offsets = [0.0, 0.25, 0.5, 0.75]": "offsets = [0.0, 0.3]"})
     assert main(["run", str(case)]) == 0, capsys.readouterr().err
     out = case / "results"
     s = json.loads((out / "summary.json").read_text())
@@ -84,10 +74,10 @@ def test_run_writes_the_study(tmp_path, capsys):
 
 @needs_foam
 def test_failed_check_exits_1(tmp_path, capsys):
-    case = scene_copy(tmp_path, {"cells_across = [4, 8, 16, 32]": "cells_across = [4]",
-                                 'methods = ["wall", "binary"]': 'methods = ["wall"]',
-                                 "offsets = [0.0, 0.25, 0.5, 0.75]": "offsets = [0.0]",
-                                 "cells_across = 8\n": "cells_across = 4\n"})
+    case = copy_case(CASE, tmp_path, {"cells_across = [4, 8, 16, 32]": "cells_across = [4]",
+                                      'methods = ["wall", "binary"]': 'methods = ["wall"]',
+                                      "offsets = [0.0, 0.25, 0.5, 0.75]": "offsets = [0.0]",
+                                      "cells_across = 8\n": "cells_across = 4\n"})
     assert main(["run", str(case)]) == 1
     out = capsys.readouterr().out
     assert "check: worst error +12.5" in out and "FAIL" in out
