@@ -107,9 +107,8 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
         return config
     solver = scene.solvers["fluid"]
     g = scene.fluid
-    material = scene.fluid_material or {"density": 1000.0, "viscosity": 1e-3}
     config = {"grid": {"origin": g.origin, "spacing": g.spacing, "shape": g.shape}, "location": "cells",
-              "material": material, "rho": material["density"], "mu": material["viscosity"]}
+              "rho": scene.fluid_material["density"], "mu": scene.fluid_material["viscosity"]}
     if solver["participant"] == "replay_fluid":
         config.update(pressure=solver["pressure"], feedback=solver["feedback"])
     if solver["participant"] == "openfoam":
@@ -202,7 +201,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         full = scene.coupling["traction"] == "full"  # the viscous stress too (coupler/viscous.py)
         on_grid = SolidOnGrid(S, G, triangles, f"{scene.path}: [geometry.fluid]",
                               deform=scene.coupling["deformation"], traction=scene.coupling["traction"])
-        traction = FluidTraction((scene.fluid_material or {"viscosity": 1e-3})["viscosity"]) if full else None
+        traction = FluidTraction(scene.fluid_material["viscosity"]) if full else None
         interface = on_grid.interface
         summary["interface"] = {**interface.describe(), "traction": scene.coupling["traction"]}
         if isinstance(interface, WettedInterface):

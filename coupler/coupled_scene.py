@@ -71,7 +71,7 @@ class CoupledScene:
     solid: SolidGeometry
     fluid: FluidGeometry | None
     material: dict  # E, nu, density
-    fluid_material: dict | None  # density, viscosity
+    fluid_material: dict  # density, viscosity (water if the scene gives none)
     loads: list[Load]
     solvers: dict  # "solid": {...}, "fluid": {...}
     time: dict  # dt, steps
@@ -183,12 +183,10 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                  {"E": "Young's modulus [Pa]", "nu": "Poisson ratio", "density": "[kg/m^3]"})
     material = {"E": rock.number("E", positive=True), "nu": rock.number("nu", minimum=-0.99, maximum=0.4999999),
                 "density": rock.number("density", default=2600.0, positive=True)}
-    fluid_material = None
-    if "fluid" in materials.data:
-        water = Table(path, "materials.fluid", materials.data["fluid"],
-                      {"density": "[kg/m^3]", "viscosity": "dynamic viscosity [Pa s]"})
-        fluid_material = {"density": water.number("density", default=1000.0, positive=True),
-                          "viscosity": water.number("viscosity", default=1e-3, positive=True)}
+    water = Table(path, "materials.fluid", materials.data.get("fluid", {}),  # water unless the scene says
+                  {"density": "[kg/m^3]", "viscosity": "dynamic viscosity [Pa s]"})
+    fluid_material = {"density": water.number("density", default=1000.0, positive=True),
+                      "viscosity": water.number("viscosity", default=1e-3, positive=True)}
 
     loads = _loads(path, data.get("loads", []), solid, effects)
 
