@@ -284,8 +284,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             start = time.perf_counter()
             solid_fields = {k: v for k, v in last["solid"].items() if k != "contact_stats"}
             if coupled:  # the coupled load: the pressure, or with traction 'full' the traction vector
-                solid_fields["traction" if full else "pressure"] = interface.to_solid_vertices(
-                    x.reshape(-1, 3) if full else x)
+                solid_fields.update(_as_arrays(to_solid(x)))
                 fluid_fields = {"pressure": last["fluid"]["pressure"], "solid_fraction": last["fraction"],
                                 "solid_velocity": last["fluid_in"]}
                 if "velocity" in last["fluid"]:
@@ -320,7 +319,6 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         client.finish()
         launcher.wait(name, timeout=30)
     if coupled:
-        summary["geometry_update"] = on_grid.describe()
         residual_plot(out / "residuals.png", result)
     log(f"{steps} step{'s' * (steps > 1)} done; results in {out}")
     done = {"iterations": result.iterations, "converged": result.converged}
