@@ -43,7 +43,7 @@ large value does not hurt the linear solvers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -157,7 +157,6 @@ class CaseSpec:
     write_binary: bool = True
     ranks: int = 1                     # MPI ranks of the solver (decomposed case, parallel.py)
     decomposition: str = "simple"      # decomposePar method with ranks > 1 (parallel.METHODS)
-    extra: dict = field(default_factory=dict)
 
     @property
     def nu(self) -> float:
