@@ -33,10 +33,6 @@ W, L, DP, MU, RHO, NX = 1.0e-3, 2.0e-3, 1.0e-2, 1.0e-3, 1000.0, 4
 METHODS = ("binary", "linear", "power", "wall")
 
 
-def cubic_law(w: float = W, dp: float = DP, mu: float = MU, length: float = L) -> float:
-    return w ** 3 * dp / (12 * mu * length)
-
-
 @dataclass(frozen=True)
 class Plates:
     """The physical problem: aperture ``w`` [m], length ``length`` [m] along x, pressure drop
@@ -51,7 +47,7 @@ class Plates:
     @property
     def q_cubic(self) -> float:
         """Flow rate per unit width of the cubic law, ``w^3 dp / (12 mu L)`` [m^2/s]."""
-        return cubic_law(self.w, self.dp, self.mu, self.length)
+        return self.w ** 3 * self.dp / (12 * self.mu * self.length)
 
 
 def geometry(n_across: int, offset: float = 0.3, w: float = W, length: float = L):
