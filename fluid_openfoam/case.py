@@ -285,13 +285,13 @@ def boundary_scalar_passive(faces: dict) -> str:
 
 
 def control_dict(start, end, write_binary: bool = True, application: str = "simpleFoam",
-                 delta_t: float = 1.0, write_interval: int = 100000000) -> str:
+                 delta_t: float = 1.0, write_interval: int = 100000000, write_control: str = "timeStep") -> str:
     """``start`` and ``end`` as numbers (written ``%g``) or time names (written as given)."""
     start, end = (t if isinstance(t, str) else f"{t:g}" for t in (start, end))
     return (_header("dictionary", "controlDict", "system")
             + f"application     {application};\nstartFrom       startTime;\nstartTime       {start};\n"
             f"stopAt          endTime;\nendTime         {end};\ndeltaT          {delta_t!r};\n"
-            f"writeControl    timeStep;\nwriteInterval   {write_interval};\npurgeWrite      0;\n"
+            f"writeControl    {write_control};\nwriteInterval   {write_interval};\npurgeWrite      0;\n"
             f"writeFormat     {'binary' if write_binary else 'ascii'};\nwritePrecision  17;\n"
             "writeCompression off;\ntimeFormat      general;\ntimePrecision   12;\n"
             "runTimeModifiable false;\n\n"

@@ -185,9 +185,8 @@ class OpenFOAMSolver:
         ``t`` over ``dt`` in ``substeps`` steps (written at ``t + dt``)."""
         if not self.spec.transient:
             t0, budget = float(self.start), self.spec.max_iterations
-            cd = _case.control_dict(t0, t0 + budget, self.spec.write_binary, self.application)
-            cd = re.sub(r"writeControl\s+\w+;", "writeControl    runTime;", cd)
-            return re.sub(r"writeInterval\s+\S+;", f"writeInterval   {budget};", cd)
+            return _case.control_dict(t0, t0 + budget, self.spec.write_binary, self.application,
+                                      write_interval=budget, write_control="runTime")
         if t is None or dt is None:
             raise ValueError("a transient fluid advances from t over dt: both are needed")
         if abs(float(self.start) - t) > 1e-9 * max(dt, abs(t)):
