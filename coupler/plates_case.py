@@ -16,7 +16,6 @@ the worst |error| over the offsets at ``cells_across`` exceeds ``tolerance``.
 
 from __future__ import annotations
 
-import json
 import platform
 import tempfile
 import time
@@ -125,6 +124,8 @@ def run(scene: PlatesScene, log=print) -> dict:
     """Run the study of `scene`, write its outputs, return the summary."""
     from fluid_openfoam import plates as _plates
 
+    from .results import write_summary
+
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -169,7 +170,7 @@ def run(scene: PlatesScene, log=print) -> dict:
             f"tolerance {c['tolerance']:g}: {'PASS' if passed else 'FAIL'}")
     summary["wall_seconds"] = time.perf_counter() - start
     summary["outputs"] = [f.name for f in written] + ["summary.json"]
-    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    write_summary(out, summary)
     for f in written:
         log(f"wrote {f}")
     log(f"wrote {out / 'summary.json'}")
