@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from fluid_openfoam.penalization import wall_distance
+
 from .errors import CouplerError
 from .interface import DEPTHS
 
@@ -57,9 +59,9 @@ def velocity_gradient(velocity, shape, spacing, fraction=None) -> np.ndarray:
     Fluid cells are those whose centre is outside the solid (solid fraction below 1/2,
     as in the ``wall`` penalization). Along each axis (spacing h) a fluid cell c uses the
     three-point difference through its neighbours at distances ``d-`` and ``d+``: a fluid
-    neighbour at h, a solid-centred neighbour s as the wall at
-    ``d = h (3/2 - f_c - f_s)`` (clipped to [h/50, h]) carrying s's (penalized) velocity,
-    which is the wall's. At the grid's faces the difference is one-sided (two points).
+    neighbour at h, a solid-centred neighbour s as the wall at ``d = h (3/2 - f_c - f_s)``
+    (clipped to [h/50, h]; :func:`fluid_openfoam.penalization.wall_distance`) carrying s's
+    (penalized) velocity, which is the wall's. At the grid's faces the difference is one-sided (two points).
     Solid-centred cells get zero.
     """
     shape = tuple(int(n) for n in shape)
@@ -75,7 +77,7 @@ def velocity_gradient(velocity, shape, spacing, fraction=None) -> np.ndarray:
             inside = _shift(np.ones_like(fluid), axis, step, False)
             f_n = _shift(f, axis, step, 0.0)
             wall = inside & (f_n >= 0.5)
-            d = np.where(wall, np.clip(h * (1.5 - f - f_n), h / 50, h), h)
+            d = np.where(wall, wall_distance(f, f_n, h), h)
             sides.append((inside, d[..., None], _shift(u, axis, step, 0.0)))
         (in_m, dm, um), (in_p, dp, up) = sides
         both = (in_m & in_p)[..., None]

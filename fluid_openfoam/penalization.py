@@ -35,6 +35,13 @@ import numpy as np
 MODES = ("linear", "power", "wall")
 
 
+def wall_distance(f_c, f_s, h: float):
+    """Distance from the centre of a fluid-centred cell (fraction ``f_c``) to the wall in the
+    direction of its solid-centred neighbour (``f_s``), spacing ``h``: ``h (3/2 - f_c - f_s)``
+    clipped to ``[h / 50, h]`` (the ``"wall"`` mode above)."""
+    return np.clip(h * (1.5 - f_c - f_s), h / 50.0, h)
+
+
 def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str = "wall",
                   exponent: float = 2.0) -> np.ndarray:
     """The field ``T`` in [0, 1] (written as ``solid``) for the table ``[(0, 0), (1, d_max)]``.
@@ -62,7 +69,7 @@ def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str =
             sl_s[axis] = slice(1, n) if side == 1 else slice(0, n - 1)
             fc, fs = F[tuple(sl_c)], F[tuple(sl_s)]
             hit = (fc < 0.5) & (fs >= 0.5)
-            d = np.clip(h * (1.5 - fc - fs), h / 50.0, h)
+            d = wall_distance(fc, fs, h)
             D[tuple(sl_c)] += np.where(hit, nu / h ** 2 * (h / d - 1.0), 0.0)
     T = np.where(solid, 1.0, np.minimum(D / d_max, 1.0))
     return T.reshape(-1)
