@@ -96,7 +96,7 @@ def make_plan(scene: CoupledScene) -> Plan:
             *([PlannedCoupling("fluid.velocity", "solid.traction",
                                "viscous wall shear mu du_t/dn: Q0 velocity traced on the pressure's surface and "
                                "two deeper ones, quadratic through the three samples (coupler/viscous.py)",
-                               "steps 2-3")] if scene.coupling.get("traction") == "full" else []),
+                               "steps 2-3")] if scene.coupling["traction"] == "full" else []),
             PlannedCoupling("solid.velocity", "fluid.solid_velocity",
                             "P1 (solid mesh) -> Q0 (fluid cells), pseudo_l2", "step 6"),
         ]
@@ -123,7 +123,7 @@ def make_plan(scene: CoupledScene) -> Plan:
                     "velocity of its wetted cells; rotation and deformation within a body are not)"
                     if scene.solvers["fluid"]["solid_velocity"] == "bodies" else
                     "openfoam: the solid velocity is not applied (penalization towards rest)")
-        notes.append(velocity + ("" if scene.coupling.get("deformation", True) else
+        notes.append(velocity + ("" if scene.coupling["deformation"] else
                                  "; [coupling] deformation = false: the solid fraction comes from the undeformed solid"))
         fluid_cfg = scene.solvers["fluid"]
         if fluid_cfg["solver_ranks"] > 1:

@@ -36,6 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .case import FACES
+
 
 @dataclass
 class BodySource:
@@ -44,9 +46,6 @@ class BodySource:
     velocity: np.ndarray  # U_s (3,), m/s
     su: np.ndarray       # D_max U_s, m/s^2 (kinematic, per unit volume)
     dropped: dict        # closed face -> the velocity component normal to it that was dropped
-
-
-FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 
 
 def body_sources(fraction, velocity, shape, d_max: float, closed=()) -> list[BodySource]:
