@@ -365,6 +365,31 @@ def topo_set_dict(grid: Grid) -> str:
             f"    {{ name {ZONE}; type cellZoneSet; action new; source setToCellZone; set {ZONE}Set; }}\n);\n")
 
 
+_PROCESSOR_SCALAR = b'\n    "procBoundary.*" { type processor; value uniform 0; }'
+_PROCESSOR_VECTOR = b'\n    "procBoundary.*" { type processor; value uniform (0 0 0); }'
+
+
+def write_inputs(time_dir, spec: CaseSpec, fraction, drag, inlet_cells, processor: bool = False) -> None:
+    """The inputs of one solve in a time directory (the case's, or with ``processor`` a
+    processor directory's, whose fields also get its processor patches): the ``solid`` drag
+    field and, for a fixed-velocity inlet (xmin), ``U`` with each inlet face masked to
+    ``u_in (1 - f)``, f the solid fraction of the cell behind it (``inlet_cells``, in the
+    patch's face order); U's internal field is kept."""
+    from .fields import read_internal_field, write_field
+
+    time_dir, faces, binary = Path(time_dir), spec.faces, spec.write_binary
+    inlet = faces["xmin"]
+    if inlet["kind"] == "velocity":
+        values = np.outer(1.0 - fraction[inlet_cells], inlet["value"])
+        U = read_internal_field(time_dir / "U", len(drag))
+        write_field(time_dir / "U", U,
+                    boundary_u(faces, {"xmin": values}, binary) + (_PROCESSOR_VECTOR if processor else b""),
+                    obj="U", location=time_dir.name, binary=binary, dimensions="[0 1 -1 0 0 0 0]")
+    write_field(time_dir / "solid", drag,
+                boundary_scalar_passive(faces).encode() + (_PROCESSOR_SCALAR if processor else b""),
+                obj="solid", location=time_dir.name, binary=binary)
+
+
 def write_case(case_dir, spec: CaseSpec) -> Path:
     """Write system/, constant/ and 0/ (U, p, solid = 0). Returns the case directory."""
     case = Path(case_dir)

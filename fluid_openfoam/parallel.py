@@ -25,11 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from . import case as _case
-from .fields import read_internal_field, read_label_list, read_patches, write_field
+from .fields import read_internal_field, read_label_list, read_patches
 
 METHODS = ("simple",)
-_PROCESSOR_SCALAR = b'\n    "procBoundary.*" { type processor; value uniform 0; }'
-_PROCESSOR_VECTOR = b'\n    "procBoundary.*" { type processor; value uniform (0 0 0); }'
 
 
 def simple_split(ranks: int, shape) -> tuple[int, int, int]:
@@ -138,17 +136,6 @@ class Decomposition:
                 write_cell_set(folder / name, name, np.flatnonzero(np.isin(cells, members)))
 
     def write_inputs(self, time: str, fraction: np.ndarray, drag: np.ndarray) -> None:
-        """Per processor: the ``solid`` drag field and, for a fixed-velocity inlet, ``U`` with
-        the inlet faces masked as in :meth:`OpenFOAMSolver.write_inlet` (internal field kept)."""
-        faces, binary = self.spec.faces, self.spec.write_binary
-        inlet = faces["xmin"]
+        """:func:`fluid_openfoam.case.write_inputs` in every processor's ``time`` directory."""
         for proc, cells, patches in zip(self.processors, self.cells, self.patch_cells):
-            if inlet["kind"] == "velocity":
-                path = proc / time / "U"
-                U = read_internal_field(path, len(cells))
-                values = np.outer(1.0 - fraction[cells][patches["xmin"]], inlet["value"])
-                write_field(path, U, _case.boundary_u(faces, {"xmin": values}, binary) + _PROCESSOR_VECTOR,
-                            obj="U", location=time, binary=binary, dimensions="[0 1 -1 0 0 0 0]")
-            write_field(proc / time / "solid", drag[cells],
-                        _case.boundary_scalar_passive(faces).encode() + _PROCESSOR_SCALAR,
-                        obj="solid", location=time, binary=binary)
+            _case.write_inputs(proc / time, self.spec, fraction[cells], drag[cells], patches["xmin"], processor=True)

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from . import case as _case
-from .fields import read_internal_field, write_field
+from .fields import read_internal_field
 from .parallel import Decomposition, patch_cells
 from .penalization import drag_fraction
 from .zones import body_sources, write_cell_set
@@ -122,19 +122,6 @@ class OpenFOAMSolver:
         lists the i = 0 column, j fastest then k (checked in tests/test_fluid_inlet.py)."""
         return patch_cells(self.case / "constant" / "polyMesh")
 
-    def write_inlet(self, fraction: np.ndarray) -> None:
-        """Inlet masking: a fixed-velocity xmin face gets ``u_in (1 - f)`` with f the solid
-        fraction of its cell. Rewrites U in the start-time directory (internal field kept)."""
-        c = self.spec.faces["xmin"]
-        if c["kind"] != "velocity":
-            return
-        cells = self.patch_cells["xmin"]
-        values = np.outer(1.0 - fraction[cells], c["value"])
-        path = self.case / self.start / "U"
-        U = read_internal_field(path, self.n)
-        write_field(path, U, _case.boundary_u(self.spec.faces, {"xmin": values}, self.spec.write_binary),
-                    obj="U", location=self.start, binary=self.spec.write_binary, dimensions="[0 1 -1 0 0 0 0]")
-
     # ------------------------------------------------------------------ one solve
     def write_solid(self, fraction) -> None:
         frac = np.asarray(fraction, dtype=np.float64).reshape(-1)
@@ -148,9 +135,7 @@ class OpenFOAMSolver:
         if self.parallel is not None:
             self.parallel.write_inputs(self.start, frac, T)
             return
-        self.write_inlet(frac)
-        write_field(self.case / self.start / "solid", T, _case.boundary_scalar_passive(self.spec.faces),
-                    obj="solid", location=self.start, binary=self.spec.write_binary)
+        _case.write_inputs(self.case / self.start, self.spec, frac, T, self.patch_cells["xmin"])
 
     def write_sources(self, fraction, velocity) -> None:
         """constant/fvOptions with one velocity source per solid body (:mod:`zones`) when the

@@ -30,7 +30,7 @@ def test_xmin_face_order_is_the_i0_column(tmp_path):
     # the per-face values written are u_in (1 - f) of the cell behind each face
     frac = np.zeros(s.n)
     frac[cell[:, :, 0].ravel()] = np.linspace(0, 1, ny * nz)
-    s.write_inlet(frac)
+    s.write_solid(frac)
     text = (s.case / "0" / "U").read_bytes()
     assert b"nonuniform List<vector>" in text.split(b"xmin")[1][:200]
 
