@@ -102,8 +102,9 @@ class Decomposition:
     def mpi_command(self, command: list[str]) -> list[str]:
         """``mpirun -np N <solver> -parallel ...`` for a solver command line. Open MPI's ob1
         messaging layer unless ``OMPI_MCA_pml`` says otherwise: the solver is relaunched every
-        coupling iteration, and the default (UCX) start-up costs more (measured here, one
-        simpleFoam iteration on 512 cells: 2 ranks 0.53 s, 0.31 s with ob1; serial 0.08 s)."""
+        coupling iteration, and letting Open MPI choose its layer at every start-up costs more
+        (measured here, one simpleFoam iteration on 512 cells, median of 5, load average ~0.5:
+        2 ranks 0.43 s with ``OMPI_MCA_pml=""`` or ``"^ucx"``, 0.21 s with ob1; serial 0.09 s)."""
         pml = [] if "OMPI_MCA_pml" in os.environ else ["--mca", "pml", "ob1"]
         return ["mpirun", "-np", str(self.ranks), "--oversubscribe", *pml, command[0], "-parallel", *command[1:]]
 
