@@ -14,12 +14,12 @@ fraction, the Bandis fit sigma = k_ni d / (1 - d / d_max)).
 
 from __future__ import annotations
 
-import json
 import platform
 import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from .results import write_summary
 from .scene import Table, check_tables, output_directory
 
 #: [closure] key -> one-line description (also the list of allowed keys); cases/README.md
@@ -144,7 +144,7 @@ def run(scene: ClosureScene, log=print) -> dict:
                "setup_seconds": test.setup_seconds, "wall_seconds": time.perf_counter() - start,
                "platform": {"python": platform.python_version(), "machine": platform.machine()},
                "outputs": [f.name for f in written] + ["summary.json"]}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+    write_summary(out, summary)
     if fit:
         log(f"Bandis: k_ni {fit['k_ni']:.3g} Pa/m, d_max {fit['d_max'] * 1e6:.1f} um, RMS deviation "
             f"{fit['rms_deviation']:.1%}")

@@ -11,7 +11,6 @@ the hierarchy's grids beside it (``solution_L<levels>_grid<k>.vtu``), ``converge
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ from transfer.fracture import fracture_blocks, rough_surface
 from transfer.grid import StructuredGrid
 from transfer.mesh import lattice_tetrahedra
 
+from .results import write_summary
 from .scene import Table, check_tables, output_directory
 
 #: table -> key -> one-line description (also the list of allowed keys); cases/README.md
@@ -235,7 +235,7 @@ def run(scene: ObstacleScene, log=print) -> dict:
     plot_convergence(out / "convergence.png", runs, f"{name}: {scene.method}")
     summary = {"scene": str(scene.path), "case": name, "description": scene.description, "method": scene.method,
                "tolerance": scene.tolerance, "runs": runs, "load_average": list(os.getloadavg())}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_summary(out, summary)
     for f in written:
         log(f"wrote {f} (and its grids {f.stem}_grid<k>.vtu)")
     log(f"wrote {out / 'convergence.png'}")
