@@ -29,6 +29,7 @@ from scipy.sparse.csgraph import connected_components
 
 from nonsmooth import BoundConstrainedQP, NonsmoothSolveError, Solution
 from nonsmooth import solvers as nonsmooth_solvers
+from nonsmooth.obstacle import rigid_body_modes as body_modes
 
 from .mortar import ContactSetupError, Mortar, boundary_face, mortar
 
@@ -69,22 +70,18 @@ def transformation(m: Mortar, num_dofs: int) -> tuple[sp.csr_matrix, sp.csr_matr
 
 
 def rigid_body_modes(points: np.ndarray, K: sp.csr_matrix) -> np.ndarray:
-    """(3 n, 6 b) translations and rotations of each of the b bodies (connected
-    components of the matrix graph) at nodes ``points`` (n, 3)."""
+    """(3 n, 6 b) translations and rotations (:func:`nonsmooth.obstacle.rigid_body_modes`,
+    about each body's centroid) of each of the b bodies (connected components of the
+    matrix graph) at nodes ``points`` (n, 3)."""
     n = len(points)
     rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr)) // 3
     graph = sp.csr_matrix((np.ones(rows.size), (rows, K.indices // 3)), (n, n))
     count, label = connected_components(graph, directed=False)
     Z = np.zeros((3 * n, 6 * count))
-    x = points - points.mean(axis=0)
     for b in range(count):
-        on = label == b
-        base = 6 * b
-        for d in range(3):
-            Z[3 * np.flatnonzero(on) + d, base + d] = 1.0
-        for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):  # rotation in the (i, j) plane
-            Z[3 * np.flatnonzero(on) + i, base + 3 + k] = -x[on, j]
-            Z[3 * np.flatnonzero(on) + j, base + 3 + k] = x[on, i]
+        nodes = np.flatnonzero(label == b)
+        dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+        Z[dofs, 6 * b:6 * b + 6] = body_modes(points[nodes] - points[nodes].mean(axis=0))
     return Z
 
 

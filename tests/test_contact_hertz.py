@@ -209,3 +209,19 @@ def test_hertz_within_5_percent_at_h_0025(tmp_path):
     ref = hertz_solution(state.force[2], R, E, NU)
     a, p0 = elliptic_fit(contact, state)
     assert abs(a / ref["a"] - 1) < 0.05 and abs(p0 / ref["p0"] - 1) < 0.05, (a / ref["a"], p0 / ref["p0"])
+
+
+def test_rigid_body_modes_span_the_kernel_of_each_body():
+    """Two disconnected blocks: the 12 modes are independent and K Z = 0."""
+    from nonsmooth.obstacle import p1_elasticity_stiffness
+    from solid_fenicsx.contact import rigid_body_modes
+    from transfer.mesh import lattice_tetrahedra
+
+    g = np.stack(np.meshgrid(*[np.linspace(0, 1, 3)] * 3, indexing="ij"), -1).reshape(-1, 3)[:, ::-1]  # x fastest
+    tets = lattice_tetrahedra((2, 2, 2))
+    points = np.vstack([g, g + [2.0, 0.5, 0.0]])
+    K = p1_elasticity_stiffness(points, np.vstack([tets, tets + len(g)]), 1.0, 0.3)
+    Z = rigid_body_modes(points, K)
+    assert Z.shape == (3 * len(points), 12)
+    assert np.linalg.matrix_rank(Z) == 12
+    assert np.abs(K @ Z).max() < 1e-10 * np.abs(K).max()
