@@ -105,6 +105,11 @@ class Accelerator:
         """JSON-ready parameters and statistics (for summary.json)."""
         return {"name": self.name}
 
+    def advice(self) -> str:
+        """What to try in a scene's ``[coupling]`` table when this accelerator's iteration
+        diverges or stalls (a message must not advise what the scene already does)."""
+        return "use [coupling] acceleration = 'iqn-ils'"
+
 
 class ConstantRelaxation(Accelerator):
     """Constant under-relaxation ``x_{k+1} = x_k + omega (H(x_k) - x_k)``.
@@ -131,6 +136,10 @@ class ConstantRelaxation(Accelerator):
 
     def info(self) -> dict:
         return {"name": self.name, "omega": self.omega}
+
+    def advice(self) -> str:
+        return (f"use [coupling] acceleration = 'iqn-ils' (or 'aitken'), or a relaxation below "
+                f"the present {self.omega:g}")
 
 
 class Aitken(Accelerator):
@@ -194,6 +203,10 @@ class Aitken(Accelerator):
 
     def info(self) -> dict:
         return {"name": self.name, "omega0": self.omega0, "omega_max": self.omega_max, "omega": self.omega}
+
+    def advice(self) -> str:
+        return (f"use [coupling] acceleration = 'iqn-ils', or an initial relaxation below the present "
+                f"{self.omega0:g}")
 
 
 @dataclass
@@ -425,6 +438,12 @@ class IQNILS(Accelerator):
         self._origin = [self._origin[i] for i in keep]
         self._r_prev = None
         self._Hx_prev = None
+
+    def advice(self) -> str:
+        return (f"IQN-ILS is in use already: try a first relaxation below the present {self.omega0:g}, fewer "
+                f"[coupling] columns (newest secants only; now {self.max_columns}), a shorter [time] dt (a better "
+                f"first guess), or more [coupling] max_iterations; a residual that grows instead of stalling "
+                f"points at the physics (a load the solid cannot carry, a fluid grid too coarse for the gap)")
 
     def info(self) -> dict:
         return {"name": self.name, "omega0": self.omega0, "reuse": self.reuse, "filter": self.filter,

@@ -41,7 +41,7 @@ from transfer import Mesh, StructuredGrid
 
 from .acceleration import make_accelerator
 from .coupled_scene import CoupledScene
-from .errors import CouplerError
+from .errors import CouplerError, run_status
 from .launch import Launcher
 from .loop import run_coupled
 from .messaging import CouplerSession, new_run_id
@@ -49,8 +49,9 @@ from .plan import Plan, make_plan
 from .progress import ProgressBar
 from .interface import SolidOnGrid, WettedInterface
 from .viscous import FluidTraction, traction_figures
-from .protocol import CONTACT_STATS, Field
+from .protocol import Field
 from .results import Series, check_displacement, residual_plot, write_summary
+from .solves import StepSolves
 
 
 class Phases:
@@ -156,7 +157,7 @@ def run(scene: CoupledScene, log=print, progress: bool | None = None) -> dict:
             result = _run(scene, plan, session, launcher, out, phases, summary, log, progress)
         summary.update(result, status="completed")
     except BaseException as exc:
-        summary["status"] = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
+        summary["status"] = run_status(exc)
         summary["error"] = f"{type(exc).__name__}: {exc}"
         raise
     finally:
@@ -190,7 +191,20 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
     steps, dt = scene.time["steps"], scene.time["dt"]
     coupled = "fluid" in clients
     every = scene.output["every"]
-    last = {}
+    last = {"figures": {}}
+    allow = {name: bool(scene.solvers[name].get("allow_unconverged")) for name in clients}
+    solves = {"step": StepSolves(allow)}
+
+    def advance(name, window, iteration, inputs):
+        """One participant's advance: its fields (arrays); its solve reports and figures recorded."""
+        client = clients[name]
+        fields = _as_arrays(phases.remote(name, client, "advance", window.index, iteration, window.t_start,
+                                          window.dt, inputs))
+        if iteration == 0 and name == next(iter(clients)):
+            solves["step"] = StepSolves(allow)
+        solves["step"].add(name, iteration, client.last_solves)
+        last["figures"][name] = client.last_figures
+        return fields
 
     if coupled:
         fluid = clients["fluid"]
@@ -229,8 +243,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             return {"pressure": Field("pressure", on_grid.interface.to_solid_vertices(x), "Pa")}
 
         def iterate(window, iteration, x):
-            solid_out = _as_arrays(phases.remote("solid", solid, "advance", window.index, iteration, window.t_start,
-                                                window.dt, to_solid(x)))
+            solid_out = advance("solid", window, iteration, to_solid(x))
             # two-way: the fluid sees the deformed solid (fractions, velocity transfer, sampling surface)
             try:
                 phases.timed("geometry update", on_grid.update, solid_out.get("displacement"))
@@ -242,8 +255,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
             velocity = phases.timed("transfer", on_grid.to_fluid.apply, solid_out["velocity"], fill=0.0)
             fluid_in = {"solid_velocity": Field("solid_velocity", velocity, "m/s"),
                         "solid_fraction": Field("solid_fraction", on_grid.fraction, "1")}
-            fluid_out = _as_arrays(phases.remote("fluid", fluid, "advance", window.index, iteration, window.t_start,
-                                                window.dt, fluid_in))
+            fluid_out = advance("fluid", window, iteration, fluid_in)
             last.update(solid=solid_out, fluid=fluid_out, fluid_in=velocity, fraction=on_grid.fraction)
             if full:
                 wall = solid_out["velocity"][on_grid.interface.vertices]
@@ -274,15 +286,17 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         weights, x0, accelerator, mode, checkpoint = None, np.zeros(0), None, "explicit", None
 
         def iterate(window, iteration, x):
-            last["solid"] = _as_arrays(phases.remote("solid", solid, "advance", window.index, iteration,
-                                                    window.t_start, window.dt, {}))
+            last["solid"] = advance("solid", window, iteration, {})
             return x
 
-    def on_converged(window, x):
-        record = {"step": window.index, "t": window.t_end}
+    def on_converged(window, x, step):
+        inner = solves["step"]
+        record = {"step": window.index, "t": window.t_end, "iterations": step.iterations,
+                  "residuals": list(step.residuals), "coupling_converged": step.converged,
+                  "converged": step.converged and inner.converged, **inner.as_dict()}
         if window.index % every == 0 or window.index == steps - 1:
             start = time.perf_counter()
-            solid_fields = {k: v for k, v in last["solid"].items() if k != "contact_stats"}
+            solid_fields = dict(last["solid"])
             if coupled:  # the coupled load: the pressure, or with traction 'full' the traction vector
                 solid_fields.update(_as_arrays(to_solid(x)))
                 fluid_fields = {"pressure": last["fluid"]["pressure"], "solid_fraction": last["fraction"],
@@ -292,9 +306,7 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
                 series["fluid"].write(window.index, window.t_end, cell_data=fluid_fields)
             series["solid"].write(window.index, window.t_end, point_data=solid_fields)
             phases.add("output", time.perf_counter() - start)
-        stats = last["solid"].get("contact_stats")
-        if stats is not None:  # figures of the contact solve (protocol.CONTACT_STATS)
-            record["contact"] = dict(zip(CONTACT_STATS, (float(v) for v in stats)))
+        record["figures"] = {name: figures for name, figures in last["figures"].items() if figures}
         if "traction" in last:  # how much the viscous part matters ([coupling] traction = "full")
             record["traction"] = last["traction"]
         u = last["solid"].get("displacement")
@@ -304,6 +316,8 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
         if coupled:
             summary["geometry_update"] = on_grid.describe()
         write_summary(out, summary)
+        if not inner.converged:
+            raise inner.error(window.index)
 
     bar = ProgressBar(steps, label=scene.case_dir.name, enabled=progress)
     try:
@@ -313,15 +327,13 @@ def _run(scene, plan: Plan, session, launcher, out, phases, summary, log, progre
     finally:
         bar.close()
     summary["accelerator"] = result.accelerator
-    for record, step in zip(summary["steps"], result.steps):
-        record.update(iterations=step.iterations, residuals=list(step.residuals), converged=step.converged)
     for name, client in clients.items():
         client.finish()
         launcher.wait(name, timeout=30)
     if coupled:
         residual_plot(out / "residuals.png", result)
     log(f"{steps} step{'s' * (steps > 1)} done; results in {out}")
-    done = {"iterations": result.iterations, "converged": result.converged}
+    done = {"iterations": result.iterations, "converged": [r["converged"] for r in summary["steps"]]}
     if scene.check:
         done["check"] = check_displacement(scene.check, meshes["solid"].points, last["solid"]["displacement"])
         c = done["check"]

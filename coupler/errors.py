@@ -13,6 +13,38 @@ class SceneError(CouplerError, ValueError):
     """A scene file is invalid: message reads ``<scene.toml>: [table] key: reason``."""
 
 
+class NotConverged(CouplerError):
+    """The coupling iteration, or an inner solve of a participant, did not converge: the run
+    stops with status ``not_converged`` (its results so far kept) instead of claiming a
+    result it does not have."""
+
+
+class Terminated(BaseException):
+    """SIGTERM (``timeout``, batch schedulers) received: handled like Ctrl-C, status ``terminated``."""
+
+    def __init__(self, signum: int = 15):
+        self.signum = signum
+        super().__init__(f"terminated by signal {signum}")
+
+
+#: Exit code of ``varcouple run`` for each final status of summary.json (README: "When a run fails").
+EXIT_CODES = {"completed": 0, "check_failed": 1, "invalid": 2, "not_converged": 3, "failed": 4,
+              "interrupted": 130, "terminated": 143}
+
+
+def run_status(exc: BaseException | None) -> str:
+    """The status a run that ended with ``exc`` (None: no exception) records."""
+    if exc is None:
+        return "completed"
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted"
+    if isinstance(exc, Terminated):
+        return "terminated"
+    if isinstance(exc, NotConverged):
+        return "not_converged"
+    return "failed"
+
+
 # ----------------------------------------------------------------- messaging (docs/protocol.md)
 
 

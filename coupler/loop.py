@@ -12,8 +12,9 @@ supplies
 - ``checkpoint.save(window)`` / ``checkpoint.restore(window)``: the participants'
   states at the start of the window (``save_state``/``restore_state`` of the
   protocol), so that every iteration of a window starts from the same state;
-- ``on_converged(window, x)``: called once per window with the accepted interface
-  value, where the caller writes output and advances its participants' clocks.
+- ``on_converged(window, x, step)``: called once per window with the accepted
+  interface value and the window's :class:`StepRecord`, where the caller writes
+  output and advances its participants' clocks.
 
 The loop does Step 5: it measures the interface residual ``||H(x) - x||_M`` in the
 mass-weighted L2 norm (:mod:`coupler.convergence`), stops the window when it is
@@ -26,7 +27,7 @@ Per window::
     for k = 0, 1, ...:
         if k > 0: checkpoint.restore(window)
         Hx = iterate(window, k, x)                 # NaN/inf -> NonFiniteInterface at once
-        if ||Hx - x||_M <= tol ||Hx||_M: accept Hx, on_converged(window, Hx), next window
+        if ||Hx - x||_M <= tol ||Hx||_M: accept Hx, on_converged(window, Hx, step), next window
         x = accelerator.update(x, Hx)
     max_iterations reached -> CouplingDiverged (or accept, when allow_unconverged)
 
@@ -48,7 +49,7 @@ import numpy as np
 
 from .acceleration import Accelerator, ConstantRelaxation
 from .convergence import ConvergenceMonitor, as_weights
-from .errors import CouplerError
+from .errors import CouplerError, NotConverged
 from .progress import ProgressBar
 
 __all__ = ["TimeWindow", "Checkpoint", "StepRecord", "CouplingResult", "CouplingError", "CouplingDiverged",
@@ -159,7 +160,7 @@ class CouplingError(CouplerError):
     result: CouplingResult | None = None
 
 
-class CouplingDiverged(CouplingError):
+class CouplingDiverged(CouplingError, NotConverged):
     """A window did not converge within `max_iterations`, or its residual blew up."""
 
     def __init__(self, message: str, *, step: int, time: float, iterations: int, residual: float,
@@ -216,7 +217,7 @@ def _fmt(values) -> str:
 def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.ndarray], np.ndarray], x0,
                 accelerator: Accelerator | None = None, tolerance: float = 1e-6, max_iterations: int = 50,
                 checkpoint: Checkpoint | None = None,
-                on_converged: Callable[[TimeWindow, np.ndarray], None] | None = None,
+                on_converged: Callable[[TimeWindow, np.ndarray, "StepRecord"], None] | None = None,
                 progress=None, *, weights=None, abs_tolerance: float = 0.0, allow_unconverged: bool = False,
                 coupling: str = "implicit", t0: float = 0.0, extrapolation: int = 0,
                 divergence_factor: float | None = 1e8) -> CouplingResult:
@@ -245,8 +246,9 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
         ``restore(window)`` before every further one; ``None`` when ``iterate``
         has no state of its own.
     on_converged:
-        ``on_converged(window, x)`` with the accepted interface value ``H(x)`` of
-        the last iteration, once per window.
+        ``on_converged(window, x, step)`` with the accepted interface value ``H(x)``
+        of the last iteration and the window's :class:`StepRecord` (already in the
+        result), once per window.
     progress:
         ``True`` for a progress bar on stderr (only on a terminal), a
         :class:`~coupler.progress.ProgressBar`-like object (``update(n, status)``,
@@ -358,8 +360,7 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                             f"coupling diverges in {window}: after {k + 1} iterations the interface residual "
                             f"||H(x)-x||_M = {res.absolute:.3g} has grown by more than {divergence_factor:g} times "
                             f"its first value {first_abs:.3g} (relative residuals: {_fmt(history.relative[-5:])}); "
-                            f"{accelerator.name} {_describe(accelerator)}: lower the relaxation or use "
-                            f"IQN-ILS", step=n, time=window.t_start, iterations=k + 1, residual=res.relative,
+                            f"{accelerator.name} {_describe(accelerator)}: {accelerator.advice()}", step=n, time=window.t_start, iterations=k + 1, residual=res.relative,
                             residuals=list(history.relative), reason="divergence")
                     if k == max_iterations - 1:
                         break
@@ -376,8 +377,8 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                                f"{_fmt(history.relative[-5:])}; acceleration {accelerator.name} "
                                f"{_describe(accelerator)}")
                     if not allow_unconverged:
-                        raise CouplingDiverged(message + ". Raise max_iterations, lower the relaxation, use IQN-ILS, "
-                                               "or allow unconverged steps", step=n, time=window.t_start,
+                        raise CouplingDiverged(f"{message}: raise [coupling] max_iterations, or "
+                                               f"{accelerator.advice()}", step=n, time=window.t_start,
                                                iterations=history.iterations, residual=last,
                                                residuals=list(history.relative))
                     warnings.warn(message + "; accepted (allow_unconverged)", RuntimeWarning, stacklevel=2)
@@ -386,12 +387,13 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                 t_accel += time.perf_counter() - tic
             monitor.end_window(converged)
             accepted = Hx.copy()
-            if on_converged is not None:
-                on_converged(window, accepted.copy())
-            result.steps.append(StepRecord(
-                n, window.t_start, window.t_end, history.iterations, list(history.relative),
-                list(history.absolute), converged, time.perf_counter() - start, t_iterate, t_accel, t_checkpoint))
+            step = StepRecord(n, window.t_start, window.t_end, history.iterations, list(history.relative),
+                              list(history.absolute), converged, time.perf_counter() - start, t_iterate, t_accel,
+                              t_checkpoint)
+            result.steps.append(step)
             result.x = accepted
+            if on_converged is not None:
+                on_converged(window, accepted.copy(), step)
             if extrapolation == 1 and x_prev_converged is not None:
                 x = 2.0 * accepted - x_prev_converged
             else:

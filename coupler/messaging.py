@@ -47,7 +47,7 @@ from .errors import (
     ParticipantTimeout,
     ProtocolError,
 )
-from .protocol import Field, as_fields, check_reply, decode, encode
+from .protocol import Field, SolveReport, as_fields, check_reply, decode, encode, json_number
 
 log = logging.getLogger("varcouple.messaging")
 
@@ -471,7 +471,9 @@ class ParticipantServer:
             if missing:
                 raise ProtocolError(f"advance request without {missing}")
             out = h.advance(request["window"], request["iteration"], request["t"], request["dt"], fields)
-            return {}, as_fields(out)
+            solves, figures = h.take_reports() if hasattr(h, "take_reports") else ([], {})
+            return ({"solves": [s.as_dict() for s in solves], "figures": {k: json_number(v) for k, v in figures.items()}},
+                    as_fields(out))
         if verb in ("save_state", "restore_state"):
             if "window" not in request:
                 raise ProtocolError(f"{verb} request without 'window'")
@@ -530,6 +532,8 @@ class ParticipantClient:
         self.poll = poll
         self.finished = False
         self.shared_memory = shared_memory
+        self.last_solves: list[SolveReport] = []
+        self.last_figures: dict[str, float] = {}
         self.stats = {"calls": 0, "seconds": 0.0, "remote_seconds": 0.0, "bytes_out": 0, "bytes_in": 0,
                       "shm_out": 0, "shm_in": 0}
         self._lock = threading.Lock()
@@ -669,9 +673,13 @@ class ParticipantClient:
 
     def advance(self, window: int, iteration: int, t: float, dt: float, inputs=None,
                 timeout: float | None = None) -> dict[str, Field]:
-        _, fields = self.request(
+        """The participant's output fields; how its inner solves ended and its figures of
+        the step are in :attr:`last_solves` and :attr:`last_figures` until the next call."""
+        header, fields = self.request(
             "advance", {"window": int(window), "iteration": int(iteration), "t": float(t), "dt": float(dt)},
             inputs, timeout=timeout)
+        self.last_solves = [SolveReport.from_dict(d) for d in header.get("solves", [])]
+        self.last_figures = {str(k): float(v) for k, v in header.get("figures", {}).items()}
         return fields
 
     def save_state(self, window: int, timeout: float | None = None) -> None:

@@ -33,7 +33,7 @@ import time
 from typing import Callable, Mapping
 
 from .errors import CouplerError
-from .protocol import Field
+from .protocol import Field, SolveReport
 
 log = logging.getLogger("varcouple.participant")
 
@@ -46,6 +46,12 @@ class Participant(abc.ABC):
     ``extra_args`` (command-line arguments :func:`main` did not know). An exception
     raised by a method is sent to the coupler as an error reply
     (``ParticipantError(name, "<Type>: <message>")``); the participant keeps serving.
+
+    During ``advance`` a participant reports every inner solve with :meth:`report_solve`
+    (converged or not, iterations, final residual against its tolerance) and may add
+    scalar figures of the step with :meth:`report_figures`; both travel in the reply's
+    header (``solves``, ``figures``) and end up in summary.json. A solve that did not
+    converge is reported, not raised: the coupler decides what the run may claim.
     """
 
     run_id: str = ""
@@ -54,6 +60,23 @@ class Participant(abc.ABC):
     rank: int = 0
     size: int = 1
     extra_args: list[str] = []
+
+    def report_solve(self, solver: str, converged: bool, iterations: int, residual: float, tolerance: float,
+                     detail: str = "", accepted: bool = False) -> SolveReport:
+        """Record how an inner solve of the current ``advance`` ended (see :class:`SolveReport`)."""
+        report = SolveReport(solver, bool(converged), int(iterations), float(residual), float(tolerance), detail,
+                             bool(accepted))
+        self.__dict__.setdefault("_solves", []).append(report)
+        return report
+
+    def report_figures(self, **figures: float) -> None:
+        """Record scalar figures of the current ``advance`` (e.g. contact area fraction)."""
+        self.__dict__.setdefault("_figures", {}).update({k: float(v) for k, v in figures.items()})
+
+    def take_reports(self) -> tuple[list[SolveReport], dict[str, float]]:
+        """The solves and figures reported since the last call (the server sends them with the reply)."""
+        solves, figures = self.__dict__.pop("_solves", []), self.__dict__.pop("_figures", {})
+        return solves, figures
 
     def bind(self, run_id: str, name: str, comm=None, extra_args=()) -> None:
         """Called by :func:`main` before serving."""
@@ -123,6 +146,9 @@ class _MpiRoot:
     def __init__(self, handler: Participant, comm):
         self.handler, self.comm = handler, comm
 
+    def take_reports(self):  # rank 0's own reports: nothing to broadcast
+        return self.handler.take_reports()
+
     def __getattr__(self, verb):
         if verb not in _VERB_METHODS:
             raise AttributeError(verb)
@@ -147,6 +173,7 @@ def _mpi_worker(handler: Participant, comm) -> None:
             return
         try:
             getattr(handler, verb)(*args)
+            handler.take_reports()  # rank 0 reports for all ranks
         except Exception:  # noqa: BLE001
             log.exception("rank %d: %s failed; aborting the MPI job", comm.Get_rank(), verb)
             comm.Abort(1)

@@ -36,9 +36,6 @@ ALIGN = 64
 _LEN = struct.Struct("<Q")
 #: numpy kinds that may travel: bool, signed/unsigned int, float, complex.
 _KINDS = "biufc"
-#: The figures of a contact step a solid returns as the field ``contact_stats``, in this order.
-CONTACT_STATS = ("iterations", "krylov_iterations", "seconds", "active_nodes", "area_fraction", "max_pressure",
-                 "force_x", "force_y", "force_z", "min_gap")
 #: Header keys :func:`check_reply` compares between a request and its reply.
 MATCH_KEYS = ("run_id", "participant", "verb", "window", "iteration")
 
@@ -70,6 +67,65 @@ class Field:
     @property
     def dtype(self) -> np.dtype:
         return self.data.dtype
+
+
+@dataclass
+class SolveReport:
+    """How one inner solve of an ``advance`` ended, as a participant reports it to the coupler
+    (header ``solves`` of the reply): a run never claims more than its solvers did.
+
+    ``solver`` names the solve (``"simpleFoam"``, ``"static CG+GAMG"``, ``"active_set"``);
+    ``residual`` is the final value of the solver's own stopping criterion and ``tolerance``
+    the value it had to reach; ``iterations`` what it took; ``detail`` a short reason
+    (``"iteration limit"``, a PETSc reason). ``accepted``: the participant was told to accept
+    this solve unconverged (a scene key such as ``allow_unconverged``).
+    """
+
+    solver: str
+    converged: bool
+    iterations: int
+    residual: float
+    tolerance: float
+    detail: str = ""
+    accepted: bool = False
+
+    def as_dict(self) -> dict:
+        """JSON-ready (non-finite numbers as strings, which JSON has no words for)."""
+        return {"solver": self.solver, "converged": bool(self.converged), "iterations": int(self.iterations),
+                "residual": json_number(self.residual), "tolerance": json_number(self.tolerance),
+                "detail": self.detail, "accepted": bool(self.accepted)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "SolveReport":
+        try:
+            return cls(str(d["solver"]), bool(d["converged"]), int(d["iterations"]), float(d["residual"]),
+                       float(d["tolerance"]), str(d.get("detail", "")), bool(d.get("accepted", False)))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ProtocolError(f"malformed solve report {d!r}: {exc}") from None
+
+    @property
+    def ok(self) -> bool:
+        """Converged, or accepted unconverged on purpose."""
+        return self.converged or self.accepted
+
+    def describe(self) -> str:
+        """One line: ``simpleFoam did not converge: residual 3.2e-03 > 1e-07 after 2000 iterations``."""
+        state = "converged" if self.converged else "did not converge"
+        relation = "<=" if self.converged else ">"
+        text = (f"{self.solver} {state}: residual {self.residual:.3g} {relation} {self.tolerance:.3g} after "
+                f"{self.iterations} iteration{'s' * (self.iterations != 1)}")
+        if self.detail:
+            text += f" ({self.detail})"
+        if self.accepted and not self.converged:
+            text += "; accepted (allow_unconverged)"
+        return text
+
+
+def json_number(x: float):
+    """``x`` for a JSON header: finite numbers as they are, inf and NaN as the strings
+    ``"inf"``, ``"-inf"``, ``"nan"`` (``float()`` reads them back)."""
+    x = float(x)
+    return x if math.isfinite(x) else str(x)
 
 
 def as_fields(fields) -> list[Field]:

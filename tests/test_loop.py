@@ -218,7 +218,7 @@ def test_explicit_mode_calls_iterate_once_per_step():
     p = StatefulParticipant()
     accepted = []
     result = run_coupled(5, 0.1, p.iterate, np.zeros(12), coupling="explicit", checkpoint=p,
-                         on_converged=lambda w, x: accepted.append((w.index, x)))
+                         on_converged=lambda w, x, step: accepted.append((w.index, x)))
     assert result.iterations == [1] * 5 and result.all_converged
     assert p.saves == p.restores == 0
     assert [w for w, _ in accepted] == list(range(5))
@@ -235,7 +235,7 @@ def test_on_converged_gets_the_accepted_value_and_time_windows():
     p = StatefulParticipant()
     seen = []
     result = run_coupled(3, 0.25, p.iterate, np.zeros(12), IQNILS(0.3), tolerance=1e-8, max_iterations=60,
-                         checkpoint=p, on_converged=lambda w, x: seen.append((w, x)), t0=1.0)
+                         checkpoint=p, on_converged=lambda w, x, step: seen.append((w, x)), t0=1.0)
     assert [(w.index, w.t_start, w.t_end) for w, _ in seen] == [(0, 1.0, 1.25), (1, 1.25, 1.5), (2, 1.5, 1.75)]
     last_H = [Hx for (w, k, x, Hx) in p.log if w == 2][-1]
     np.testing.assert_array_equal(seen[-1][1], last_H)
