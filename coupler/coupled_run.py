@@ -89,9 +89,9 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
     if name == "solid":
         solver = scene.solvers["solid"]
         geometry = {"mesh": str(scene.solid.mesh.resolve())} if scene.solid.mesh else {"box": scene.solid.box}
-        loads = [{"type": "pressure" if load.type == "fluid_pressure" else load.type,
+        loads = [{"type": "pressure" if load.type == "fluid_pressure" else load.type, "key": f"[loads.{i}]",
                   "boundary": load.boundary, "value": load.value, "components": load.components}
-                 for load in scene.loads]
+                 for i, load in enumerate(scene.loads, start=1)]
         config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material,
                   "loads": loads, "degree": solver["degree"], "linear_solver": solver["linear_solver"],
                   "rtol": solver["rtol"], "dynamic": "dynamics" in scene.effects,
@@ -118,6 +118,8 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
                                               "tolerance", "decomposition", "substeps", "outer_correctors",
                                               "solid_velocity")}, ranks=solver["solver_ranks"])
         config.update(transient="dynamics" in scene.effects, dt=scene.time["dt"])
+        if solver["keep_case"]:
+            config["case_dir"] = str((Path(scene.output_dir) / "logs" / "fluid_case").resolve())
         if flow:
             config.update(inlet=flow["inlet"], outlet=flow["outlet"], walls=flow["walls"],
                           boundaries=dict(flow["faces"]))

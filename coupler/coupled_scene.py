@@ -149,7 +149,12 @@ SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI 
                "substeps": "openfoam with dynamics: pimpleFoam time steps per coupling step (default 1)",
                "outer_correctors": "openfoam with dynamics: PIMPLE outer iterations per time step at most (default 50)",
                "solid_velocity": "openfoam: 'bodies' (each solid body moves rigidly with its wetted layer's mean "
-                                 "velocity, default) or 'none' (penalized towards rest)"}
+                                 "velocity, default) or 'none' (penalized towards rest)",
+               "allow_unconverged": "accept this participant's unconverged inner solves on purpose (e.g. a "
+                                    "deliberately capped steady solve; default false: the run stops with "
+                                    "status not_converged); summary.json lists what was accepted",
+               "keep_case": "openfoam: keep the OpenFOAM case in <output>/logs/fluid_case for inspection "
+                            "(default false: a temporary directory, removed when the run ends)"}
 
 
 def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
@@ -434,7 +439,7 @@ def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
 def _solver(path, part, data, participants, default) -> dict:
     t = Table(path, f"solvers.{part}", data, SOLVER_KEYS)
     cfg = {"participant": t.string("participant", default, tuple(participants)),
-           "ranks": t.integer("ranks", 1)}
+           "ranks": t.integer("ranks", 1), "allow_unconverged": t.boolean("allow_unconverged", False)}
     cfg["module"] = participants[cfg["participant"]]
     if part == "solid":
         cfg["degree"] = t.integer("degree", 1)
@@ -463,4 +468,5 @@ def _solver(path, part, data, participants, default) -> dict:
         cfg["substeps"] = t.integer("substeps", 1)
         cfg["outer_correctors"] = t.integer("outer_correctors", 50)
         cfg["solid_velocity"] = t.string("solid_velocity", "bodies", ("bodies", "none"))
+        cfg["keep_case"] = t.boolean("keep_case", False)
     return cfg

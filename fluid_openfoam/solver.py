@@ -43,6 +43,27 @@ class OpenFOAMError(RuntimeError):
     """An OpenFOAM binary failed or produced unusable output."""
 
 
+_RESIDUAL = re.compile(r"Solving for (\w+), Initial residual = ([^,]+),")
+
+
+def final_residual(log_text: str, transient: bool) -> float:
+    """The quantity ``residualControl`` compares with the tolerance: the largest initial
+    residual of p and U (any component; the first solve of each field in an iteration) in
+    the last iteration of a simpleFoam log (pseudo-time: its last step), or of every time
+    step of a pimpleFoam log (its last PIMPLE iteration), maximised over the time steps.
+    NaN when the log has no residual."""
+    worst = float("nan")
+    blocks = re.split(r"^Time = ", log_text, flags=re.M)[1:]
+    for block in blocks if transient else blocks[-1:]:
+        last = re.split(r"^PIMPLE: iteration \d+", block, flags=re.M)[-1]
+        first: dict[str, float] = {}
+        for name, value in _RESIDUAL.findall(last):
+            first.setdefault(name, float(value))
+        if first:
+            worst = max(first.values()) if not worst >= 0 else max(worst, *first.values())
+    return worst
+
+
 def openfoam_env() -> dict:
     env = dict(os.environ)
     env.setdefault("WM_PROJECT_DIR", OPENFOAM_DIR)
@@ -209,7 +230,8 @@ class OpenFOAMSolver:
         else:
             m = re.search(r"SIMPLE solution converged in (\S+) iterations", text)
             iters = int(round(float(end) - t0))  # the log names the converged *time*, not a count
-        self.last_run = {"wall": wall, "iterations": iters, "converged": bool(m), "start": self.start, "end": end,
+        self.last_run = {"wall": wall, "iterations": iters, "converged": bool(m),
+                         "residual": final_residual(text, self.spec.transient), "start": self.start, "end": end,
                          "velocity_sources": [src.velocity.tolist() for src in self.sources],
                          "dropped": [src.dropped for src in self.sources if src.dropped]}
         if not m:
@@ -227,6 +249,16 @@ class OpenFOAMSolver:
         log.info("%s: %s -> %s, %d iterations, converged %s, %.3f s", self.application, self.last_run["start"],
                  end, iters, bool(m), wall)
         return U, p
+
+    def report(self) -> dict:
+        """How the last :meth:`solve` ended, as the keywords of
+        :meth:`coupler.participant.Participant.report_solve`."""
+        run = self.last_run
+        limit = (f"{self.spec.outer_correctors} PIMPLE iterations per time step" if self.spec.transient
+                 else f"{self.spec.max_iterations} iterations")
+        return {"solver": self.application, "converged": run["converged"], "iterations": run["iterations"],
+                "residual": run["residual"], "tolerance": self.spec.tolerance,
+                "detail": "" if run["converged"] else f"limit of {limit} reached"}
 
     def prune(self, keep: set[str]) -> None:
         """Delete time directories other than 0, the current start and ``keep``."""
