@@ -3,11 +3,12 @@
 A file may hold several cell blocks (meshio ``cells``): the blocks of the
 highest topological dimension are the mesh (they must be of one supported
 type: tetra, hexahedron, triangle or quad); lower-dimensional blocks (boundary
-faces, edges, vertices of e.g. Gmsh files) are ignored. A field is looked up by
-name in ``point_data`` (degree 1: P1 on simplices, Q1 on hexahedra and quads)
-or in ``cell_data`` (degree 0: P0 / Q0), where meshio keeps one array per cell
-block and the blocks of the mesh's type are joined in file order, as
-:meth:`transfer.Mesh.from_meshio` joins their cells.
+faces, edges, vertices of e.g. Gmsh files) are ignored. Cells numbered with
+negative orientation are reordered (:meth:`transfer.Mesh.from_meshio`). A
+field is looked up by name in ``point_data`` (degree 1: P1 on simplices, Q1 on
+hexahedra and quads) or in ``cell_data`` (degree 0: P0 / Q0), where meshio
+keeps one array per cell block and the blocks of the mesh's type are joined in
+file order, as :meth:`transfer.Mesh.from_meshio` joins their cells.
 """
 
 from __future__ import annotations
@@ -165,6 +166,9 @@ class MeshFile:
         text = f"{m.num_cells} {m.cell_type} cells, {m.num_points} points"
         if self.ignored:
             text += " (ignoring " + ", ".join(f"{n} {t}" for t, n in self.ignored.items()) + " cells)"
+        if m.reoriented:
+            text += (f"; note: {m.reoriented} of {m.num_cells} {m.cell_type} cells had negative orientation "
+                     f"and were reordered (vertex order only)")
         return text
 
     def space(self, kind: str) -> FunctionSpace:

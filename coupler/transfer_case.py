@@ -41,7 +41,8 @@ def _finite(x):
 def _mesh_summary(mf: MeshFile, kind: str) -> dict:
     space = mf.space(kind)
     return {"file": str(mf.path), "cell_type": mf.mesh.cell_type, "cells": mf.mesh.num_cells,
-            "points": mf.mesh.num_points, "space": space.family, "dofs": space.num_dofs}
+            "points": mf.mesh.num_points, "space": space.family, "dofs": space.num_dofs,
+            "reoriented_cells": mf.mesh.reoriented}
 
 
 def _read(scene: scenes.TransferScene, key: str) -> MeshFile:

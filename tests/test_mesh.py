@@ -167,9 +167,11 @@ def test_from_meshio_validates_and_round_trips_files(tmp_path):
     back = Mesh.from_meshio(meshio.read(path))
     np.testing.assert_allclose(back.points, m.points)
     np.testing.assert_array_equal(back.cells, m.cells)
-    bad = meshio.Mesh(m.points, [("tetra", m.cells[:, [1, 0, 2, 3]])])
+    mirrored = meshio.Mesh(m.points, [("tetra", m.cells[:, [1, 0, 2, 3]])])
+    back = Mesh.from_meshio(mirrored)  # a file's orientation is a convention: reordered, not rejected
+    assert back.reoriented == back.num_cells == 12 and np.all(signed_volumes(back) > 0)
     with pytest.raises(MeshError, match="inverted"):
-        Mesh.from_meshio(bad)
+        Mesh.from_meshio(mirrored, reorient=False)
     with pytest.raises(MeshError, match="no tetra, hexahedron"):
         Mesh.from_meshio(meshio.Mesh(m.points, [("line", np.array([[0, 1]]))]))
 

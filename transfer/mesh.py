@@ -5,11 +5,21 @@ when it is made: finite coordinates, indices in range, no repeated vertex in a
 cell, no degenerate cell and, for volume cells, no inverted cell. Tolerances
 are relative to each cell's own size, so a mesh in metres and the same mesh in
 millimetres are judged alike.
+
+Orientation: the constructor is strict, since the coupler builds deformed meshes
+with the same cells and an inverted cell there is a real failure. Mesh files,
+though, number cells in either orientation (scipy's Delaunay and many mesh
+generators give negative tetrahedra), so :meth:`Mesh.from_meshio` passes
+``reorient=True``: a cell with negative orientation throughout (a tetrahedron,
+or a hexahedron whose eight corner Jacobians are all negative) gets its mirror
+vertex order (:data:`MIRROR`) and is counted in ``Mesh.reoriented``. Cells keep
+their index, so cell data stays attached. A partly inverted hexahedron and a
+degenerate cell stay errors.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 
 import numpy as np
 
@@ -47,6 +57,15 @@ def lattice_tetrahedra(shape) -> np.ndarray:
 #: a cell whose measure is below this times (longest edge)^dim is degenerate
 DEGENERATE_RTOL = 1e-13
 
+#: vertex order of the mirror image of a volume cell: its orientation reversed (two
+#: vertices of a tetrahedron swapped; the bottom and top quads of a hexahedron swapped)
+MIRROR = {"tetra": [0, 2, 1, 3], "hexahedron": [4, 5, 6, 7, 0, 1, 2, 3]}
+
+#: the corner tetrahedra of a hexahedron (a corner and its three neighbours, right-handed):
+#: their volumes are the signs of the Jacobian at the eight corners
+HEX_CORNERS = np.array([[0, 1, 3, 4], [1, 2, 0, 5], [2, 3, 1, 6], [3, 0, 2, 7],
+                        [4, 7, 5, 0], [5, 4, 6, 1], [6, 5, 7, 2], [7, 6, 4, 3]])
+
 
 def _signed_tet_volumes(p: np.ndarray) -> np.ndarray:
     """Signed volumes of tetrahedra given as (n, 4, 3) vertex arrays."""
@@ -68,15 +87,20 @@ class Mesh:
     cells : (m, k) integer array of vertex indices, VTK order
     cell_type : ``"tetra"``, ``"hexahedron"``, ``"triangle"`` or ``"quad"``
     name : label used in error messages (e.g. the file it was read from)
+    reorient : give volume cells with negative orientation their mirror vertex
+        order instead of rejecting them as inverted (see the module docstring);
+        ``reoriented`` is then the number of cells reordered
     """
 
     points: np.ndarray
     cells: np.ndarray
     cell_type: str
     name: str = "mesh"
+    reorient: InitVar[bool] = False
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    reoriented: int = field(default=0, init=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self, reorient: bool):
         points = np.asarray(self.points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] not in (2, 3):
             raise MeshError(f"{self.name}: points must have shape (n, 3), got {points.shape}")
@@ -88,13 +112,14 @@ class Mesh:
                             f"use one of {sorted(CELL_TYPES)}")
         cells = np.ascontiguousarray(np.asarray(self.cells, dtype=np.int64))
         object.__setattr__(self, "cells", cells)
-        self._validate()
+        self._validate(reorient)
 
     # -- construction ---------------------------------------------------
     @classmethod
-    def from_meshio(cls, mesh, cell_type: str | None = None, name: str = "mesh") -> "Mesh":
+    def from_meshio(cls, mesh, cell_type: str | None = None, name: str = "mesh", reorient: bool = True) -> "Mesh":
         """The cells of one type of a :class:`meshio.Mesh` (by default its
-        highest-dimensional supported type; blocks of that type are joined)."""
+        highest-dimensional supported type; blocks of that type are joined),
+        reoriented by default: a file's orientation is a convention."""
         present = [b.type for b in mesh.cells if b.type in CELL_TYPES]
         if cell_type is None:
             if not present:
@@ -108,7 +133,7 @@ class Mesh:
         blocks = [b.data for b in mesh.cells if b.type == cell_type]
         if not blocks:
             raise MeshError(f"{name}: no cells of type {cell_type!r}")
-        return cls(mesh.points, np.concatenate(blocks), cell_type, name=name)
+        return cls(mesh.points, np.concatenate(blocks), cell_type, name=name, reorient=reorient)
 
     def to_meshio(self):
         import meshio
@@ -166,7 +191,7 @@ class Mesh:
         return d.max(axis=1)
 
     # -- validation -------------------------------------------------------
-    def _validate(self):
+    def _validate(self, reorient: bool):
         tdim, nverts = CELL_TYPES[self.cell_type]
         if self.cells.ndim != 2 or self.cells.shape[1] != nverts:
             raise MeshError(f"{self.name}: {self.cell_type} cells need {nverts} vertices, "
@@ -190,17 +215,29 @@ class Mesh:
             raise MeshError(f"{self.name}: cell {degenerate[0]} is degenerate (measure {measure[degenerate[0]]:.3e} "
                             f"for edge length {h[degenerate[0]]:.3e}); {degenerate.size} such cell(s)")
         if tdim == 3:
-            self._check_orientation(h)
+            self._check_orientation(DEGENERATE_RTOL * h**3, reorient)
 
-    def _check_orientation(self, h):
+    def _corner_volumes(self) -> np.ndarray:
+        """(m, 1) signed volumes of tetrahedra, (m, 8) of the corner tetrahedra of hexahedra."""
         p = self.cell_vertices()
         if self.cell_type == "tetra":
-            vol = _signed_tet_volumes(p)
-        else:  # Jacobian sign at the eight corners of each hexahedron
-            corner = np.array([[0, 1, 3, 4], [1, 2, 0, 5], [2, 3, 1, 6], [3, 0, 2, 7],
-                               [4, 7, 5, 0], [5, 4, 6, 1], [6, 5, 7, 2], [7, 6, 4, 3]])
-            vol = np.min([_signed_tet_volumes(p[:, c]) for c in corner], axis=0)
-        inverted = np.flatnonzero(vol <= DEGENERATE_RTOL * h**3)
+            return _signed_tet_volumes(p)[:, None]
+        return np.stack([_signed_tet_volumes(p[:, c]) for c in HEX_CORNERS], axis=1)
+
+    def _check_orientation(self, small: np.ndarray, reorient: bool):
+        """MeshError on a cell whose corner volume is below `small`; with `reorient`
+        first mirror the cells negative at every corner."""
+        vol = self._corner_volumes()
+        if reorient:
+            mirrored = np.all(vol < -small[:, None], axis=1)
+            if mirrored.any():
+                cells = self.cells.copy()
+                cells[mirrored] = cells[mirrored][:, MIRROR[self.cell_type]]
+                object.__setattr__(self, "cells", cells)
+                object.__setattr__(self, "reoriented", int(mirrored.sum()))
+                self._cache.clear()
+                vol = self._corner_volumes()
+        inverted = np.flatnonzero(vol.min(axis=1) <= small)
         if inverted.size:
             raise MeshError(f"{self.name}: cell {inverted[0]} is inverted (negative orientation, "
                             f"vertices {self.cells[inverted[0]].tolist()}); {inverted.size} such cell(s)")

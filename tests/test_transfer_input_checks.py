@@ -1,0 +1,142 @@
+"""Honest runs: inputs the transfer used to reject wrongly, or accept silently with a wrong
+or unfinished result (cell orientation, length units, quadrature degree, output files,
+the error of the [transfer] scene)."""
+
+import json
+
+import meshio
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from coupler.cli import main
+from coupler.meshfile import MeshFile
+from transfer import FunctionSpace, Mesh, MeshError, Transfer
+from transfer.generate import box_hexahedra, box_tetrahedra
+
+from vc_helpers import Linear
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_clean_error(code, err, *words):
+    assert code == 2 and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("varcouple: error: "), err
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+
+
+# -- orientation: a convention of the file, not an error ---------------------------------
+def delaunay_cube(n=40, seed=3):
+    """scipy's Delaunay tetrahedra of the unit cube's corners and n random points: about half
+    of them have negative orientation."""
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    points = np.vstack([corners, np.random.default_rng(seed).uniform(0, 1, (n, 3))])
+    return points, Delaunay(points).simplices
+
+
+def volumes(points, cells):
+    """Signed volumes of tetrahedra, from scratch."""
+    p = points[cells]
+    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
+
+
+def test_negative_tetrahedra_are_reordered_on_request():
+    points, cells = delaunay_cube()
+    negative = volumes(points, cells) < 0
+    with pytest.raises(MeshError, match=r"is inverted"):  # strict by default (a deformation inverting cells)
+        Mesh(points, cells, "tetra")
+    m = Mesh(points, cells, "tetra", reorient=True)
+    assert 0 < m.reoriented == np.count_nonzero(negative) < len(cells)
+    assert np.all(volumes(m.points, m.cells) > 0)
+    np.testing.assert_array_equal(np.sort(m.cells, axis=1), np.sort(cells, axis=1))  # same cells, same order
+    np.testing.assert_array_equal(m.cells[~negative], cells[~negative])
+    np.testing.assert_allclose(m.cell_measures().sum(), 1.0, rtol=1e-13)
+    assert Mesh(m.points, m.cells, "tetra").reoriented == 0
+
+
+@pytest.mark.parametrize("side", ["source", "target"])
+def test_delaunay_mesh_transfers_a_linear_field_exactly(side, method):
+    points, cells = delaunay_cube()
+    delaunay = FunctionSpace(Mesh(points, cells, "tetra", reorient=True), "P1")
+    box = FunctionSpace(box_tetrahedra((3, 4, 2), jitter=0.2, seed=5), "P1")
+    source, target = (delaunay, box) if side == "source" else (box, delaunay)
+    f = Linear(7)
+    T = Transfer.assemble(source, target, method)
+    assert T.covered.all()
+    np.testing.assert_allclose(T(source.interpolate(f)), target.interpolate(f), rtol=0, atol=1e-12)
+
+
+def test_mirrored_hexahedron_is_reordered_a_partly_inverted_one_is_not():
+    m = box_hexahedra((2, 1, 1))
+    mirrored = m.cells.copy()
+    mirrored[1] = mirrored[1][[4, 5, 6, 7, 0, 1, 2, 3]]  # top and bottom swapped: every corner negative
+    with pytest.raises(MeshError, match=r"cell 1 is inverted"):
+        Mesh(m.points, mirrored, "hexahedron")
+    fixed = Mesh(m.points, mirrored, "hexahedron", reorient=True)
+    assert fixed.reoriented == 1
+    np.testing.assert_array_equal(fixed.cells, m.cells)
+    twisted = m.cells.copy()
+    twisted[1, [0, 1]] = twisted[1, [1, 0]]  # some corners negative, others positive: not a convention
+    with pytest.raises(MeshError, match=r"cell 1 is inverted"):
+        Mesh(m.points, twisted, "hexahedron", reorient=True)
+
+
+def test_degenerate_cells_stay_errors_with_reorient():
+    points, cells = delaunay_cube()
+    points = points.copy()
+    points[cells[0, 3]] = points[cells[0, :3]].mean(axis=0)  # on the plane of the other three
+    with pytest.raises(MeshError, match=r"degenerate"):
+        Mesh(points, cells, "tetra", reorient=True)
+
+
+@pytest.fixture
+def delaunay_file(tmp_path):
+    """A .vtu of the Delaunay cube with a cell field k = 1 + 10 x + 100 y + 1000 z at the centroids
+    (different in every cell) and the linear point field T."""
+    points, cells = delaunay_cube()
+    k = (1 + points[cells].mean(axis=1) @ [10.0, 100.0, 1000.0])
+    path = tmp_path / "delaunay.vtu"
+    meshio.write(path, meshio.Mesh(points, [("tetra", cells)], point_data={"T": Linear(7)(points)},
+                                   cell_data={"k": [k]}))
+    return path, cells, k
+
+
+def test_file_reading_reorients_and_keeps_cell_data(delaunay_file, tmp_path, capsys):
+    path, cells, k = delaunay_file
+    mf = MeshFile.read(path)
+    assert mf.mesh.reoriented == np.count_nonzero(volumes(mf.raw.points, cells) < 0) > 0
+    assert "reordered" in mf.describe()
+    # P0 from the file onto itself is the identity: each value stays with its cell
+    out = tmp_path / "out.vtu"
+    code, stdout, err = run_cli(capsys, "transfer", path, path, "-f", "k", "-o", out, "--method", "pseudo_l2")
+    assert code == 0, err
+    assert f"{mf.mesh.reoriented} of {len(cells)} tetra cells" in stdout
+    res = meshio.read(out)
+    np.testing.assert_allclose(res.cell_data["k"][0], k, rtol=1e-13)
+    np.testing.assert_array_equal(np.sort(res.cells[0].data, axis=1), np.sort(cells, axis=1))
+
+
+def write_scene(case, text):
+    case.mkdir(exist_ok=True)
+    (case / "scene.toml").write_text(text)
+    return case
+
+
+def test_scene_records_reoriented_cells(delaunay_file, tmp_path, capsys):
+    path, cells, _ = delaunay_file
+    box = box_tetrahedra((2, 2, 2))
+    meshio.write(tmp_path / "box.vtu", meshio.Mesh(box.points, [("tetra", box.cells)]))
+    case = write_scene(tmp_path, f'[transfer]\nsource = "{path.name}"\ntarget = "box.vtu"\nfield = "T"\n'
+                                 f'method = "l2"\n')
+    code, stdout, err = run_cli(capsys, "run", case, "--output", tmp_path / "out")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    n = np.count_nonzero(volumes(meshio.read(path).points, cells) < 0)
+    assert summary["source"]["reoriented_cells"] == n > 0 and summary["target"]["reoriented_cells"] == 0
+    assert f"{n} of {len(cells)} tetra cells had negative orientation" in stdout
