@@ -129,32 +129,50 @@ def _run_args(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Validate the scene of CASE, run it and write its outputs."""
+    """Validate the scene of CASE, run it and write its outputs. Exit code by the final
+    status (README, "When a run fails"): 0 completed, 1 the [check] failed, 2 invalid input,
+    3 not converged, 4 failed, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
+    from transfer import TransferError
+
     from . import scene as scenes
+    from .errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, SceneError
+    from .messaging import new_run_id
+    from .outdir import OutputLock, prepare
 
     start = time.perf_counter()
     scene = scenes.load(args.case, output=args.output)
     study = scenes.study_module(scene)
+    origin = "--output" if args.output is not None else f"{scene.path}: [output] directory"
+    run_id = new_run_id()
+    lock = OutputLock(scene.output_dir, run_id)
+    out = prepare(scene.output_dir, origin)
 
     def log(line):
         print(line, flush=True)
 
-    if isinstance(scene, scenes.TransferScene):
-        from .transfer_case import run as run_transfer
+    with lock:
+        if lock.note:
+            log(f"note: {out}: {lock.note}")
+        try:
+            if isinstance(scene, scenes.TransferScene):
+                from .transfer_case import run as run_transfer
 
-        run_transfer(scene, log=log)
-    else:
-        if study is not None:
-            summary = study.run(scene, log=log)
-        else:
-            from .coupled_run import run as run_coupled_case
+                summary = run_transfer(scene, log=log)
+            elif study is not None:
+                summary = study.run(scene, log=log)
+            else:
+                from .coupled_run import run as run_coupled_case
 
-            summary = run_coupled_case(scene, log=log)
-        if not summary.get("check", {}).get("passed", True):
-            log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}; the [check] FAILED")
-            return 1
+                summary = run_coupled_case(scene, log=log, run_id=run_id)
+        except (NotConverged, SceneError):  # not converged (3); a scene key found wrong while running (2)
+            raise
+        except (CouplerError, TransferError, OSError) as exc:  # the run started: a failure, not bad input
+            raise RunFailed(_one_line(exc)) from exc
+    if not summary.get("check", {}).get("passed", True):
+        log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}; the [check] FAILED")
+        return EXIT_CODES["check_failed"]
     log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}")
-    return 0
+    return EXIT_CODES["completed"]
 
 
 # -- main ----------------------------------------------------------------------------
@@ -188,6 +206,19 @@ def error(message: str) -> None:
     print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 
+def _one_line(exc: BaseException) -> str:
+    """An error as one line; an OSError as ``<file>: <reason>``."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _terminate(signum, frame):
+    from .errors import Terminated
+
+    raise Terminated(signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
@@ -195,19 +226,37 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a usage error argparse has printed
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
 
+    import signal
+
     from transfer import TransferError
 
-    from .errors import CouplerError
+    from .errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, Terminated
 
+    try:  # SIGTERM (timeout, batch schedulers) ends a run like Ctrl-C: participants stopped, results kept
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread
+        previous = None
     try:
         return args.func(args)
-    except (CouplerError, TransferError) as exc:
-        sys.stdout.flush()
-        error(str(exc))
-        return 2
+    except Terminated as exc:
+        error(f"{exc}: participants stopped, the results written so far are kept")
+        return EXIT_CODES["terminated"]
     except KeyboardInterrupt:
-        error("interrupted")
-        return 130
+        error("interrupted: participants stopped, the results written so far are kept")
+        return EXIT_CODES["interrupted"]
+    except NotConverged as exc:
+        error(str(exc))
+        return EXIT_CODES["not_converged"]
+    except RunFailed as exc:
+        error(str(exc))
+        return EXIT_CODES["failed"]
+    except (CouplerError, TransferError, OSError) as exc:
+        sys.stdout.flush()
+        error(_one_line(exc))
+        return EXIT_CODES["invalid"]
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -111,7 +111,7 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
     config = {"grid": {"origin": g.origin, "spacing": g.spacing, "shape": g.shape}, "location": "cells",
               "rho": scene.fluid_material["density"], "mu": scene.fluid_material["viscosity"]}
     if solver["participant"] == "replay_fluid":
-        config.update(pressure=solver["pressure"], feedback=solver["feedback"])
+        config.update(pressure=solver["pressure"], feedback=solver["feedback"], unconverged=solver["unconverged"])
     if solver["participant"] == "openfoam":
         flow = scene.flow or {}
         config.update({k: solver[k] for k in ("penalization", "penalization_exponent", "drag", "max_iterations",
@@ -140,14 +140,14 @@ def _as_arrays(fields: dict) -> dict:
     return {k: np.asarray(f.data if isinstance(f, Field) else f) for k, f in fields.items()}
 
 
-def run(scene: CoupledScene, log=print, progress: bool | None = None) -> dict:
+def run(scene: CoupledScene, log=print, progress: bool | None = None, run_id: str | None = None) -> dict:
     """Run the coupled `scene`; return its summary (also in ``summary.json``)."""
     plan = make_plan(scene)
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     for note in plan.notes:
         log(f"warning: {note}")
-    run_id = new_run_id()
+    run_id = run_id or new_run_id()
     phases = Phases()
     summary = {"case": str(scene.case_dir), "scene": str(scene.path), "run_id": run_id,
                **plan.as_dict(), "status": "running", "steps": [], "phases_seconds": phases.seconds}

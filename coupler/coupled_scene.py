@@ -140,6 +140,7 @@ SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI 
                "rtol": "relative tolerance of the linear solver", "stiffness": "spring_solid: spring stiffness",
                "pressure": "replay_fluid: uniform pressure served",
                "feedback": "replay_fluid: pressure drop per unit mean solid velocity [Pa s/m]",
+               "unconverged": "replay_fluid: time steps in which it reports an unconverged solve (for tests)",
                "penalization": f"openfoam: solid fractions -> drag, one of {', '.join(PENALIZATIONS)}",
                "penalization_exponent": "openfoam: exponent of penalization 'power'",
                "drag": "openfoam: maximum penalization drag [1/s] (default 1e4 x the fastest cell rate)",
@@ -452,6 +453,8 @@ def _solver(path, part, data, participants, default) -> dict:
     if part == "fluid" and cfg["participant"] == "replay_fluid":
         cfg["pressure"] = t.number("pressure", 0.0)
         cfg["feedback"] = t.number("feedback", 0.0)
+        cfg["unconverged"] = t.numbers("unconverged", [], integer=True, minimum=0, within=None) \
+            if "unconverged" in t.data else []
     if part == "fluid" and cfg["participant"] == "openfoam":
         # one participant process; the solver runs decomposed on `ranks` MPI ranks (fluid_openfoam/parallel.py)
         cfg["solver_ranks"], cfg["ranks"] = cfg["ranks"], 1

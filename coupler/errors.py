@@ -19,6 +19,11 @@ class NotConverged(CouplerError):
     result it does not have."""
 
 
+class RunFailed(CouplerError):
+    """A run that had started failed (a participant died or answered an error, NaN in a
+    field, an output that could not be written): status ``failed``, exit code 4."""
+
+
 class Terminated(BaseException):
     """SIGTERM (``timeout``, batch schedulers) received: handled like Ctrl-C, status ``terminated``."""
 
@@ -42,6 +47,8 @@ def run_status(exc: BaseException | None) -> str:
         return "terminated"
     if isinstance(exc, NotConverged):
         return "not_converged"
+    if isinstance(exc, SceneError):
+        return "invalid"
     return "failed"
 
 

@@ -16,6 +16,10 @@ without dolfinx or OpenFOAM.
                                         # "velocity" (W, n, 3), row w served in window w
                                         # (the last row once w >= W)
 
+    With ``"unconverged": [w, ...]`` it reports (``report_solve``) an unconverged solve in
+    those windows and a converged one in the others: the coupler's handling of inner
+    solvers that fail is tested with it.
+
     Grid points and cells are numbered x fastest (as :class:`transfer.StructuredGrid`).
     Accepts ``solid_velocity`` and ``solid_fraction`` (checked for their size). With
     ``"feedback": c`` (Pa s/m, default 0) the served pressure reacts to the solid:
@@ -92,6 +96,7 @@ class ReplayFluid(Participant):
         self.pressure = np.full(self.n, float(config.get("pressure", 0.0)))
         self.feedback = float(config.get("feedback", 0.0))
         self.velocity = np.tile(_vec3(config.get("velocity", [0, 0, 0]), "velocity"), (self.n, 1))
+        self.unconverged = {int(w) for w in config.get("unconverged", [])}
         self.replay = {}
         if config.get("npz"):
             with np.load(config["npz"]) as data:
@@ -124,6 +129,10 @@ class ReplayFluid(Participant):
             vz = inputs["solid_velocity"].data[:, 2]
             mean_vz = float(w @ vz / w.sum()) if w.sum() > 0 else 0.0
             out["pressure"] = Field("pressure", out["pressure"].data - self.feedback * mean_vz, "Pa")
+        if int(window) in self.unconverged:
+            self.report_solve("replay", False, 10, 1e-2, 1e-6, "told to (config 'unconverged')")
+        else:
+            self.report_solve("replay", True, 1, 0.0, 1e-6)
         return out
 
     def save_state(self, window):

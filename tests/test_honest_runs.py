@@ -1,0 +1,130 @@
+"""A run never claims more than it did: unconverged inner solves, signals, a second run in
+the same output directory and unwritable outputs end with a status that says what
+happened, a non-zero exit and one line naming the cause (stand-in participants: fast)."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from coupler.cli import main
+from coupler.errors import EXIT_CODES
+from coupler.outdir import LOCK, OutputBusy, OutputLock
+from vc_helpers import copy_case
+
+CASE = Path(__file__).resolve().parent.parent / "cases" / "standin_flow"
+
+
+def summary(out):
+    return json.loads((out / "summary.json").read_text())
+
+
+def run(capsys, case, out):
+    code = main(["run", str(case), "--output", str(out)])
+    return code, capsys.readouterr().err
+
+
+def test_an_unconverged_inner_solve_stops_the_run_as_not_converged(tmp_path, capsys):
+    case = copy_case(CASE, tmp_path, {"feedback = 3.0e4": "feedback = 3.0e4\nunconverged = [1]"})
+    out = tmp_path / "out"
+    code, err = run(capsys, case, out)
+    assert code == EXIT_CODES["not_converged"] == 3
+    line = err.strip().splitlines()[-1]
+    assert line.startswith("varcouple: error: not converged in time step 1, coupling iteration")
+    assert "participant 'fluid': replay did not converge: residual 0.01 > 1e-06 after 10 iterations" in line
+    s = summary(out)
+    assert s["status"] == "not_converged" and "InnerSolveNotConverged" in s["error"]
+    first, second = s["steps"]  # step 0 done and kept, step 1 recorded as not converged, nothing after
+    assert first["converged"] and first["inner_converged"] and first["coupling_converged"]
+    assert first["solves"]["fluid"][0]["converged"] and first["solves"]["solid"] == []
+    assert second["coupling_converged"] and not second["inner_converged"] and not second["converged"]
+    assert second["solves"]["fluid"][0] == {"solver": "replay", "converged": False, "iterations": 10,
+                                            "residual": 0.01, "tolerance": 1e-6,
+                                            "detail": "told to (config 'unconverged')", "accepted": False}
+    assert (out / "solid_0001.vtu").is_file() and not (out / "solid_0002.vtu").exists()
+
+
+def test_allow_unconverged_accepts_it_on_purpose_and_says_so(tmp_path, capsys):
+    case = copy_case(CASE, tmp_path, {"feedback = 3.0e4": "feedback = 3.0e4\nunconverged = [1]\n"
+                                                          "allow_unconverged = true"})
+    out = tmp_path / "out"
+    code, err = run(capsys, case, out)
+    assert code == 0, err
+    s = summary(out)
+    assert s["status"] == "completed" and len(s["steps"]) == 4
+    assert s["steps"][1]["converged"] and s["steps"][1]["accepted_unconverged"] == ["fluid: replay"]
+    assert s["steps"][1]["solves"]["fluid"][0]["accepted"] and s["steps"][0]["accepted_unconverged"] == []
+
+
+def _wait_for_steps(out, timeout=60):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            s = summary(out)
+            if s.get("steps"):
+                return s
+        except (OSError, ValueError):
+            pass
+        time.sleep(0.05)
+    raise AssertionError("the run wrote no step")
+
+
+def test_sigterm_stops_the_participants_and_keeps_the_results(tmp_path):
+    case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _wait_for_steps(out)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1].startswith("varcouple: error: terminated by signal 15")
+    s = summary(out)
+    assert s["status"] == "terminated" and len(s["steps"]) >= 1
+    time.sleep(0.5)
+    for p in s["participants_announced"].values():
+        with pytest.raises(ProcessLookupError):
+            os.kill(p["pid"], 0)
+    assert not (out / LOCK).exists()
+
+
+def test_a_second_run_into_the_same_output_is_refused(tmp_path, capsys):
+    case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
+    out = tmp_path / "out"
+    first = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        s = _wait_for_steps(out)
+        code, err = run(capsys, CASE, out)
+        assert code == 2
+        assert f"in use by run {s['run_id']} (pid {first.pid}" in err and "another --output" in err
+        assert summary(out)["run_id"] == s["run_id"]  # the first run's files are untouched
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.wait(60)
+
+
+def test_a_stale_lock_is_taken_over(tmp_path):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp_path / LOCK).write_text(json.dumps({"run_id": "old", "pid": dead.pid, "host": os.uname().nodename,
+                                             "started": "yesterday"}))
+    with OutputLock(tmp_path, "new") as lock:
+        assert "stale lock of run old" in lock.note
+        assert json.loads((tmp_path / LOCK).read_text())["run_id"] == "new"
+        with pytest.raises(OutputBusy, match="in use by run new"):
+            OutputLock(tmp_path, "third").acquire()
+    assert not (tmp_path / LOCK).exists()
+
+
+def test_an_unwritable_output_is_one_line_before_anything_runs(capsys):
+    out = Path("/sys/varcouple-cannot-write-here")  # refused even to root
+    code, err = run(capsys, CASE, out)
+    assert code == 2 and "Traceback" not in err
+    assert err.strip() == (f"varcouple: error: --output: cannot write to the output directory '{out}': "
+                           f"Operation not permitted")
