@@ -43,6 +43,7 @@ def _positive_int(text: str) -> int:
 # -- varcouple transfer ----------------------------------------------------------
 def _transfer_args(parser: argparse.ArgumentParser) -> None:
     from transfer.operators import METHODS
+    from transfer.quadrature import MAX_DEGREE
 
     parser.add_argument("source", metavar="SRC", help="source mesh file carrying the field (any format meshio reads)")
     parser.add_argument("target", metavar="DST", help="target mesh file (any format meshio reads)")
@@ -53,7 +54,8 @@ def _transfer_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", "-m", choices=METHODS, default="l2",
                         help="l2: full target mass matrix; pseudo_l2: dual basis, diagonal mass (default: l2)")
     parser.add_argument("--quadrature-degree", "-q", type=_positive_int, default=None, metavar="N",
-                        help="quadrature degree on the intersections (default: exact for the bases)")
+                        help=f"quadrature degree on the intersections, 1 to {MAX_DEGREE} "
+                             f"(default: exact for the bases)")
     parser.add_argument("--threads", "-t", type=_positive_int, default=1, metavar="N",
                         help="threads of the assembly kernel (default: 1)")
 
@@ -62,10 +64,18 @@ def transfer(args: argparse.Namespace) -> int:
     """Transfer one field from SRC to DST and write DST with it to OUT."""
     import numpy as np
 
+    from transfer import QuadratureError
+    from transfer.quadrature import check_degree
+
     from .errors import CouplerError
     from .meshfile import MeshFile, check_writable
     from .projection import project
 
+    if args.quadrature_degree is not None:
+        try:
+            check_degree(args.quadrature_degree)
+        except QuadratureError as exc:
+            raise CouplerError(f"--quadrature-degree: {exc}") from None
     check_writable(args.output)
     source = MeshFile.read(args.source)
     target = MeshFile.read(args.target)

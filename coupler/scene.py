@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from transfer import QuadratureError
 from transfer.operators import METHODS
+from transfer.quadrature import MAX_DEGREE, check_degree
 
 from .errors import SceneError
 
@@ -34,7 +36,7 @@ KEYS = {
         "method": f"transfer method, one of {', '.join(METHODS)}",
         "methods": "list of transfer methods, run one after the other",
         "exact": "optional: the field as an expression in x, y, z (numpy), to measure the error",
-        "quadrature_degree": "optional: quadrature degree (default: exact for the bases)",
+        "quadrature_degree": f"optional: quadrature degree, 1 to {MAX_DEGREE} (default: exact for the bases)",
         "threads": "optional: threads of the assembly kernel (default 1)",
     },
     "output": {
@@ -318,6 +320,11 @@ def _load_transfer(path: Path, case_dir: Path, data: dict, output) -> TransferSc
     if exact is not None:
         check_expression(exact, tr.where("exact"))
     qdeg = tr.integer("quadrature_degree", None) if "quadrature_degree" in tr.data else None
+    if qdeg is not None:
+        try:
+            check_degree(qdeg)
+        except QuadratureError as exc:
+            raise tr.error("quadrature_degree", str(exc)) from None
     slice_z = out.number("slice_z", None)
     return TransferScene(path=path, case_dir=case_dir, source=source, target=target, field=field,
                          methods=methods, exact=exact, quadrature_degree=qdeg,

@@ -3,6 +3,7 @@ or unfinished result (cell orientation, length units, quadrature degree, output 
 the error of the [transfer] scene)."""
 
 import json
+import time
 
 import meshio
 import numpy as np
@@ -11,7 +12,7 @@ from scipy.spatial import Delaunay
 
 from coupler.cli import main
 from coupler.meshfile import MeshFile
-from transfer import FunctionSpace, Mesh, MeshError, Transfer
+from transfer import FunctionSpace, Mesh, MeshError, QuadratureError, Transfer, TransferError
 from transfer.generate import box_hexahedra, box_tetrahedra
 
 from vc_helpers import Linear
@@ -140,3 +141,35 @@ def test_scene_records_reoriented_cells(delaunay_file, tmp_path, capsys):
     n = np.count_nonzero(volumes(meshio.read(path).points, cells) < 0)
     assert summary["source"]["reoriented_cells"] == n > 0 and summary["target"]["reoriented_cells"] == 0
     assert f"{n} of {len(cells)} tetra cells had negative orientation" in stdout
+
+
+# -- quadrature degree: bounded -----------------------------------------------------------
+@pytest.mark.parametrize("degree", [0, 21, 99, 2.5, True])
+def test_quadrature_degree_out_of_range_is_refused_at_once(degree):
+    cube = FunctionSpace(box_tetrahedra((1, 1, 1)), "P1")
+    start = time.perf_counter()
+    with pytest.raises(QuadratureError, match=rf"quadrature degree {degree!r}.*1 to 20"):
+        Transfer.assemble(cube, cube, "l2", quadrature_degree=degree)
+    assert time.perf_counter() - start < 0.5
+    assert issubclass(QuadratureError, TransferError) and issubclass(QuadratureError, ValueError)
+
+
+def test_largest_quadrature_degree_is_accepted():
+    src, dst = box_tetrahedra((1, 1, 1)), box_tetrahedra((1, 2, 1), jitter=0.1)
+    T = Transfer.assemble(FunctionSpace(src, "P1"), FunctionSpace(dst, "P1"), "l2", quadrature_degree=20)
+    assert T.stats["quadrature_degree"] == 20 and T.stats["quadrature_points"] == 1001
+    f = Linear(3)
+    np.testing.assert_allclose(T(FunctionSpace(src, "P1").interpolate(f)), f(dst.points), atol=1e-11)
+
+
+def test_cli_and_scene_refuse_a_huge_quadrature_degree(delaunay_file, tmp_path, capsys):
+    path, _, _ = delaunay_file
+    out = tmp_path / "out.vtu"
+    code, _, err = run_cli(capsys, "transfer", path, path, "-f", "T", "-o", out, "--quadrature-degree", "99")
+    assert_clean_error(code, err, "--quadrature-degree", "99", "1 to 20")
+    assert not out.exists()
+    case = write_scene(tmp_path, f'[transfer]\nsource = "{path.name}"\ntarget = "{path.name}"\nfield = "T"\n'
+                                 f'method = "l2"\nquadrature_degree = 99\n')
+    code, _, err = run_cli(capsys, "run", case)
+    assert_clean_error(code, err, "scene.toml: [transfer] quadrature_degree", "99", "1 to 20")
+    assert not (case / "results").exists()

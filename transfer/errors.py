@@ -21,5 +21,9 @@ class NoOverlapError(TransferError):
     """Source and target do not overlap: nothing can be transferred."""
 
 
+class QuadratureError(TransferError, ValueError):
+    """A quadrature degree outside [1, :data:`transfer.quadrature.MAX_DEGREE`]."""
+
+
 class FieldError(TransferError, ValueError):
     """A field has the wrong shape or contains NaN/inf."""

@@ -28,7 +28,7 @@ import scipy.sparse.linalg as spla
 from . import _kernels
 from .errors import FieldError, NoOverlapError, TransferError
 from .grid import StructuredGrid
-from .quadrature import simplex_rule
+from .quadrature import check_degree, simplex_rule
 from .spaces import FunctionSpace
 
 METHODS = ("l2", "pseudo_l2")
@@ -94,7 +94,8 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
     Products of affine bases (P0, P1 on tets) are integrated exactly from the
     moments of the intersection unless `quadrature_degree` is given; other
     pairs use a simplex rule of that degree (default: exact for the bases) on
-    the intersection pieces.
+    the intersection pieces; degrees above :data:`transfer.quadrature.MAX_DEGREE`
+    raise :class:`QuadratureError`.
 
     Volume meshes (tetra, hexahedron, structured grid) are intersected exactly;
     a surface target inside a volume source gets the trace of the volume field
@@ -106,6 +107,8 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
     """
     if method not in METHODS:
         raise TransferError(f"unknown method {method!r}; use one of {METHODS}")
+    if quadrature_degree is not None:
+        check_degree(quadrature_degree)
     smesh, tmesh = source.mesh, target.mesh
     if smesh.tdim < tmesh.tdim:
         raise TransferError(f"{smesh.name} ({smesh.cell_type}) -> {tmesh.name} ({tmesh.cell_type}): a surface "
