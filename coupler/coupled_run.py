@@ -154,7 +154,8 @@ def run(scene: CoupledScene, log=print, progress: bool | None = None, run_id: st
     write_summary(out, summary)
     start = time.perf_counter()
     try:
-        with CouplerSession(run_id, mode=scene.messaging["mode"], connect=scene.messaging["connect"]) as session, \
+        with CouplerSession(run_id, mode=scene.messaging["mode"], connect=scene.messaging["connect"],
+                            connect_timeout=min(10.0, scene.messaging["timeout"])) as session, \
                 Launcher(run_id, out, session.endpoints) as launcher:
             result = _run(scene, plan, session, launcher, out, phases, summary, log, progress)
         summary.update(result, status="completed")

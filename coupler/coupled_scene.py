@@ -9,10 +9,12 @@ the participants to start and the fields that cross.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import SceneError
+from .messaging import check_endpoint
 from .scene import _REQUIRED, Table, check_expression, output_directory
 
 #: effects a scene may ask for
@@ -239,6 +241,14 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     messaging_cfg = {"mode": messaging.string("mode", "peer", ("peer", "client")),
                      "connect": messaging.strings("connect", []),
                      "timeout": messaging.number("timeout", 300.0, positive=True)}
+    for endpoint in messaging_cfg["connect"]:
+        try:
+            check_endpoint(endpoint)
+        except ValueError as exc:
+            raise messaging.error("connect", str(exc)) from None
+    if messaging_cfg["mode"] == "client" and not messaging_cfg["connect"]:
+        raise messaging.error("connect", "client mode needs the zenoh router(s) to connect to, e.g. "
+                                         "connect = [\"tcp/192.168.1.10:7447\"]")
 
     check = None
     if "check" in data:
@@ -382,8 +392,8 @@ def _flow(path, data, fluid: FluidGeometry | None, effects) -> dict:
             raise SceneError(f"{where}: unknown face; use one of {', '.join(sides)}")
         if isinstance(condition, dict):  # an open face: { pressure = p } (Pa), e.g. where a moving body leaves the grid
             if set(condition) != {"pressure"} or isinstance(condition["pressure"], bool) \
-                    or not isinstance(condition["pressure"], (int, float)):
-                raise SceneError(f"{where}: a table condition is {{ pressure = p }} (Pa), got {condition!r}")
+                    or not isinstance(condition["pressure"], (int, float)) or not math.isfinite(condition["pressure"]):
+                raise SceneError(f"{where}: a table condition is {{ pressure = p }} (Pa, finite), got {condition!r}")
             faces[face] = {"pressure": float(condition["pressure"])}
             continue
         if condition not in FACE_CONDITIONS:

@@ -74,6 +74,29 @@ def check_name(what: str, value: str) -> str:
     return value
 
 
+_ENDPOINT = re.compile(r"^(?P<proto>[a-z0-9-]+)/(?P<address>[^?#\s]+)(\?[^#\s]*)?(#\S*)?$")
+_IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+
+
+def check_endpoint(endpoint: str) -> str:
+    """A zenoh endpoint ``<protocol>/<address>``; for IP protocols the address is
+    ``host:port`` (``[v6]:port``) with a port in 1..65535. ValueError says what is wrong."""
+    m = _ENDPOINT.match(endpoint) if isinstance(endpoint, str) else None
+    if m is None:
+        raise ValueError(f"{endpoint!r} is not a zenoh endpoint <protocol>/<address>, e.g. tcp/127.0.0.1:7447")
+    if m["proto"] in _IP_PROTOCOLS:
+        host, _, port = m["address"].rpartition(":")
+        if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+            raise ValueError(f"{endpoint!r}: the address must be host:port with a port in 1..65535, "
+                             f"e.g. {m['proto']}/127.0.0.1:7447")
+    return endpoint
+
+
+def _zenoh_text(exc: BaseException) -> str:
+    """zenoh's message without the Rust source locations it appends (``at /.../x.rs:388.``)."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(exc)).strip()
+
+
 def key(run_id: str, name: str, verb: str) -> str:
     """``varcouple/<run_id>/<participant>/<verb>``."""
     return f"{PREFIX}/{run_id}/{name}/{verb}"
@@ -154,7 +177,7 @@ def session_config(
     """The zenoh configuration of :func:`open_session` (see there)."""
     if mode not in ("peer", "client", "router"):
         raise ValueError(f"zenoh mode must be peer, client or router, got {mode!r}")
-    connect, listen = list(connect), list(listen)
+    connect, listen = [check_endpoint(e) for e in connect], [check_endpoint(e) for e in listen]
     if mode == "client" and not connect:
         raise ValueError("client mode needs at least one router endpoint to connect to")
     conf = zenoh.Config()
@@ -202,8 +225,13 @@ def open_session(
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:
+        text = _zenoh_text(exc)
+        if connect and "Unable to connect" in text:
+            timeout = kwargs.get("connect_timeout", 10.0)
+            raise Unreachable(f"cannot reach {', '.join(connect)} within {timeout:g} s: no zenoh router or peer "
+                              f"answers there ({mode} mode)") from None
         where = ", ".join(list(connect) + list(listen)) or "no endpoint"
-        raise ConnectionError(f"cannot open a zenoh session ({mode}, {where}): {exc}") from None
+        raise ConnectionError(f"cannot open a zenoh session ({mode}, {where}): {text}") from None
     _open_sessions[:] = [s for s in _open_sessions if not s.is_closed()] + [session]
     return session
 
@@ -213,6 +241,10 @@ def free_tcp_port(host: str = "127.0.0.1") -> int:
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host, 0))
         return s.getsockname()[1]
+
+
+class Unreachable(ConnectionError):
+    """No zenoh router or peer answers at the endpoints to connect to."""
 
 
 def open_listening_session(host: str = "127.0.0.1", port: int | None = None, attempts: int = 8, **kwargs):
@@ -225,6 +257,8 @@ def open_listening_session(host: str = "127.0.0.1", port: int | None = None, att
         endpoint = f"tcp/[{host}]:{p}" if ":" in host else f"tcp/{host}:{p}"
         try:
             return open_session(listen=[endpoint], **kwargs), endpoint
+        except Unreachable:  # another port would not help
+            raise
         except ConnectionError as exc:
             last = exc
     raise ConnectionError(f"could not listen on {host}: {last}")

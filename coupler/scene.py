@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -128,6 +129,8 @@ class Table:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.error(key, f"must be a number, got {value!r}")
         value = float(value)
+        if not math.isfinite(value):
+            raise self.error(key, f"must be a finite number, got {value!r}")
         if positive and not value > 0:
             raise self.error(key, f"must be positive, got {value!r}")
         if minimum is not None and value < minimum or maximum is not None and value > maximum:
@@ -145,8 +148,8 @@ class Table:
         if value is None:
             return None
         if (not isinstance(value, list) or len(value) != length
-                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
-            raise self.error(key, f"must be a list of {length} numbers, got {value!r}")
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in value)):
+            raise self.error(key, f"must be a list of {length} finite numbers, got {value!r}")
         return [float(v) for v in value]
 
     def shape(self, key, default=_REQUIRED):
@@ -165,9 +168,9 @@ class Table:
         value = self._value(key, default)
         kind = int if integer else (int, float)
         if (not isinstance(value, list) or not value and within is None
-                or any(isinstance(v, bool) or not isinstance(v, kind) for v in value)):
+                or any(isinstance(v, bool) or not isinstance(v, kind) or not math.isfinite(v) for v in value)):
             raise self.error(key, f"must be a {'non-empty ' * (within is None)}list of "
-                                  f"{'integers' if integer else 'numbers'}, got {value!r}")
+                                  f"{'integers' if integer else 'finite numbers'}, got {value!r}")
         if value and (minimum is not None and min(value) < minimum or below is not None and max(value) >= below):
             raise self.error(key, f"values must lie in [{minimum}, {below if below is not None else 'inf'}), "
                                   f"got {value!r}")

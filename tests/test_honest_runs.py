@@ -128,3 +128,35 @@ def test_an_unwritable_output_is_one_line_before_anything_runs(capsys):
     assert code == 2 and "Traceback" not in err
     assert err.strip() == (f"varcouple: error: --output: cannot write to the output directory '{out}': "
                            f"Operation not permitted")
+
+
+@pytest.mark.parametrize("replace, words", [
+    ({"dt = 0.01": "dt = inf"}, ["[time] dt", "must be a finite number, got inf"]),
+    ({"E = 1.0e9": "E = inf"}, ["[materials.solid] E", "finite"]),
+    ({"nu = 0.25": "nu = nan"}, ["[materials.solid] nu", "finite"]),
+    ({"upper = [1.0, 1.0, 1.0]": "upper = [1.0, inf, 1.0]"}, ["[geometry.fluid] upper", "finite numbers"]),
+    ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nmode = \"client\""},
+     ["[messaging] connect", "client mode needs the zenoh router"]),
+    ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nconnect = [\"foo:bar\"]"},
+     ["[messaging] connect", "'foo:bar' is not a zenoh endpoint"]),
+    ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nconnect = [\"tcp/127.0.0.1:99999\"]"},
+     ["[messaging] connect", "port in 1..65535"]),
+], ids=["dt_inf", "E_inf", "nu_nan", "grid_inf", "client_without_router", "malformed_endpoint", "bad_port"])
+def test_scene_numbers_and_endpoints_are_checked_where_read(tmp_path, capsys, replace, words):
+    case = copy_case(CASE, tmp_path, replace)
+    code, err = run(capsys, case, tmp_path / "out")
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    for word in words:
+        assert word in err, (word, err)
+    assert not (tmp_path / "out").exists()  # nothing ran, nothing written
+
+
+def test_an_unreachable_router_is_one_line_after_the_connect_timeout(tmp_path, capsys):
+    case = copy_case(CASE, tmp_path, {"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nmode = \"client\"\n"
+                                                             "connect = [\"tcp/127.0.0.1:9\"]\ntimeout = 2"})
+    start = time.monotonic()
+    code, err = run(capsys, case, tmp_path / "out")
+    assert code == 4 and time.monotonic() - start < 15 and "Traceback" not in err
+    assert err.strip() == ("varcouple: error: cannot reach tcp/127.0.0.1:9 within 2 s: no zenoh router or peer "
+                           "answers there (client mode)")
+    assert summary(tmp_path / "out")["status"] == "failed"
