@@ -11,13 +11,18 @@ and solves the equality-constrained problem ``x_U = upper_U``, ``x_L = lower_L``
 diagonal, which keeps the block structure and the near-nullspace usable for
 AMG). It stops when the sets repeat (the exact PDAS criterion: the last solve
 then satisfies all KKT conditions up to the Krylov tolerance) or when the
-scaled natural residual ``max |x - P(x + lam / diag(A))|`` falls below ``tol``.
+scaled natural residual ``max |x - P(x + lam / diag(A))|``, relative to
+``max(|x|, |finite bounds|)``, falls below ``tol``: that relative residual is the
+criterion :class:`Solution` reports.
 
 Anti-chattering: when a set seen earlier returns (a cycle), the method
 switches to a monotone mode in which a constraint leaves the active set only
 when no inactive component violates its bound, and then only the half with
-the most negative multiplier. If that also fails within ``max_iter`` it raises
-:class:`NonsmoothSolveError` with the set changes of the last iterations.
+the most negative multiplier. If that also fails within ``max_iter``, or an
+inner CG reaches its iteration limit, the last iterate is returned unconverged
+(``reason`` with the set changes of the last iterations); it raises
+:class:`NonsmoothSolveError` only for a matrix that is not SPD, NaN, or a Krylov
+breakdown.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 from petsc4py import PETSc
 
-from .petsc import configure_cg_amg, near_nullspace, petsc_matrix, petsc_vector
+from .petsc import configure_cg_amg, converged_reason, near_nullspace, petsc_matrix, petsc_vector
 from .problem import BoundConstrainedQP, NonsmoothSolveError, Solution
 
 
@@ -73,15 +78,15 @@ class _Sets:
 
 
 def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, tol: float = 1e-10,
-                     max_iter: int = 100, ksp_rtol: float = 1e-12, ksp_max_it: int = 2000, amg: str = "gamg",
-                     raise_on_failure: bool = True) -> Solution:
+                     max_iter: int = 100, ksp_rtol: float = 1e-12, ksp_max_it: int = 2000,
+                     amg: str = "gamg") -> Solution:
     """Solve the QP by the primal-dual active set method with CG + GAMG inner solves.
 
     amg : ``"gamg"`` (with the near-nullspace) or ``"hypre"``, see :func:`nonsmooth.petsc.configure_cg_amg`
     tol : on the natural residual scaled by diag(A), relative to max(|x|, |finite bounds|)
     x0 : start (e.g. the previous load step); projected onto the bounds
     ``iterations`` counts active-set iterations (one linear solve each),
-    ``history`` the scaled natural residual after each, ``info["changes"]``
+    ``history`` the relative scaled natural residual after each, ``info["changes"]``
     the number of components whose set changed before each solve.
     """
     start = time.perf_counter()
@@ -109,7 +114,7 @@ def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, to
     sets = _Sets.predict(qp, x, lam, dinv, tol * scale(x))
     seen = {sets.tobytes(): 0}
     history, changes, krylov = [], [], 0
-    monotone_from, converged, message = None, False, ""
+    monotone_from, converged, reason = None, False, ""
     try:
         for it in range(1, max_iter + 1):
             value = np.where(sets == 1, qp.upper, np.where(sets == -1, qp.lower, bound))
@@ -120,11 +125,11 @@ def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, to
             ksp.setOperators(M)
             xv, bv = petsc_vector(np.where(sets != 0, value, x)), petsc_vector(rhs)
             ksp.solve(bv, xv)
-            reason = ksp.getConvergedReason()
+            inner = ksp.getConvergedReason()
             krylov += ksp.getIterationNumber()
-            if reason < 0:
-                raise NonsmoothSolveError(f"active set iteration {it}: CG + GAMG diverged (PETSc reason {reason}) "
-                                          f"after {ksp.getIterationNumber()} iterations")
+            if inner < 0 and inner != PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT:
+                raise NonsmoothSolveError(f"active set iteration {it}: CG + {amg.upper()} failed "
+                                          f"({converged_reason(ksp)}) after {ksp.getIterationNumber()} iterations")
             x = xv.getArray().copy()
             for obj in (M, xv, bv):
                 obj.destroy()
@@ -132,16 +137,19 @@ def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, to
                 raise NonsmoothSolveError(f"active set iteration {it}: the linear solve returned NaN/inf")
             lam = b - A @ x
             lam[sets == 0] = 0.0  # zero up to the Krylov tolerance
+            history.append(float(np.max(np.abs(x - qp.project(x + lam * dinv)), initial=0.0)) / scale(x))
             tol_abs = tol * scale(x)
-            residual = float(np.max(np.abs(x - qp.project(x + lam * dinv)), initial=0.0))
-            history.append(residual)
+            if inner < 0:
+                reason = (f"the inner CG + {amg.upper()} reached its {ksp_max_it} iterations at active set "
+                          f"iteration {it}")
+                break
             if monotone_from is None:
                 new = _Sets.predict(qp, x, lam, dinv, tol_abs)
             else:
                 new = _Sets.monotone(qp, sets, x, lam, dinv, tol_abs)
             changes.append(int(np.count_nonzero(new != sets)))
-            if changes[-1] == 0 or residual <= tol_abs:
-                converged = True
+            if changes[-1] == 0 or history[-1] <= tol:
+                converged, reason = True, "active sets repeat" if changes[-1] == 0 else "criterion below the tolerance"
                 break
             key = new.tobytes()
             if key in seen and monotone_from is None:
@@ -151,15 +159,12 @@ def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, to
             seen[key] = it
             sets = new
         else:
-            message = (f"active set method: no convergence in {max_iter} iterations; scaled KKT residual "
-                       f"{history[-1]:.3e} (tol {tol:g}); set changes in the last iterations {changes[-5:]}"
-                       f"{'' if monotone_from is None else f'; cycling detected at iteration {monotone_from}'}")
+            reason = (f"iteration limit; set changes in the last iterations {changes[-5:]}"
+                      f"{'' if monotone_from is None else f'; cycling detected at iteration {monotone_from}'}")
     finally:
         ksp.destroy()
-    sol = Solution(x=x, iterations=len(history), converged=converged, solver="active_set",
-                   seconds=time.perf_counter() - start, krylov_iterations=krylov, history=history,
-                   active=sets != 0,
-                   info={"changes": changes, "monotone_from": monotone_from, "kkt_residual": qp.kkt_residual(x)})
-    if not converged and raise_on_failure:
-        raise NonsmoothSolveError(message)
-    return sol
+    return Solution(x=x, iterations=len(history), converged=converged, solver="active_set",
+                    seconds=time.perf_counter() - start, krylov_iterations=krylov, history=history,
+                    active=sets != 0,
+                    info={"changes": changes, "monotone_from": monotone_from, "kkt_residual": qp.kkt_residual(x)},
+                    residual=history[-1] if history else float("nan"), tolerance=tol, reason=reason)

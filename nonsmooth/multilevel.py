@@ -153,7 +153,8 @@ def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hi
                      coarse_smooth: int = 3, callback=None) -> Solution:
     """Truncated nonsmooth multigrid (module docstring) on `hierarchy`, whose
     finest level must be the unknowns of `qp`. Stops when the step length
-    ``||x_{k+1} - x_k||_2`` falls below `tol`; ``callback(k, x)`` sees every iterate.
+    ``||x_{k+1} - x_k||_2`` (the criterion reported) falls below `tol`, or after
+    `maxiter` iterations (returned unconverged); ``callback(k, x)`` sees every iterate.
 
     ``Solution.history`` holds the step lengths; ``info`` the energies, the
     largest bound violation over all iterates, the asymptotic rate and the level sizes.
@@ -195,7 +196,9 @@ def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hi
     info = {"energies": energies, "max_infeasibility": violation, "asymptotic_rate": asymptotic_rate(steps),
             "level_sizes": hierarchy.sizes, "levels": hierarchy.levels, "coarse_rebuilds": rebuilds,
             "kkt_residual": qp.kkt_residual(x)}
-    return Solution(x, len(steps), converged, "multilevel", time.perf_counter() - start, 0, steps, active, info)
+    return Solution(x, len(steps), converged, "multilevel", time.perf_counter() - start, 0, steps, active, info,
+                    residual=steps[-1] if steps else float("nan"), tolerance=tol,
+                    reason="step length below the tolerance" if converged else "iteration limit")
 
 
 register("multilevel", solve_multilevel)

@@ -49,6 +49,13 @@ def near_nullspace(Z: np.ndarray | None) -> PETSc.NullSpace | None:
     return PETSc.NullSpace().create(vectors=[petsc_vector(q) for q in Q.T], comm=PETSc.COMM_SELF)
 
 
+def converged_reason(solver: PETSc.KSP | PETSc.SNES) -> str:
+    """The name of a KSP's or SNES's converged reason (``"CONVERGED_RTOL"``, ``"DIVERGED_MAX_IT"``)."""
+    reason = solver.getConvergedReason()
+    names = {v: k for k, v in vars(type(solver).ConvergedReason).items() if not k.startswith("_")}
+    return names.get(reason, str(reason))
+
+
 #: algebraic multigrid preconditioners for :func:`configure_cg_amg`
 AMG = ("gamg", "hypre")
 
@@ -79,7 +86,7 @@ def petsc_bounds(qp: BoundConstrainedQP) -> tuple[PETSc.Vec, PETSc.Vec]:
 
 def solve_snes_vi(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, rtol: float = 1e-12,
                   atol: float = 0.0, max_iter: int = 200, ksp_rtol: float = 1e-12,
-                  amg: str = "hypre", raise_on_failure: bool = True) -> Solution:
+                  amg: str = "hypre") -> Solution:
     """Solve the QP with SNES ``vinewtonrsls`` and CG + AMG on the inactive set.
 
     ``amg="hypre"`` (BoomerAMG) by default: GAMG inside vinewtonrsls fails in
@@ -88,7 +95,10 @@ def solve_snes_vi(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, rtol:
 
     Converged when the residual norm on the inactive set falls below
     ``max(rtol * |F(x0)|, atol)`` (PETSc's test), or the step is below 1e-14
-    relative. ``iterations`` are Newton steps, ``krylov_iterations`` their CG iterations.
+    relative. ``iterations`` are Newton steps, ``krylov_iterations`` their CG iterations;
+    the criterion reported is that norm relative to ``|F(x0)|`` against
+    ``max(rtol, atol / |F(x0)|)``. Any PETSc divergence (iteration limit, line search)
+    returns the last iterate unconverged with PETSc's reason; only NaN raises.
     """
     start = time.perf_counter()
     n = qp.size
@@ -104,7 +114,7 @@ def solve_snes_vi(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, rtol:
         A.mult(xv, fv)
         fv.axpy(-1.0, b)
 
-    history: list[float] = []
+    norms: list[float] = []
     snes = PETSc.SNES().create(PETSc.COMM_SELF)
     snes.setType("vinewtonrsls")
     snes.setFunction(residual, f)
@@ -113,19 +123,23 @@ def solve_snes_vi(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, rtol:
     snes.setTolerances(rtol=rtol, atol=atol, stol=1e-14, max_it=max_iter)
     # PETSc's default backtracking line search: with full steps ("basic") vinewtonrsls cycles on
     # SPD problems that are not M-matrices (tests/test_nonsmooth_active_set.py, CYCLING_A)
-    snes.setMonitor(lambda snes, it, norm: history.append(float(norm)))
+    snes.setMonitor(lambda snes, it, norm: norms.append(float(norm)))
     configure_cg_amg(snes.getKSP(), ksp_rtol, amg=amg)
     snes.solve(None, x)
     reason = snes.getConvergedReason()
+    name = converged_reason(snes)
     xs = x.getArray().copy()
-    sol = Solution(x=xs, iterations=snes.getIterationNumber(), converged=reason > 0, solver="snes_vi",
-                   seconds=time.perf_counter() - start, krylov_iterations=snes.getLinearSolveIterations(),
-                   history=history[1:] if len(history) > 1 else history,
-                   active=(xs <= qp.lower) | (xs >= qp.upper),
-                   info={"petsc_reason": int(reason), "kkt_residual": qp.kkt_residual(xs)})
+    iterations, krylov = snes.getIterationNumber(), snes.getLinearSolveIterations()
     for obj in (snes, A, b, x, f):
         obj.destroy()
-    if not sol.converged and raise_on_failure:
-        raise NonsmoothSolveError(f"SNES VI (vinewtonrsls) did not converge: PETSc reason {reason} after "
-                                  f"{sol.iterations} Newton steps, residual {history[-1] if history else float('nan'):.3e}")
-    return sol
+    if reason == PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN or not np.all(np.isfinite(xs)):
+        raise NonsmoothSolveError(f"SNES VI (vinewtonrsls): NaN after {iterations} Newton steps ({name})")
+    initial = norms[0] if norms else 0.0
+    return Solution(x=xs, iterations=iterations, converged=reason > 0, solver="snes_vi",
+                    seconds=time.perf_counter() - start, krylov_iterations=krylov,
+                    history=norms[1:] if len(norms) > 1 else norms,
+                    active=(xs <= qp.lower) | (xs >= qp.upper),
+                    info={"petsc_reason": int(reason), "kkt_residual": qp.kkt_residual(xs)},
+                    residual=norms[-1] / initial if initial > 0 else 0.0,
+                    tolerance=max(rtol, atol / initial) if initial > 0 else rtol,
+                    reason="iteration limit" if reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT else name)

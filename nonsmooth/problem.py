@@ -19,7 +19,8 @@ import scipy.sparse as sp
 
 
 class NonsmoothSolveError(RuntimeError):
-    """A nonsmooth solve that failed: no convergence, a singular system, NaN."""
+    """A nonsmooth solve without a usable result (a singular system, NaN), or one a caller
+    refuses unconverged (:meth:`Solution.raise_if_unconverged`)."""
 
 
 @dataclass
@@ -93,7 +94,14 @@ class BoundConstrainedQP:
 
 @dataclass
 class Solution:
-    """What every nonsmooth solver returns."""
+    """What every nonsmooth solver returns, converged or not: a solver raises
+    :class:`NonsmoothSolveError` only when it has no usable iterate (NaN, a matrix that is
+    not SPD, a breakdown); hitting its iteration limit is told by ``converged`` False.
+
+    ``residual`` is the final value of the solver's own stopping criterion and
+    ``tolerance`` the value it had to reach (both in the solver's scaling, see each
+    solver); ``reason`` says why it stopped.
+    """
 
     x: np.ndarray
     iterations: int  # outer iterations (active-set, Newton, multigrid cycles)
@@ -104,10 +112,27 @@ class Solution:
     history: list[float] = field(default_factory=list)  # per outer iteration: the solver's own criterion
     active: np.ndarray | None = None  # boolean mask of components at a bound, at the end
     info: dict = field(default_factory=dict)
+    residual: float = float("nan")
+    tolerance: float = float("nan")
+    reason: str = ""
 
     def as_dict(self) -> dict:
         """Figures for summary.json and benchmark JSON (no arrays)."""
         return {"solver": self.solver, "iterations": self.iterations, "converged": self.converged,
+                "residual": self.residual, "tolerance": self.tolerance, "reason": self.reason,
                 "seconds": self.seconds, "krylov_iterations": self.krylov_iterations,
                 "history": [float(h) for h in self.history],
                 "active": None if self.active is None else int(np.count_nonzero(self.active)), **self.info}
+
+    def describe(self) -> str:
+        """One line: ``active_set did not converge: criterion 3.2e-03 > 1e-10 after 1 iteration (iteration limit)``."""
+        state, relation = ("converged", "<=") if self.converged else ("did not converge", ">")
+        return (f"{self.solver} {state}: criterion {self.residual:.3g} {relation} {self.tolerance:g} after "
+                f"{self.iterations} iteration{'s' * (self.iterations != 1)} ({self.reason})")
+
+    def raise_if_unconverged(self, what: str) -> "Solution":
+        """``self`` if converged, else :class:`NonsmoothSolveError` naming `what` (for
+        callers that cannot report an unconverged solve, e.g. a study's bracketing)."""
+        if not self.converged:
+            raise NonsmoothSolveError(f"{what}: {self.describe()}")
+        return self

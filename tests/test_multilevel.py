@@ -198,6 +198,19 @@ def test_multilevel_converges_from_a_bad_start(partial_contact):
     assert np.linalg.norm(sol.x - ref.x) < 1e-8 * np.linalg.norm(ref.x)
 
 
+def test_multilevel_reports_its_criterion_and_the_iteration_limit(partial_contact):
+    """The step length is the criterion: below tol when converged; maxiter reached returns
+    the (feasible) iterate unconverged with its last step length, nothing raised."""
+    qp, H, _ = partial_contact
+    full = solve(qp, "multilevel", hierarchy=H, tol=1e-12)
+    assert full.converged and full.residual == full.history[-1] <= full.tolerance == 1e-12
+    assert full.reason == "step length below the tolerance"
+    capped = solve(qp, "multilevel", hierarchy=H, tol=1e-12, maxiter=2)
+    assert not capped.converged and capped.iterations == 2 and capped.reason == "iteration limit"
+    assert capped.residual == capped.history[-1] > 1e3 * capped.tolerance
+    assert qp.infeasibility(capped.x) == 0.0
+
+
 def _cube_iterations(levels):
     points, tets, qp = cube(CELLS[levels])
     sol = solve_multilevel(qp, hierarchy=hierarchy(points, tets, levels), tol=1e-12)

@@ -145,14 +145,23 @@ def test_registry():
         get("nope")
 
 
-def test_no_convergence_is_a_clear_error():
+@pytest.mark.parametrize("method, options, tolerance", [("active_set", {"tol": 1e-10}, 1e-10),
+                                                      ("snes_vi", {"rtol": 1e-12}, 1e-12)])
+def test_the_iteration_limit_is_reported_not_raised(method, options, tolerance):
+    """Hitting max_iter returns the iterate with converged False, the final criterion above
+    the tolerance and the reason; a full solve reports its criterion below the tolerance."""
     qp, _ = obstacle_2d()
-    with pytest.raises(NonsmoothSolveError, match="no convergence in 1 iterations.*KKT residual"):
-        solve(qp, "active_set", max_iter=1)
-    with pytest.raises(NonsmoothSolveError, match="SNES VI.*did not converge"):
-        solve(qp, "snes_vi", max_iter=1)
-    sol = solve(qp, "active_set", max_iter=1, raise_on_failure=False)
-    assert not sol.converged
+    capped = solve(qp, method, max_iter=1, **options)
+    assert not capped.converged and capped.iterations == 1 and capped.reason.startswith("iteration limit")
+    assert capped.tolerance == tolerance and capped.residual > 1e3 * tolerance
+    assert np.all(np.isfinite(capped.x))
+    assert capped.describe().startswith(f"{method} did not converge: criterion {capped.residual:.3g} > "
+                                        f"{tolerance:g} after 1 iteration (iteration limit")
+    with pytest.raises(NonsmoothSolveError, match=f"obstacle: {method} did not converge"):
+        capped.raise_if_unconverged("obstacle")
+    full = solve(qp, method, **options)
+    assert full.converged and full.iterations > 1 and full.residual <= full.tolerance == tolerance
+    assert full.as_dict()["residual"] == full.residual and full.raise_if_unconverged("obstacle") is full
 
 
 def test_bad_input():
