@@ -99,6 +99,8 @@ def transfer(args: argparse.Namespace) -> int:
           f"apply {1e3 * p.apply_seconds:.1f} ms")
     print(f"covered {100 * p.covered_fraction:.2f}% of {dst_space.num_dofs} target dofs "
           f"({p.uncovered} uncovered, NaN in the output)")
+    for text in p.operator.warnings:
+        print(f"warning: {text}")
     print(f"conservation error {p.conservation_error:.2e} (relative difference of the integrals over the overlap)")
     target.write(args.output, {field.name: (field.kind, p.values),
                                "covered": (field.kind, p.covered.astype(np.uint8))})

@@ -9,11 +9,12 @@ coloured by value, seen from above.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import numpy as np
 
-from transfer import FunctionSpace, NoOverlapError, StructuredGrid, Transfer
+from transfer import FunctionSpace, NoOverlapError, OverlapWarning, StructuredGrid, Transfer
 
 #: slab thickness as a fraction of the largest extent of the meshes
 SLAB_THICKNESS = 0.005
@@ -52,8 +53,9 @@ def sampler(space: FunctionSpace, grid: StructuredGrid) -> Callable[[np.ndarray]
     # intersection piece, whose cost grows with the points. The pieces are smaller than a
     # pixel, so one point per piece draws the same picture several times faster.
     qdeg = 1 if space.family == "Q1" else None
-    try:
-        op = Transfer.assemble(space, FunctionSpace(grid, "Q0"), "pseudo_l2", quadrature_degree=qdeg)
+    try:  # the slab spans all meshes: meshes of different sizes are the run's warning, not the plot's
+        with warnings.catch_warnings(action="ignore", category=OverlapWarning):
+            op = Transfer.assemble(space, FunctionSpace(grid, "Q0"), "pseudo_l2", quadrature_degree=qdeg)
     except NoOverlapError:
         return lambda values: np.full((ny, nx), np.nan)
 

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from transfer import FunctionSpace, Transfer
+from transfer import FunctionSpace, OverlapWarning, Transfer
 
 from .meshfile import Field
 
@@ -42,9 +43,12 @@ class Projection:
 
 def project(field: Field, source: FunctionSpace, target: FunctionSpace, method: str, *,
             quadrature_degree: int | None = None, threads: int = 1) -> Projection:
-    """Assemble ``T`` from `source` to `target` with `method` and apply it to `field`."""
+    """Assemble ``T`` from `source` to `target` with `method` and apply it to `field`.
+    Overlap warnings are not issued but left in ``operator.warnings`` for the caller to report."""
     start = time.perf_counter()
-    operator = Transfer.assemble(source, target, method, quadrature_degree=quadrature_degree, nthreads=threads)
+    with warnings.catch_warnings(action="ignore", category=OverlapWarning):
+        operator = Transfer.assemble(source, target, method, quadrature_degree=quadrature_degree,
+                                     nthreads=threads)
     assembly = time.perf_counter() - start
     u = field.flat
     start = time.perf_counter()

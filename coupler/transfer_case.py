@@ -93,7 +93,7 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
             log(f"warning: exact differs from {field.name!r} at the source points by up to {mismatch:.3g}: "
                 f"the errors below are against exact, not against the source field")
 
-    results = []
+    results, warned = [], []
     for method in scene.methods:
         p = project(field, src_space, dst_space, method, quadrature_degree=scene.quadrature_degree,
                     threads=scene.threads)
@@ -117,6 +117,10 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
             entry["relative_l2_error"] = err_norm / norm if norm > 0 else float("nan")
             line += f"; max error vs exact {entry['max_error']:.3e}"
         log(line)
+        for text in p.operator.warnings:
+            if text not in warned:  # the same for every method: a property of the two meshes
+                warned.append(text)
+                log(f"warning: {text}")
         results.append(entry)
 
     out = scene.output_dir
@@ -170,6 +174,7 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
                           if k in r} | {"output": f"target_{r['method']}.vtu"}
             for r in results},
         "exact": exact_info,
+        "warnings": warned,
         "threads": scene.threads,
         "plot": {"file": FIGURE, "slice_z": slice_z},
         "platform": {"python": platform.python_version(), "machine": platform.machine()},

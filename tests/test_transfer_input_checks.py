@@ -4,6 +4,7 @@ the error of the [transfer] scene)."""
 
 import json
 import time
+import warnings
 
 import meshio
 import numpy as np
@@ -12,8 +13,8 @@ from scipy.spatial import Delaunay
 
 from coupler.cli import main
 from coupler.meshfile import MeshFile
-from transfer import FunctionSpace, Mesh, MeshError, QuadratureError, Transfer, TransferError
-from transfer.generate import box_hexahedra, box_tetrahedra
+from transfer import FunctionSpace, Mesh, MeshError, OverlapWarning, QuadratureError, Transfer, TransferError
+from transfer.generate import box_hexahedra, box_tetrahedra, rectangle
 
 from vc_helpers import Linear
 
@@ -173,3 +174,67 @@ def test_cli_and_scene_refuse_a_huge_quadrature_degree(delaunay_file, tmp_path, 
     code, _, err = run_cli(capsys, "run", case)
     assert_clean_error(code, err, "scene.toml: [transfer] quadrature_degree", "99", "1 to 20")
     assert not (case / "results").exists()
+
+
+# -- length units and placement: warned, with both boxes ------------------------------------
+def p1(mesh):
+    return FunctionSpace(mesh, "P1")
+
+
+MM = box_tetrahedra((3, 3, 3), upper=(1000, 1000, 1000), jitter=0.2, seed=1, name="rock_mm.vtu")
+M = box_tetrahedra((2, 2, 2), jitter=0.2, seed=2, name="fluid_m.vtu")
+
+
+def test_source_in_mm_target_in_m_warns_with_both_boxes_and_the_factor():
+    with pytest.warns(OverlapWarning) as caught:
+        T = Transfer.assemble(p1(MM), p1(M), "l2")
+    assert T.covered.all()  # fully covered: the wrong result looks complete
+    assert [str(w.message) for w in caught] == T.warnings == T.stats["warnings"]
+    (text,) = T.warnings
+    for words in ("rock_mm.vtu", "fluid_m.vtu", "factor 1000", "[0, 0, 0]..[1000, 1000, 1000]",
+                  "[0, 0, 0]..[1, 1, 1]", "units"):
+        assert words in text, (words, text)
+
+
+def test_target_in_mm_warns_too():
+    with pytest.warns(OverlapWarning, match=r"factor 1000: .*\[0, 0, 0\]\.\.\[1, 1, 1\]"):
+        T = Transfer.assemble(p1(M), p1(MM), "pseudo_l2")
+    assert 0 < T.covered_fraction < 0.1
+
+
+def test_small_overlap_of_both_meshes_warns():
+    shifted = box_tetrahedra((2, 2, 2), lower=(0.95, 0, 0), upper=(1.95, 1, 1), name="shifted")
+    with pytest.warns(OverlapWarning) as caught:
+        T = Transfer.assemble(p1(M), p1(shifted), "l2")
+    (text,) = T.warnings
+    assert len(caught) == 1 and "5%" in text and "[0.95, 0, 0]..[1.95, 1, 1]" in text
+
+
+def test_nested_meshes_and_surfaces_apart_do_not_warn():
+    """A body 5 times smaller inside a grid (immersed solid) and two parallel surfaces 0.01 apart
+    (contact: paired by proximity, their boxes do not overlap) are normal."""
+    small = box_tetrahedra((2, 2, 2), lower=(0.4, 0.4, 0.4), upper=(0.6, 0.6, 0.6), name="small")
+    top, bottom = rectangle((4, 4), height=lambda x, y: 0 * x + 0.01), rectangle((5, 3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", OverlapWarning)
+        for source, target in [(M, small), (small, M)]:
+            assert Transfer.assemble(p1(source), p1(target), "l2").warnings == []
+        assert Transfer.assemble(p1(top), p1(bottom), "pseudo_l2").warnings == []
+
+
+def test_cli_and_scene_report_the_units_warning(tmp_path, capsys):
+    for mesh in (MM, M):
+        meshio.write(tmp_path / mesh.name, meshio.Mesh(mesh.points, [("tetra", mesh.cells)],
+                                                       point_data={"T": Linear(1)(mesh.points)}))
+    code, stdout, err = run_cli(capsys, "transfer", tmp_path / MM.name, tmp_path / M.name, "-f", "T",
+                                "-o", tmp_path / "out.vtu")
+    assert code == 0, err
+    (line,) = [line for line in stdout.splitlines() if line.startswith("warning: ")]
+    assert "factor 1000" in line and "[0, 0, 0]..[1000, 1000, 1000]" in line
+    case = write_scene(tmp_path, f'[transfer]\nsource = "{MM.name}"\ntarget = "{M.name}"\nfield = "T"\n'
+                                 f'methods = ["l2", "pseudo_l2"]\n')
+    code, stdout, err = run_cli(capsys, "run", case, "--output", tmp_path / "out")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert len(summary["warnings"]) == 1 and "factor 1000" in summary["warnings"][0]
+    assert stdout.count("warning: ") == 1 and summary["warnings"][0] in stdout

@@ -1,4 +1,4 @@
-"""Typed errors of the transfer library.
+"""Typed errors and warnings of the transfer library.
 
 Every error names what was wrong with which input, so that command-line tools
 can print it as one line instead of a traceback.
@@ -27,3 +27,8 @@ class QuadratureError(TransferError, ValueError):
 
 class FieldError(TransferError, ValueError):
     """A field has the wrong shape or contains NaN/inf."""
+
+
+class OverlapWarning(UserWarning):
+    """Source and target look like different length units or places (sizes far apart, or
+    boxes that barely overlap): the transfer runs, but its result is probably not meant."""

@@ -14,11 +14,14 @@ target mass matrix ``D`` restricted to the overlap. :class:`Transfer` applies
 Both are conservative over the overlap: the integral of ``T u`` over the
 overlap equals that of ``u``. Target dofs the source does not reach are
 reported in ``Transfer.covered`` and filled with NaN by default, never zero.
+Meshes that look like different length units or places get an
+:class:`OverlapWarning` (:func:`overlap_warnings`), kept in ``Transfer.warnings``.
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,7 +29,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import _kernels
-from .errors import FieldError, NoOverlapError, TransferError
+from .errors import FieldError, NoOverlapError, OverlapWarning, TransferError
 from .grid import StructuredGrid
 from .quadrature import check_degree, simplex_rule
 from .spaces import FunctionSpace
@@ -67,6 +70,50 @@ def _bounding_boxes_overlap(a, b, rtol=1e-9) -> bool:
     (alo, ahi), (blo, bhi) = a.bounding_box(), b.bounding_box()
     tol = rtol * max(np.linalg.norm(ahi - alo), np.linalg.norm(bhi - blo))
     return bool(np.all(alo <= bhi + tol) and np.all(blo <= ahi + tol))
+
+
+#: warn when the bounding-box diameters of source and target differ by more than this
+#: factor: mm against m is 1000, while a body immersed in a grid is rarely 10 times smaller
+SCALE_FACTOR = 100.0
+
+#: warn when the bounding boxes overlap in less than this fraction of each box: a body
+#: inside a larger grid covers little of the grid's box but lies wholly in it, whereas
+#: meshes that are misplaced (a shifted origin, another frame) overlap little of both
+OVERLAP_FRACTION = 0.1
+
+
+def _box(mesh) -> str:
+    lo, hi = mesh.bounding_box()
+    return f"[{', '.join(f'{v:.6g}' for v in lo)}]..[{', '.join(f'{v:.6g}' for v in hi)}]"
+
+
+def overlap_warnings(smesh, tmesh, proximity: bool = False) -> list[str]:
+    """Signs that `smesh` and `tmesh` are in different length units or places.
+
+    With diameters d = |hi - lo| of the bounding boxes: max(d_s, d_t) / min(d_s, d_t)
+    > :data:`SCALE_FACTOR`. With the overlap box O of the two boxes: |O| / |box| <
+    :data:`OVERLAP_FRACTION` for both boxes, measured per axis (the product of the
+    overlapping fractions of the extents, so flat surface boxes count too). Surfaces
+    paired by `proximity` (surface to surface) need not overlap: only their size is compared.
+    """
+    (alo, ahi), (blo, bhi) = smesh.bounding_box(), tmesh.bounding_box()
+    ds, dt = np.linalg.norm(ahi - alo), np.linalg.norm(bhi - blo)
+    found = []
+    factor = max(ds, dt) / min(ds, dt)
+    if factor > SCALE_FACTOR:
+        found.append(f"{smesh.name} and {tmesh.name} differ in size by a factor {factor:.4g}: bounding boxes "
+                     f"{_box(smesh)} (diameter {ds:.4g}) and {_box(tmesh)} (diameter {dt:.4g}); "
+                     f"different length units (mm and m differ by 1000)?")
+    if not proximity:
+        common = np.clip(np.minimum(ahi, bhi) - np.maximum(alo, blo), 0.0, None)
+        flat = 1e-9 * max(ds, dt)
+        fractions = [np.prod(np.where(hi - lo > flat, common / np.maximum(hi - lo, flat), 1.0))
+                     for lo, hi in ((alo, ahi), (blo, bhi))]
+        if max(fractions) < OVERLAP_FRACTION:
+            found.append(f"{smesh.name} and {tmesh.name} overlap in only {100 * fractions[0]:.2g}% and "
+                         f"{100 * fractions[1]:.2g}% of their bounding boxes {_box(smesh)} and {_box(tmesh)}: "
+                         f"misplaced, or in different length units?")
+    return found
 
 
 def _mean_edge(mesh) -> float:
@@ -146,17 +193,17 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
     D = sp.csr_matrix((raw["D"][2], raw["D"][1], raw["D"][0]), shape=(target.num_dofs,) * 2)
     if not np.any(raw["overlap"] > 0):
         raise NoOverlapError(_no_overlap_message(smesh, tmesh))
+    found = overlap_warnings(smesh, tmesh, proximity=surface)
+    for text in found:
+        warnings.warn(text, OverlapWarning, stacklevel=3)
     stats = {"pairs_tested": int(raw["pairs_tested"]), "pairs_intersected": int(raw["pairs_intersected"]),
              "assembly_seconds": seconds, "quadrature_degree": qdeg, "quadrature_points": len(weights),
-             "nthreads": nthreads}
+             "nthreads": nthreads, "warnings": found}
     return Coupling(B, D, raw["overlap"], raw["measure"], stats)
 
 
 def _no_overlap_message(smesh, tmesh) -> str:
-    (alo, ahi), (blo, bhi) = smesh.bounding_box(), tmesh.bounding_box()
-    return (f"{smesh.name} and {tmesh.name} do not overlap: bounding boxes "
-            f"{np.round(alo, 6).tolist()}..{np.round(ahi, 6).tolist()} and "
-            f"{np.round(blo, 6).tolist()}..{np.round(bhi, 6).tolist()}")
+    return f"{smesh.name} and {tmesh.name} do not overlap: bounding boxes {_box(smesh)} and {_box(tmesh)}"
 
 
 class Transfer:
@@ -191,6 +238,11 @@ class Transfer:
     @property
     def stats(self) -> dict:
         return self.coupling.stats
+
+    @property
+    def warnings(self) -> list[str]:
+        """The :class:`OverlapWarning` texts of this pair of meshes (:func:`overlap_warnings`)."""
+        return self.coupling.stats["warnings"]
 
     @property
     def covered_fraction(self) -> float:
