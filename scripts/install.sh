@@ -26,11 +26,12 @@ APT_PACKAGES=(
   openfoam
   python3-dolfinx python3-mpi4py python3-petsc4py
   python3-scipy python3-numpy python3-meshio python3-vtk9 python3-matplotlib python3-gmsh
+  python3-h5py    # meshio's XDMF needs it; only a Recommends of python3-meshio
   python3-venv python3-dev python3-pip
   build-essential cmake ninja-build git
 )
 # Python distributions that must come from Debian (pinned for pip to what is installed).
-DEBIAN_PY_DISTS=(numpy scipy meshio matplotlib mpi4py petsc4py slepc4py
+DEBIAN_PY_DISTS=(numpy scipy meshio matplotlib h5py mpi4py petsc4py slepc4py
                  fenics-dolfinx fenics-basix fenics-ffcx fenics-ufl)
 
 log() { printf '[install] %s\n' "$*"; }
