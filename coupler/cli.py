@@ -110,8 +110,10 @@ def transfer(args: argparse.Namespace) -> int:
 
 # -- varcouple check -------------------------------------------------------------
 def check(args: argparse.Namespace) -> int:
-    """Validate the scene of CASE and print its plan: effects, participants to
-    start, fields that cross, transfer operators to build. Runs nothing."""
+    """Validate the scene of CASE and print its plan: effects, participants to start,
+    fields that cross, transfer operators to build; estimate its size and memory, and
+    have each participant read its part (meshes, boundaries) without solving anything
+    (``--quick``: the scene alone)."""
     from . import scene as scenes
 
     scene = scenes.load(args.case)
@@ -126,9 +128,18 @@ def check(args: argparse.Namespace) -> int:
             print(line)
     else:
         from .plan import make_plan
+        from .preflight import check_memory, configure_participants, estimate
 
-        for line in make_plan(scene).lines():
+        plan = make_plan(scene)
+        for line in plan.lines():
             print(line)
+        estimates = estimate(scene)
+        print("size          " + "; ".join(f"{e.name} {e.cells:,} cells" for e in estimates if e.cells))
+        print(f"memory        {check_memory(scene, estimates)}")
+        if not args.quick:
+            for name, found in configure_participants(scene, plan).items():
+                print(f"configured    {name}: {found['kind']} accepts its part ({found['cells']:,} cells"
+                      + (f", {found['points']:,} points" if "points" in found else "") + ")")
     print(f"output        {scene.output_dir}")
     return 0
 
@@ -206,6 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("check", help="validate a case's scene and print its plan", description=check.__doc__)
     p.add_argument("case", metavar="CASE", help="case directory holding scene.toml (or the scene file)")
+    p.add_argument("--quick", action="store_true",
+                   help="validate the scene and estimate its size only; start no participant")
     p.set_defaults(func=check)
 
     p = sub.add_parser("run", help="run a case (cases/NAME with its scene.toml)", description=run.__doc__)

@@ -46,6 +46,7 @@ from .launch import Launcher
 from .loop import run_coupled
 from .messaging import CouplerSession, new_run_id
 from .plan import Plan, make_plan
+from .preflight import check_memory, estimate
 from .progress import ProgressBar
 from .interface import SolidOnGrid, WettedInterface
 from .viscous import FluidTraction, traction_figures
@@ -143,6 +144,7 @@ def _as_arrays(fields: dict) -> dict:
 def run(scene: CoupledScene, log=print, progress: bool | None = None, run_id: str | None = None) -> dict:
     """Run the coupled `scene`; return its summary (also in ``summary.json``)."""
     plan = make_plan(scene)
+    log(f"memory: {check_memory(scene, estimate(scene))}")
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     for note in plan.notes:

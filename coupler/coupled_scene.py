@@ -84,6 +84,7 @@ class CoupledScene:
     check: dict | None = None  # expected displacement: {"x"|"y"|"z": expr, "where": expr, "tolerance": float}
     flow: dict | None = None  # fluid boundary conditions: inlet, outlet, walls, faces ([flow])
     contact: dict | None = None  # [contact]: slave, master, solver, tolerances (effect 'contact')
+    resources: dict = field(default_factory=lambda: {"memory_limit": None, "check_memory": True})
 
     def error(self, table: str, key: str, reason: str) -> SceneError:
         return SceneError(f"{self.path}: [{table}] {key}: {reason}")
@@ -122,6 +123,9 @@ TABLES = {
                 "search_distance": "how far along the slave normal the master is looked for [m] (default: "
                                    "half the slave's mean edge); at least the largest gap that may close",
                 "max_normal_angle": "largest angle between paired slave and master faces [deg] (default 45)"},
+    "resources": {"memory_limit": "memory this run may use [bytes] (default: what the machine has available)",
+                  "check_memory": "refuse a scene whose estimated memory exceeds what is available (default "
+                                  "true; false runs it anyway)"},
     "output": {"directory": "output directory, relative to the case (default 'results')",
                "every": "write fields every N steps (default 1)"},
     "check": {"x": "expected x displacement (expression in x, y, z)", "y": "expected y displacement",
@@ -262,6 +266,10 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
 
     contact = _contact(path, data.get("contact"), solid, effects, solver_cfg["solid"])
 
+    res = Table(path, "resources", data.get("resources", {}), TABLES["resources"])
+    resources = {"memory_limit": res.number("memory_limit", None, positive=True),
+                 "check_memory": res.boolean("check_memory", True)}
+
     out = Table(path, "output", data.get("output", {}), TABLES["output"])
     output_dir = output_directory(case_dir, out, output)
     return CoupledScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
@@ -269,7 +277,7 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
                         output={"every": out.integer("every", 1)}, check=check, flow=flow,
-                        contact=contact)
+                        contact=contact, resources=resources)
 
 
 def _contact(path, data, solid: SolidGeometry, effects, solid_solver: dict) -> dict | None:

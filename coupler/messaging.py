@@ -474,7 +474,8 @@ class ParticipantServer:
             header, out = self.dispatch(verb, request, fields)
             base["elapsed"] = time.perf_counter() - t0
             payload = encode({**header, **base}, out)
-        except Exception as exc:  # noqa: BLE001 - every failure becomes an error reply
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - every failure becomes an error reply
+            # (SystemExit: library code that calls sys.exit, e.g. meshio on a file no reader accepts)
             message = f"{type(exc).__name__}: {exc}"
             log.exception("%s: %s failed", self.name, verb)
             base["elapsed"] = time.perf_counter() - t0
@@ -598,11 +599,19 @@ class ParticipantClient:
     def ever_alive(self) -> bool:
         return self._alive_event.is_set()
 
-    def _death_reason(self) -> str | None:
+    def _death_reason(self, grace: float = 2.0) -> str | None:
+        """Why the participant is gone (its process's exit and last log lines when known), or None.
+        A token lost while the process still runs gets `grace` seconds to show how it ended."""
         reason = self.process_check() if self.process_check else None
         if reason:
             return reason
         if self.ever_alive and not self._alive:
+            end = time.monotonic() + (grace if self.process_check else 0.0)
+            while time.monotonic() < end:
+                time.sleep(0.05)
+                reason = self.process_check()
+                if reason:
+                    return reason
             return "its liveliness token disappeared (process exited or connection lost)"
         return None
 

@@ -160,3 +160,29 @@ def test_an_unreachable_router_is_one_line_after_the_connect_timeout(tmp_path, c
     assert err.strip() == ("varcouple: error: cannot reach tcp/127.0.0.1:9 within 2 s: no zenoh router or peer "
                            "answers there (client mode)")
     assert summary(tmp_path / "out")["status"] == "failed"
+
+
+SMALL = CASE.parent / "small_fracture"
+
+
+@pytest.mark.parametrize("case, replace, key, cells", [
+    (SMALL, {"shape = [21, 11, 11]": "shape = [1000, 1000, 1000]"}, "[geometry.fluid] shape", "1,000,000,000 fluid"),
+    (CASE, {"shape = [4, 4, 3]": "shape = [2000, 2000, 2000]"}, "[geometry.solid] shape", "48,000,000,000 solid"),
+    (CASE, {"max_iterations = 30": "max_iterations = 30\n[resources]\nmemory_limit = 1e8"},
+     "[geometry.fluid] shape", "1,000 fluid"),
+], ids=["grid_1000_cubed", "box_2000_cubed", "small_memory_limit"])
+def test_a_scene_that_cannot_fit_in_memory_is_refused_before_anything_starts(tmp_path, capsys, case, replace, key,
+                                                                             cells):
+    case = copy_case(case, tmp_path, replace)
+    for command in (["check", str(case)], ["run", str(case), "--output", str(tmp_path / "out")]):
+        code = main(command)
+        err = capsys.readouterr().err
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        assert key in err and cells in err and "available" in err and "check_memory = false" in err, err
+    assert not (tmp_path / "out").exists()
+    # the override: the estimate is still printed, nothing refused
+    (case / "scene.toml").write_text((case / "scene.toml").read_text() + "\n[resources]\ncheck_memory = false\n"
+                                     if "[resources]" not in (case / "scene.toml").read_text() else
+                                     (case / "scene.toml").read_text() + "check_memory = false\n")
+    assert main(["check", "--quick", str(case)]) == 0
+    assert "available" in capsys.readouterr().out
