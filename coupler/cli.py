@@ -76,10 +76,12 @@ def transfer(args: argparse.Namespace) -> int:
             check_degree(args.quadrature_degree)
         except QuadratureError as exc:
             raise CouplerError(f"--quadrature-degree: {exc}") from None
-    check_writable(args.output)
+    check_writable(args.output, inputs=(args.source, args.target))
     source = MeshFile.read(args.source)
     target = MeshFile.read(args.target)
     field = source.field(args.field)
+    target.check_keeps(args.output, {field.name: (field.kind, field.values),
+                                     "covered": (field.kind, np.zeros(0, np.uint8))})
     if field.kind == "point" and args.field in source.raw.cell_data:
         print(f"note: {args.field!r} is both point and cell data in {source.path}; using the point data")
     if args.field == "covered":

@@ -13,6 +13,7 @@ file order, as :meth:`transfer.Mesh.from_meshio` joins their cells.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -74,18 +75,48 @@ def _meshio_read(path: Path, name: str):
     return raw
 
 
-def check_writable(path) -> None:
-    """Fail early (before any work) when meshio cannot write `path`."""
+def mesh_format(path) -> tuple[str, str] | None:
+    """(extension, format) meshio writes `path` in, by its longest known extension; None if unknown."""
     import meshio
 
+    name = Path(path).name.lower()
+    known = [ext for ext in meshio.extension_to_filetypes if name.endswith(ext)]
+    if not known:
+        return None
+    ext = max(known, key=len)
+    return ext, meshio.extension_to_filetypes[ext][0]
+
+
+def same_file(path, files) -> str | None:
+    """The one of `files` that `path` is (whatever the spelling: symbolic or hard links,
+    ``..``), or None."""
     path = Path(path)
-    if not any(path.name.lower().endswith(ext) for ext in meshio.extension_to_filetypes):
+    if not path.exists():
+        return None
+    return next((str(f) for f in files if Path(f).exists() and os.path.samefile(path, f)), None)
+
+
+def check_writable(path, inputs=()) -> None:
+    """Fail early (before any work) when meshio cannot write `path` or `path` is one of
+    the `inputs` files."""
+    path = Path(path)
+    if mesh_format(path) is None:
         raise CouplerError(f"{path}: unknown mesh format (extension {''.join(path.suffixes) or 'missing'}); "
-                           f"use one meshio writes, e.g. .vtu, .vtk, .xdmf")
+                           f"use one meshio writes, e.g. .vtu, .vtk")
     if path.is_dir():
         raise CouplerError(f"{path}: is a directory")
     if not path.parent.is_dir():
         raise CouplerError(f"{path}: directory {str(path.parent)!r} does not exist")
+    clash = same_file(path, inputs)
+    if clash is not None:
+        raise CouplerError(f"{path}: is the input file {clash}; writing there would overwrite it; "
+                           f"choose another output file")
+
+
+def _same_values(read, written: np.ndarray) -> bool:
+    """`read` back is `written` (NaN where it is NaN, to rounding)."""
+    return (read is not None and np.shape(read) == written.shape
+            and np.allclose(read, written, rtol=1e-12, atol=0, equal_nan=True))
 
 
 def family(mesh: Mesh, kind: str) -> str:
@@ -201,6 +232,60 @@ class MeshFile:
             raise CouplerError(f"{self.path}: field {name!r} has {int(bad.sum())} NaN/inf value(s) "
                                f"(first at {kind} {int(np.flatnonzero(bad)[0])})")
         return Field(name, kind, values)
+
+    def check_keeps(self, path, fields: dict[str, tuple[str, np.ndarray]]) -> None:
+        """Fail early unless the format of `path` keeps this mesh's cells and `fields`
+        (name -> (kind, values); only their dtype and trailing shape count). Many
+        formats meshio writes drop point or cell data (``.msh`` as ANSYS, ``.inp``,
+        ``.stl``, ...) or the volume cells (``.ply``, ``.stl``): two cells of the mesh
+        carrying such fields, a NaN among them (uncovered dofs), are written to a
+        temporary file of the same format, read back and compared."""
+        import contextlib
+        import io
+        import tempfile
+
+        import meshio
+
+        cells = self.mesh.cells[:2]
+        used, local = np.unique(cells, return_inverse=True)
+        local = local.reshape(cells.shape)
+        sample = {}
+        for name, (kind, values) in fields.items():
+            values = np.asarray(values)
+            shape = (len(used) if kind == "point" else len(cells),) + values.shape[1:]
+            v = np.arange(1, 1 + int(np.prod(shape))).reshape(shape).astype(values.dtype)
+            if np.issubdtype(v.dtype, np.floating):
+                v = v / 3
+                v.flat[0] = np.nan
+            sample[name] = (kind, v)
+        probe = meshio.Mesh(self.mesh.points[used], [(self.mesh.cell_type, local)],
+                            point_data={n: v for n, (k, v) in sample.items() if k == "point"},
+                            cell_data={n: [v] for n, (k, v) in sample.items() if k == "cell"})
+        ext, fmt = mesh_format(path)
+        with tempfile.TemporaryDirectory() as tmp:
+            file = Path(tmp) / Path(path).name
+            try:  # quietly: meshio prints what it skips, the comparison below says it
+                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                    meshio.write(file, probe)
+            except Exception as exc:  # noqa: BLE001 - meshio raises many exception types
+                raise CouplerError(f"{path}: meshio cannot write {self.mesh.cell_type} cells with these "
+                                   f"fields as {fmt!r} ({ext}): {one_line(exc)}; use .vtu or .vtk") from None
+            try:
+                back = _meshio_read(file, str(path))
+            except CouplerError:  # nothing comes back
+                back = meshio.Mesh(np.zeros((0, 3)), [])
+        index = next((i for i, b in enumerate(back.cells)
+                      if b.type == self.mesh.cell_type and np.array_equal(b.data, local)), None)
+        if index is None:
+            lost = f"the {self.mesh.cell_type} cells"
+        else:
+            read = {name: back.point_data.get(name) if kind == "point" else
+                    back.cell_data.get(name, [None] * len(back.cells))[index] for name, (kind, _) in sample.items()}
+            names = [name for name, (_, v) in sample.items() if not _same_values(read[name], v)]
+            kinds = " and ".join(sorted({sample[name][0] for name in names}))
+            lost = names and f"the {kinds} data {', '.join(map(repr, names))}"
+        if lost:
+            raise CouplerError(f"{path}: meshio writes {fmt!r} files ({ext}) without {lost}; use .vtu or .vtk")
 
     def write(self, path, fields: dict[str, tuple[str, np.ndarray]]) -> None:
         """Write this mesh (its main cell blocks, joined) with its own data and

@@ -20,8 +20,8 @@ import numpy as np
 from transfer import TransferError
 
 from . import scene as scenes
-from .errors import CouplerError
-from .meshfile import MeshFile, family, one_line
+from .errors import CouplerError, SceneError
+from .meshfile import MeshFile, family, one_line, same_file
 from .plots import transfer_figure
 from .projection import project
 
@@ -68,6 +68,11 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
         raise scene.error("transfer", "target", str(exc)) from None
     log(f"source {source.path}: {source.describe()}; {field.describe()} -> {src_space.family}")
     log(f"target {target.path}: {target.describe()} -> {dst_space.family}")
+    for name in ["source.vtu", *(f"target_{method}.vtu" for method in scene.methods), FIGURE, SUMMARY]:
+        clash = same_file(scene.output_dir / name, (source.path, target.path, scene.path))
+        if clash is not None:
+            raise SceneError(f"{scene.output_dir / name}: is {clash}, an input of the scene: writing there "
+                             f"would overwrite it; choose another output directory")
 
     exact_fn = None
     exact_info = None
@@ -124,12 +129,6 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
         results.append(entry)
 
     out = scene.output_dir
-    names = ["source.vtu", *(f"target_{r['method']}.vtu" for r in results), FIGURE, SUMMARY]
-    inputs = {Path(source.path).resolve(), Path(target.path).resolve(), scene.path.resolve()}
-    clash = [n for n in names if (out / n).resolve() in inputs]
-    if clash:
-        raise CouplerError(f"{out}: writing {clash[0]} there would overwrite an input of the scene; "
-                           f"choose another output directory")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

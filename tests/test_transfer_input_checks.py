@@ -238,3 +238,63 @@ def test_cli_and_scene_report_the_units_warning(tmp_path, capsys):
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert len(summary["warnings"]) == 1 and "factor 1000" in summary["warnings"][0]
     assert stdout.count("warning: ") == 1 and summary["warnings"][0] in stdout
+
+
+# -- output files: formats that drop the field, inputs overwritten ---------------------------
+@pytest.fixture
+def pair(tmp_path):
+    """src.vtu (tets, point field T, cell field k) and dst.vtu (hexahedra) in tmp_path/in."""
+    d = tmp_path / "in"
+    d.mkdir()
+    src, dst = box_tetrahedra((2, 2, 2), jitter=0.2, seed=3), box_hexahedra((3, 3, 3))
+    meshio.write(d / "src.vtu", meshio.Mesh(src.points, [("tetra", src.cells)],
+                                            point_data={"T": Linear(2)(src.points)},
+                                            cell_data={"k": [np.arange(src.num_cells, dtype=float)]}))
+    meshio.write(d / "dst.vtu", meshio.Mesh(dst.points, [("hexahedron", dst.cells)]))
+    return d / "src.vtu", d / "dst.vtu"
+
+
+@pytest.mark.parametrize("name, field, words", [
+    ("out.msh", "T", ["out.msh", "'ansys'", "point data 'T', 'covered'"]),
+    ("out.stl", "k", ["out.stl", "'stl'", "hexahedron cells"]),
+    ("out.ply", "T", ["out.ply", "'ply'", "hexahedron cells"]),
+    ("out.inp", "k", ["out.inp", "'abaqus'", "cell data 'k', 'covered'"]),
+])
+def test_output_format_that_drops_the_field_is_refused(pair, tmp_path, capsys, name, field, words):
+    src, dst = pair
+    code, stdout, err = run_cli(capsys, "transfer", src, dst, "-f", field, "-o", tmp_path / name)
+    assert_clean_error(code, err, *words, "use .vtu or .vtk")
+    assert "covered" not in stdout  # refused before the transfer ran
+    assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("name", ["out.vtk", "out.vtu"])
+def test_output_formats_that_keep_the_fields_are_written(pair, tmp_path, capsys, name):
+    src, dst = pair
+    code, stdout, err = run_cli(capsys, "transfer", src, dst, "-f", "T", "-o", tmp_path / name)
+    assert code == 0, err
+    res = meshio.read(tmp_path / name)
+    np.testing.assert_allclose(res.point_data["T"], Linear(2)(res.points), atol=1e-12)
+
+
+def test_output_over_an_input_is_refused_and_the_input_kept(pair, tmp_path, capsys):
+    src, dst = pair
+    before = src.read_bytes(), dst.read_bytes()
+    (tmp_path / "link.vtu").symlink_to(dst)
+    (tmp_path / "sub").mkdir()
+    for out, which in [(src, src), (tmp_path / "sub" / ".." / "in" / "dst.vtu", dst),
+                       (tmp_path / "link.vtu", dst)]:
+        code, _, err = run_cli(capsys, "transfer", src, dst, "-f", "T", "-o", out)
+        assert_clean_error(code, err, str(out), f"is the input file {which}", "overwrite")
+    assert (src.read_bytes(), dst.read_bytes()) == before
+
+
+def test_scene_output_over_an_input_is_refused(pair, tmp_path, capsys):
+    src, dst = pair
+    (src.parent / "source.vtu").symlink_to(src)  # what the scene writes into its output directory
+    case = write_scene(tmp_path / "case", '[transfer]\nsource = "../in/source.vtu"\ntarget = "../in/dst.vtu"\n'
+                                          'field = "T"\nmethod = "l2"\n')
+    before = src.read_bytes()
+    code, _, err = run_cli(capsys, "run", case, "--output", src.parent)
+    assert_clean_error(code, err, "source.vtu", "overwrite", "input of the scene")
+    assert src.read_bytes() == before and not (src.parent / "summary.json").exists()
