@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
 
+from .exits import describe_exit, oom_kills
 from .messaging import check_name
 
 log = logging.getLogger("varcouple.launch")
@@ -84,6 +85,8 @@ class Process:
     log_path: Path
     started: float = field(default_factory=time.monotonic)
     reported: bool = False
+    oom_before: tuple[str, int] | None = None  # coupler.exits.oom_kills() before it started
+    killed: bool = False  # signalled by Launcher.stop_all
 
     @property
     def pid(self) -> int:
@@ -93,13 +96,15 @@ class Process:
     def returncode(self) -> int | None:
         return self.popen.poll()
 
+    def how(self) -> str:
+        """How it ended (:func:`coupler.exits.describe_exit`); call once it has."""
+        return describe_exit(self.popen.poll(), self.oom_before, "the launcher" if self.killed else None)
+
     def describe_exit(self, lines: int = 15) -> str:
-        code = self.popen.poll()
-        if code is None:
+        if self.popen.poll() is None:
             return f"{self.name} is running (pid {self.pid})"
-        how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exited with code {code}"
         last = tail(self.log_path, lines)
-        text = f"process {how} (log {self.log_path})"
+        text = f"process {self.how()} (log {self.log_path})"
         if last:
             text += "; last lines:\n" + "\n".join("    " + ln for ln in last.splitlines())
         return text
@@ -114,9 +119,10 @@ class Exited:
     returncode: int
     log_tail: str
     log_path: Path
+    how: str  # coupler.exits.describe_exit
 
     def __str__(self):
-        return f"{self.name} (pid {self.pid}) exited with code {self.returncode}"
+        return f"{self.name} (pid {self.pid}) {self.how}"
 
 
 class Launcher:
@@ -163,12 +169,13 @@ class Launcher:
         env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
         env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
         env["PYTHONUNBUFFERED"] = "1"
+        oom_before = oom_kills()
         with open(log_path, "ab") as out:
             out.write(f"# {time.strftime('%Y-%m-%d %H:%M:%S')} {shlex.join(argv)}\n".encode())
             out.flush()
             popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
                                      env=env, start_new_session=True, close_fds=True)
-        proc = Process(name, argv, popen, log_path)
+        proc = Process(name, argv, popen, log_path, oom_before=oom_before)
         self.processes[name] = proc
         log.info("started %s: pid %d, %s", name, popen.pid, shlex.join(argv))
         return proc
@@ -189,7 +196,7 @@ class Launcher:
             code = proc.returncode
             if code is not None and not proc.reported:
                 proc.reported = True
-                out.append(Exited(proc.name, proc.pid, code, tail(proc.log_path), proc.log_path))
+                out.append(Exited(proc.name, proc.pid, code, tail(proc.log_path), proc.log_path, proc.how()))
         return out
 
     def running(self) -> list[str]:
@@ -222,6 +229,8 @@ class Launcher:
         targets = [("group", p.pid) for p in procs]
         extra = [d for p in procs for d in descendants(p.pid)]
         targets += [("pid", d) for d in extra]
+        for proc in procs:
+            proc.killed = proc.killed or proc.returncode is None
         self._signal(targets, signal.SIGTERM)
         deadline = time.monotonic() + timeout
         for proc in procs:

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from coupler.exits import describe_exit, oom_kills
+
 from . import case as _case
 from .fields import read_internal_field
 from .parallel import Decomposition, patch_cells
@@ -111,6 +113,7 @@ class OpenFOAMSolver:
         if exe is None:
             raise OpenFOAMError(f"{app} not found on PATH (Debian package openfoam)")
         logf = self.case / f"log.{log_name or app}"
+        oom_before = oom_kills()
         t0 = time.perf_counter()
         with open(logf, "wb") as out:
             cmd = [exe, "-case", str(self.case), *args]
@@ -120,7 +123,8 @@ class OpenFOAMSolver:
                                 stdin=subprocess.DEVNULL, env=openfoam_env()).returncode
         dt = time.perf_counter() - t0
         if rc != 0:
-            raise OpenFOAMError(f"{app} failed with exit code {rc} in {self.case} (log {logf}):\n{_tail(logf)}")
+            raise OpenFOAMError(f"{app} failed in {self.case}: {describe_exit(rc, oom_before)} (log {logf}):\n"
+                                f"{_tail(logf)}")
         return dt
 
     def setup(self) -> None:
