@@ -12,7 +12,7 @@ of an immersed solid (eq. 13), P1 or P2, PETSc CG + GAMG, MPI-parallel.
 
 Modules: :mod:`.mesh` (meshes and boundary tags), :mod:`.constitutive`
 (material, stress), :mod:`.timestepping` (Newmark, generalized-alpha),
-:mod:`.linear_solver` (KSP set-up), :mod:`.elasticity` (the solver),
+:mod:`.linear_solver` (KSP set-up, how each solve ended), :mod:`.elasticity` (the solver),
 :mod:`.vertex_io` (arrays for the coupler), :mod:`.output` (XDMF, VTU),
 :mod:`.cases` (block compression, penny crack, bar, cantilever); two-body
 frictionless mortar contact (paper 2.2, eq. 7-11): :mod:`.mortar` (contact faces,
@@ -23,12 +23,12 @@ slave normals, ``T = D^-1 B`` with the dual basis, weighted gap), :mod:`.contact
 
 from .constitutive import LockingWarning, Material
 from .elasticity import Elasticity, evaluate
-from .linear_solver import LinearSolveError, SolverOptions
+from .linear_solver import LinearSolve, LinearSolveError, SolverOptions
 from .mesh import SolidMesh, SolidMeshError, box_mesh, from_arrays, graded_nodes, read_mesh
 from .output import VTUSeries, XDMFSeries
 from .timestepping import Scheme, make_scheme
 from .vertex_io import VertexIO, write_vtu
 
-__all__ = ["Elasticity", "LinearSolveError", "LockingWarning", "Material", "Scheme", "SolidMesh", "SolidMeshError",
+__all__ = ["Elasticity", "LinearSolve", "LinearSolveError", "LockingWarning", "Material", "Scheme", "SolidMesh", "SolidMeshError",
            "SolverOptions", "VTUSeries", "VertexIO", "XDMFSeries", "box_mesh", "evaluate", "from_arrays",
            "graded_nodes", "make_scheme", "read_mesh", "write_vtu"]

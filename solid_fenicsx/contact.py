@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from nonsmooth import BoundConstrainedQP, NonsmoothSolveError, Solution
+from nonsmooth import BoundConstrainedQP, Solution
 from nonsmooth import solvers as nonsmooth_solvers
 from nonsmooth.obstacle import rigid_body_modes as body_modes
 
@@ -186,15 +186,14 @@ class Contact:
         return replace(h, prolongations=h.prolongations[:-1] + [sp.csr_matrix(self.P_inverse @ h.prolongations[-1])])
 
     def solve(self) -> ContactState:
-        """Solve with the current loads, starting from the last solution (load stepping)."""
+        """Solve with the current loads, starting from the last solution (load stepping).
+        The state of an unconverged solve is returned too (``solution.converged`` False,
+        the last iterate): the caller reports or refuses it."""
         t0 = time.perf_counter()
         qp = self.problem()
         t1 = time.perf_counter()
         sol = nonsmooth_solvers.solve(qp, self.solver, x0=self.x, **self.options)
         t2 = time.perf_counter()
-        if not sol.converged:  # solvers that return instead of raising (multilevel)
-            raise NonsmoothSolveError(f"contact: {self.solver} did not converge in {sol.iterations} iterations "
-                                      f"(last criterion {sol.history[-1] if sol.history else float('nan'):.3e})")
         self.x = sol.x
         u = self.P @ sol.x
         self.elasticity.u.x.array[: self.num_dofs] = u

@@ -136,6 +136,7 @@ class ClosureTest:
     def _solve(self, displacement: float):
         self.platen.value[:] = [0.0, 0.0, -displacement]
         state = self.contact.solve()
+        state.solution.raise_if_unconverged(f"closure test at platen displacement {displacement:g} m")
         stress = -float(self.contact.reaction("top")[2]) / self.area
         self.solves.append({"displacement": displacement, "stress": stress,
                             "iterations": state.solution.iterations,

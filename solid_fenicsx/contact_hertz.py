@@ -64,6 +64,7 @@ def run(directory, h: float, solver: str = "active_set", steps: int = 1, **optio
     for k in range(1, steps + 1):
         holder.value[:] = [0.0, 0.0, -PUSH * k / steps]
         state = contact.solve()
+        state.solution.raise_if_unconverged(f"Hertz load step {k} of {steps}")
         per_step.append({"iterations": state.solution.iterations, "krylov_iterations": state.solution.krylov_iterations,
                          "seconds": state.seconds["solve"] + state.seconds["assemble"]})
     out = {"h": h, "dofs": contact.num_dofs, "slave_nodes": len(contact.mortar.slave.nodes),

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -39,7 +39,7 @@ import dolfinx.geometry
 
 from . import constitutive
 from .constitutive import Material
-from .linear_solver import SolverOptions, make_ksp, mass_ksp, solve
+from .linear_solver import LinearSolve, SolverOptions, make_ksp, mass_ksp, solve
 from .mesh import SolidMesh
 from .timestepping import Scheme, make_scheme
 
@@ -61,11 +61,17 @@ class _Dirichlet:
 
 @dataclass
 class StepInfo:
-    """Statistics of the last solve."""
+    """The linear solves of the last static solve or time step, in order (a first time
+    step solves for the initial acceleration before the step), and their timings."""
 
-    iterations: int = 0
+    solves: list[LinearSolve] = field(default_factory=list)
     assemble_seconds: float = 0.0
     solve_seconds: float = 0.0
+
+    @property
+    def iterations(self) -> int:
+        """Krylov iterations of the last solve (the displacement's)."""
+        return self.solves[-1].iterations if self.solves else 0
 
 
 class Elasticity:
@@ -397,7 +403,7 @@ class Elasticity:
         dolfinx.fem.petsc.set_bc(rhs, self.bcs)
         t0 = time.perf_counter()
         ksp.setInitialGuessNonzero(self.solver_options.kind != "lu")
-        self.info.iterations = solve(ksp, rhs, self.u.vector, what)
+        self.info.solves.append(solve(ksp, rhs, self.u.vector, what))
         self.info.solve_seconds = time.perf_counter() - t0
         self.u.x.scatter_forward()
 
@@ -415,8 +421,8 @@ class Elasticity:
             self._build_forms()
         t0 = time.perf_counter()
         b = self._assemble(self._forms["load"])
-        self.info.assemble_seconds = time.perf_counter() - t0
-        self._solve(b, 0.0, 1.0, "static solve")
+        self.info = StepInfo(assemble_seconds=time.perf_counter() - t0)
+        self._solve(b, 0.0, 1.0, "static")
         b.destroy()
         return self.u
 
@@ -465,7 +471,7 @@ class Elasticity:
         M, ksp = self._mass
         r = self._assemble(self._forms["residual0"])
         r.array_w[self._bc_dofs_owned()] = 0.0
-        solve(ksp, r, self.a.vector, "initial acceleration")
+        self.info.solves.append(solve(ksp, r, self.a.vector, "initial acceleration"))
         self.a.x.scatter_forward()
         r.destroy()
         if self._F_old is not None:
@@ -479,6 +485,7 @@ class Elasticity:
         dt = self._require_dynamic(dt)
         if self._forms is None:
             self._build_forms()
+        self.info = StepInfo()
         if not self._initialized:
             self.initialize()
         s = self.scheme
@@ -493,7 +500,7 @@ class Elasticity:
         if s.alpha_f:
             rhs.axpy(s.alpha_f, self._F_old)
         self.info.assemble_seconds = time.perf_counter() - t0
-        self._solve(rhs, s.mass_factor(dt), s.stiffness_factor, f"time step {self.step_count + 1} (t={self.t + dt:g})")
+        self._solve(rhs, s.mass_factor(dt), s.stiffness_factor, "time step")
         rhs.destroy()
 
         u_new, u_old = self.u.x.array, self._u_old.x.array

@@ -1,14 +1,20 @@
 """PETSc linear solvers for the elasticity systems: CG + GAMG with rigid body
-modes as near-nullspace (the default), or a direct LU factorisation (MUMPS)."""
+modes as near-nullspace (the default), or a direct LU factorisation (MUMPS).
+
+:func:`solve` tells how a solve ended (:class:`LinearSolve`) instead of raising when
+the Krylov method stops short: the caller reports it (the coupler decides what the run
+may claim); it raises only when the solution is unusable (NaN, a breakdown)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 from petsc4py import PETSc
 
 import dolfinx
 import dolfinx.la
+from nonsmooth.petsc import converged_reason
 
 
 @dataclass
@@ -34,7 +40,30 @@ class SolverOptions:
 
 
 class LinearSolveError(RuntimeError):
-    """The Krylov solver did not converge."""
+    """A linear solve without a usable solution (NaN or inf, a Krylov breakdown)."""
+
+
+@dataclass
+class LinearSolve:
+    """How one linear solve ended.
+
+    solver : ``"CG+GAMG"``, ``"LU"``, ... (KSP and PC types)
+    what : the system (``"static"``, ``"time step"``, ``"initial acceleration"``)
+    residual : the final residual relative to the norm PETSc's stopping test divides by (the
+        initial residual, or with a nonzero initial guess the right side), in the test's norm
+        (CG: the preconditioned norm); direct solves: ``||A x - b|| / ||b||``
+    tolerance : the relative residual the Krylov method had to reach (``max(rtol, atol / r0)``;
+        direct solves: ``rtol`` of the options)
+    reason : PETSc's converged reason (``"CONVERGED_RTOL"``, ``"DIVERGED_MAX_IT"``)
+    """
+
+    solver: str
+    what: str
+    converged: bool
+    iterations: int
+    residual: float
+    tolerance: float
+    reason: str
 
 
 def rigid_body_modes(V) -> PETSc.NullSpace:
@@ -90,6 +119,8 @@ def make_ksp(A: PETSc.Mat, options: SolverOptions, V=None, symmetric: bool = Tru
         opts[prefix + key] = value
     ksp.setOperators(A)
     ksp.setFromOptions()
+    if options.kind == "lu":  # preonly reads no tolerance options; its residual is reported against rtol
+        ksp.setTolerances(rtol=options.rtol)
     # the options belong to this KSP only: drop them from the global database
     for key in list(opts.getAll()):
         if key.startswith(prefix):
@@ -97,16 +128,54 @@ def make_ksp(A: PETSc.Mat, options: SolverOptions, V=None, symmetric: bool = Tru
     return ksp
 
 
-def solve(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec, what: str = "solve") -> int:
-    """Solve, raising :class:`LinearSolveError` with PETSc's reason on divergence;
-    returns the number of iterations."""
+def _method(ksp: PETSc.KSP) -> str:
+    """``"CG+GAMG"``, ``"CG+JACOBI"``, ``"LU"``: the KSP and PC types (a direct solve by its PC alone)."""
+    pc = ksp.getPC().getType().upper()
+    return pc if ksp.getType() == "preonly" else f"{ksp.getType().upper()}+{pc}"
+
+
+#: negative PETSc reasons that leave a finite iterate (reported unconverged); the others raise
+_REPORTED = (PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT, PETSc.KSP.ConvergedReason.DIVERGED_DTOL)
+
+
+def _reference_norm(ksp: PETSc.KSP, b: PETSc.Vec) -> float:
+    """The norm PETSc's default test divides by: the initial residual's for a zero initial
+    guess, else the right side's (``||B b||`` in the preconditioned norm), as KSPConvergedDefault."""
+    if not ksp.getInitialGuessNonzero():
+        norms = ksp.getConvergenceHistory()
+        return float(norms[0]) if len(norms) else 0.0
+    if ksp.getNormType() != PETSc.KSP.NormType.PRECONDITIONED:
+        return b.norm()
+    z = b.duplicate()
+    ksp.getPC().apply(b, z)
+    norm = z.norm()
+    z.destroy()
+    return norm
+
+
+def solve(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec, what: str) -> LinearSolve:
+    """Solve ``A x = b`` and tell how it ended (an iteration limit or a divergence is
+    reported, not raised); :class:`LinearSolveError` naming `what` only when ``x`` is
+    unusable (NaN or inf, a breakdown, an indefinite matrix, a failed preconditioner)."""
+    ksp.setConvergenceHistory(reset=True)
     ksp.solve(b, x)
-    reason = ksp.getConvergedReason()
-    if reason < 0:
-        raise LinearSolveError(f"{what}: linear solver diverged (PETSc reason {reason}) after "
-                               f"{ksp.getIterationNumber()} iterations, residual {ksp.getResidualNorm():.3e}")
+    reason, name = ksp.getConvergedReason(), converged_reason(ksp)
+    iterations = ksp.getIterationNumber()
+    if not np.isfinite(x.norm()) or (reason < 0 and reason not in _REPORTED):
+        raise LinearSolveError(f"{what}: {_method(ksp)} failed ({name}) after {iterations} iterations, "
+                               f"the solution is not usable")
     x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-    return ksp.getIterationNumber()
+    rtol, atol, _, _ = ksp.getTolerances()
+    if ksp.getType() == "preonly":  # direct: the true relative residual
+        r = b.duplicate()
+        ksp.getOperators()[0].mult(x, r)
+        r.axpy(-1.0, b)
+        b_norm, residual = b.norm(), r.norm()
+        r.destroy()
+        return LinearSolve(_method(ksp), what, True, 1, residual / b_norm if b_norm > 0 else 0.0, rtol, name)
+    r0 = _reference_norm(ksp, b)
+    return LinearSolve(_method(ksp), what, reason > 0, iterations,
+                       ksp.getResidualNorm() / r0 if r0 > 0 else 0.0, max(rtol, atol / r0) if r0 > 0 else rtol, name)
 
 
 def mass_ksp(M: PETSc.Mat, options: SolverOptions) -> PETSc.KSP:

@@ -65,26 +65,40 @@ def test_contact_effect_without_table(tmp_path):
 
 
 def _advance(config, steps):
+    """The participant and, per load step, (outputs, solve reports, figures)."""
     from solid_fenicsx.participant import SolidParticipant
 
     p = SolidParticipant()
     p.comm, p.rank = None, 0
     p.configure(config)
-    return p, [p.advance(w, 0, float(w), 1.0, {}) for w in range(steps)]
+    return p, [(p.advance(w, 0, float(w), 1.0, {}), *p.take_reports()) for w in range(steps)]
 
 
 def test_solid_participant_ramps_the_load_with_contact():
     scene = load(HERTZ)
-    p, outs = _advance(participant_config(scene, "solid"), 2)
+    p, steps = _advance(participant_config(scene, "solid"), 2)
     assert p.contact is not None
-    from coupler.protocol import CONTACT_STATS
-
-    stats = [dict(zip(CONTACT_STATS, o["contact_stats"].data)) for o in outs]
-    assert stats[0]["force_z"] > 0 and stats[1]["force_z"] > 2 * stats[0]["force_z"]  # a stiffening contact
-    u = outs[1]["displacement"].data
+    for _, (report,), figures in steps:
+        assert report.solver == "contact active_set" and report.converged
+        assert report.iterations == figures["iterations"] >= 1 and report.residual <= report.tolerance == 1e-10
+    first, last = steps[0][2], steps[1][2]
+    assert first["force_z"] > 0 and last["force_z"] > 2 * first["force_z"]  # a stiffening contact
+    assert last["krylov_iterations"] > 0 and 0 < last["area_fraction"] < 1 and last["min_gap"] > -1e-10
+    u = steps[1][0]["displacement"].data
     assert np.isclose(u[:, 2].min(), -0.02)
-    pressure = outs[1]["contact_pressure"].data
-    assert pressure.shape == (len(u),) and pressure.max() == pytest.approx(stats[1]["max_pressure"])
+    pressure = steps[1][0]["contact_pressure"].data
+    assert pressure.shape == (len(u),) and pressure.max() == pytest.approx(last["max_pressure"])
+
+
+def test_an_unconverged_contact_solve_is_reported():
+    """[contact] max_iterations = 1: the step returns its (finite) iterate and reports the
+    active-set solve unconverged, its criterion above the tolerance."""
+    config = participant_config(load(HERTZ), "solid")
+    config["contact"] = {**config["contact"], "max_iterations": 1}
+    _, [(out, (report,), figures)] = _advance(config, 1)
+    assert (report.solver, report.converged, report.iterations) == ("contact active_set", False, 1)
+    assert report.residual > 1e3 * report.tolerance and report.detail.startswith("iteration limit")
+    assert figures["iterations"] == 1 and np.all(np.isfinite(out["displacement"].data))
 
 
 def test_a_scene_without_contact_never_builds_contact_operators(monkeypatch):
@@ -98,8 +112,9 @@ def test_a_scene_without_contact_never_builds_contact_operators(monkeypatch):
     monkeypatch.setattr(mortar, "mortar", forbidden)
     scene = load(ROOT / "cases" / "block_compression")
     assert scene.contact is None and "contact" not in participant_config(scene, "solid")
-    p, outs = _advance(participant_config(scene, "solid"), 1)
-    assert p.contact is None and "contact_stats" not in outs[0]
+    p, [(out, (report,), figures)] = _advance(participant_config(scene, "solid"), 1)
+    assert p.contact is None and "contact_pressure" not in out and figures == {}
+    assert report.solver == "LU static" and report.converged
 
 
 @pytest.mark.slow
@@ -110,6 +125,23 @@ def test_varcouple_run_hertz(tmp_path):
     assert run.returncode == 0, run.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed"
-    last = summary["steps"][-1]["contact"]
+    last = summary["steps"][-1]["figures"]["solid"]
     assert last["min_gap"] > -1e-10 and last["force_z"] > 0
     assert (out / "solid_0001.vtu").exists()
+
+
+def test_varcouple_run_stops_on_an_unconverged_contact_solve(tmp_path):
+    """The coupler side: exit 3, status not_converged, stderr naming solver, step and residual."""
+    case = hertz_copy(tmp_path, {"search_distance = 0.1": "search_distance = 0.1\nmax_iterations = 1"})
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 3, run.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "not_converged"
+    (step,) = summary["steps"]
+    (report,) = step["solves"]["solid"]
+    assert report["solver"] == "contact active_set" and not report["converged"] and report["iterations"] == 1
+    assert report["residual"] > report["tolerance"] == 1e-10
+    assert any("time step 0" in line and "contact active_set did not converge" in line
+               and f"residual {report['residual']:.3g}" in line for line in run.stderr.splitlines()), run.stderr

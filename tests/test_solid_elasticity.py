@@ -101,6 +101,50 @@ def test_prescribed_vector_displacement_and_constant_update(cube):
     assert np.allclose(s.von_mises("DG0").x.array, 0.0, atol=1e-3)
 
 
+def test_a_capped_krylov_solve_is_reported_not_raised(cube):
+    """rtol 1e-20 in 3 CG iterations cannot be met: the solve returns and tells so."""
+    s = Elasticity(cube, E=E, nu=NU, rtol=1e-20, max_it=3)
+    _rollers(s)
+    s.add_pressure("zmax", P)
+    s.solve_static()
+    (r,) = s.info.solves
+    assert (r.solver, r.what, r.converged, r.iterations, r.reason) == ("CG+GAMG", "static", False, 3, "DIVERGED_MAX_IT")
+    assert r.tolerance == 1e-20 and 1e-20 < r.residual < 1.0
+    assert np.all(np.isfinite(s.u.x.array)) and s.info.iterations == 3
+
+
+@pytest.mark.parametrize("solver", ["cg", "lu"])
+def test_a_solve_records_its_residual(cube, solver):
+    """CG: converged with the residual relative to the initial one below rtol; LU: one
+    iteration and the true relative residual ||K u - F|| / ||F||."""
+    s = block_compression(E, NU, P, solid=cube, solver=solver, rtol=1e-10).solver
+    (r,) = s.info.solves
+    K, F = s.static_system()
+    Ku = F.duplicate()
+    K.mult(s.u.vector, Ku)
+    Ku.axpy(-1.0, F)
+    true = Ku.norm() / F.norm()
+    assert r.converged and r.residual <= r.tolerance == 1e-10 and true < 1e-8
+    if solver == "lu":
+        assert (r.solver, r.iterations, r.reason) == ("LU", 1, "CONVERGED_ITS")
+        assert r.residual == pytest.approx(true, rel=1e-6) and r.residual < 1e-13
+    else:
+        assert r.solver == "CG+GAMG" and r.iterations > 1 and r.reason == "CONVERGED_RTOL"
+
+
+def test_a_warm_started_solve_is_measured_against_the_right_side(cube):
+    """From the last solution PETSc divides by ||B b||, not by the (small) initial residual:
+    the reported residual is below rtol exactly when PETSc says converged."""
+    s = Elasticity(cube, E=E, nu=NU, rtol=1e-8)
+    _rollers(s)
+    p = s.add_pressure("zmax", P)
+    s.solve_static()
+    p.value = 1.01 * P
+    s.solve_static()
+    (r,) = s.info.solves
+    assert r.reason == "CONVERGED_RTOL" and 1e-10 < r.residual <= r.tolerance == 1e-8
+
+
 def test_evaluate_outside_is_nan(cube):
     s = block_compression(E, NU, P, solid=cube).solver
     values = s.evaluate([[0.5, 0.5, 0.5], [2.0, 0.0, 0.0]])
