@@ -30,6 +30,7 @@ SCENE_FILE = "scene.toml"
 
 #: table -> key -> one-line description (also the list of allowed keys)
 KEYS = {
+    "case": {"description": "one line on what the case shows"},
     "transfer": {
         "source": "source mesh file, relative to the case directory",
         "target": "target mesh file, relative to the case directory",
@@ -58,6 +59,7 @@ VARIABLES = ("x", "y", "z")
 class TransferScene:
     path: Path  # the scene file, as given (relative paths stay relative in messages)
     case_dir: Path
+    description: str
     source: Path
     target: Path
     field: str
@@ -304,6 +306,7 @@ def _load_transfer(path: Path, case_dir: Path, data: dict, output) -> TransferSc
                              f"and the tables of a coupled scene, or a study's {', '.join(f'[{m}]' for m in STUDIES)}")
     if "transfer" not in data:
         raise SceneError(f"{path}: [transfer]: missing table (keys: {', '.join(KEYS['transfer'])})")
+    case = Table(path, "case", data.get("case", {}), KEYS["case"])
     tr = Table(path, "transfer", data["transfer"], KEYS["transfer"])
     out = Table(path, "output", data.get("output", {}), KEYS["output"])
     source, target = tr.file("source", case_dir), tr.file("target", case_dir)
@@ -329,7 +332,7 @@ def _load_transfer(path: Path, case_dir: Path, data: dict, output) -> TransferSc
         except QuadratureError as exc:
             raise tr.error("quadrature_degree", str(exc)) from None
     slice_z = out.number("slice_z", None)
-    return TransferScene(path=path, case_dir=case_dir, source=source, target=target, field=field,
-                         methods=methods, exact=exact, quadrature_degree=qdeg,
-                         threads=tr.integer("threads", 1), output_dir=output_directory(case_dir, out, output),
-                         slice_z=slice_z)
+    return TransferScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
+                         source=source, target=target, field=field, methods=methods, exact=exact,
+                         quadrature_degree=qdeg, threads=tr.integer("threads", 1),
+                         output_dir=output_directory(case_dir, out, output), slice_z=slice_z)

@@ -45,6 +45,27 @@ def _mesh_summary(mf: MeshFile, kind: str) -> dict:
             "reoriented_cells": mf.mesh.reoriented}
 
 
+def _relative(a: float, b: float) -> float:
+    return a / b if b > 0 else float("nan")
+
+
+def _errors(space, values, covered, error, exact) -> dict:
+    """Errors of the transferred field u_h (dof `values`, `error` = values - f at the dofs)
+    against f = `exact`: ``max_error`` at the covered dofs; ``relative_l2_error`` =
+    ||u_h - f|| / ||f|| in L2 over the target cells whose dofs are all covered (quadrature,
+    :meth:`transfer.FunctionSpace.l2_error`); ``relative_interpolant_distance`` =
+    ||u_h - I_h f||_M / ||I_h f||_M with the mass matrix M over the covered dofs, which is
+    zero when u_h is the interpolant I_h f, however far f is from the target space."""
+    e = error[covered]
+    mass = space.mass_matrix()[covered][:, covered]
+    interpolant = (values - error)[covered]
+    l2, norm = space.l2_error(values, exact, cells=covered[space.cell_dofs].all(axis=1))
+    return {"max_error": float(np.max(np.abs(e))) if e.size else float("nan"),
+            "relative_l2_error": _relative(l2, norm),
+            "relative_interpolant_distance": _relative(math.sqrt(max(float(e @ (mass @ e)), 0.0)),
+                                                       math.sqrt(max(float(interpolant @ (mass @ interpolant)), 0.0)))}
+
+
 def _read(scene: scenes.TransferScene, key: str) -> MeshFile:
     try:
         return MeshFile.read(getattr(scene, key))
@@ -111,16 +132,10 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
                 f"covered {100 * p.covered_fraction:.2f}% ({p.uncovered} uncovered); "
                 f"conservation error {p.conservation_error:.2e}")
         if exact_fn is not None:
-            error = p.values - exact_fn(dst_space.dof_coordinates)
-            entry["error"] = error
-            covered_error = error[p.covered]
-            entry["max_error"] = float(np.max(np.abs(covered_error))) if covered_error.size else float("nan")
-            mass = dst_space.mass_matrix()[p.covered][:, p.covered]
-            exact_cov = (p.values - error)[p.covered]
-            norm = math.sqrt(max(float(exact_cov @ (mass @ exact_cov)), 0.0))
-            err_norm = math.sqrt(max(float(covered_error @ (mass @ covered_error)), 0.0))
-            entry["relative_l2_error"] = err_norm / norm if norm > 0 else float("nan")
-            line += f"; max error vs exact {entry['max_error']:.3e}"
+            entry["error"] = p.values - exact_fn(dst_space.dof_coordinates)
+            entry.update(_errors(dst_space, p.values, p.covered, entry["error"], exact_fn))
+            line += (f"; L2 error vs exact {entry['relative_l2_error']:.3e} (relative; distance to its interpolant "
+                     f"{entry['relative_interpolant_distance']:.3e}), max error at the dofs {entry['max_error']:.3e}")
         log(line)
         for text in p.operator.warnings:
             if text not in warned:  # the same for every method: a property of the two meshes
@@ -161,6 +176,7 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
 
     summary = {
         "scene": str(scene.path),
+        "description": scene.description,
         "field": {"name": field.name, "kind": kind, "shape": list(field.values.shape[1:]),
                   "source_space": family(source.mesh, kind), "target_space": family(target.mesh, kind)},
         "source": _mesh_summary(source, kind),
@@ -169,7 +185,7 @@ def run(scene: scenes.TransferScene, log: Callable[[str], None] = print) -> dict
             r["method"]: {k: (_finite(r[k]) if isinstance(r[k], float) else r[k])
                           for k in ("assembly_seconds", "kernel_seconds", "apply_seconds", "covered_fraction",
                                     "uncovered_dofs", "conservation_error", "max_error", "relative_l2_error",
-                                    "quadrature")
+                                    "relative_interpolant_distance", "quadrature")
                           if k in r} | {"output": f"target_{r['method']}.vtu"}
             for r in results},
         "exact": exact_info,

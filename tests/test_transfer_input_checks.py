@@ -298,3 +298,70 @@ def test_scene_output_over_an_input_is_refused(pair, tmp_path, capsys):
     code, _, err = run_cli(capsys, "run", case, "--output", src.parent)
     assert_clean_error(code, err, "source.vtu", "overwrite", "input of the scene")
     assert src.read_bytes() == before and not (src.parent / "summary.json").exists()
+
+
+# -- the error of the [transfer] scene: against exact, by quadrature ---------------------------
+@pytest.mark.parametrize("mesh, family", [(box_tetrahedra((1, 1, 1)), "P1"), (box_hexahedra((1, 1, 1)), "Q1")])
+def test_l2_error_of_the_interpolant_of_x_squared(mesh, family):
+    """Every vertex of the unit cube has x in {0, 1}, so the interpolant of x^2 is x:
+    ||x - x^2||^2 = 1/3 - 1/2 + 1/5 = 1/30 and ||x^2||^2 = 1/5 over the cube."""
+    space = FunctionSpace(mesh, family)
+    square = lambda p: p[:, 0] ** 2  # noqa: E731
+    error, norm = space.l2_error(space.interpolate(square), square)
+    assert error == pytest.approx(np.sqrt(1 / 30), rel=1e-13) and norm == pytest.approx(np.sqrt(1 / 5), rel=1e-13)
+
+
+def test_l2_error_of_constants_and_linear_fields():
+    cube = FunctionSpace(box_hexahedra((1, 1, 1)), "Q0")  # 1/2 against x: ||x - 1/2||^2 = 1/12
+    assert cube.l2_error(np.array([0.5]), lambda p: p[:, 0])[0] == pytest.approx(np.sqrt(1 / 12), rel=1e-13)
+    f = Linear(5)
+    for space in (FunctionSpace(box_tetrahedra((3, 2, 2), jitter=0.2, seed=1), "P1"),
+                  FunctionSpace(box_hexahedra((2, 3, 2), jitter=0.2, seed=1), "Q1")):
+        error, norm = space.l2_error(space.interpolate(f), f)
+        assert error < 1e-15 * norm and norm > 1
+        half = space.mesh.cell_vertices()[:, :, 0].mean(axis=1) < 0.5
+        assert 0 < half.sum() < space.mesh.num_cells  # a subset of the cells: the norm of f there only
+        assert space.l2_error(space.interpolate(f), f, cells=half)[1] < norm
+
+
+CUBE_SCENE = """[case]
+description = "x^2 carried between two copies of the unit cube"
+
+[transfer]
+source = "cube.vtu"
+target = "cube.vtu"
+field = "T"
+methods = ["l2", "pseudo_l2"]
+exact = "{exact}"
+"""
+
+
+@pytest.mark.parametrize("exact, error", [("x**2", np.sqrt(1 / 6)), ("1 + x - 2*y + 3*z", 0.0)])
+def test_scene_reports_the_true_l2_error_and_the_interpolant_distance(tmp_path, capsys, exact, error):
+    """Source and target are the same six tetrahedra: both methods give back the source, which
+    is the interpolant of exact at the target dofs (distance 0), while the L2 error of the
+    interpolant of x^2 against x^2 is sqrt(1/30) / sqrt(1/5) = sqrt(1/6) (see above)."""
+    cube = box_tetrahedra((1, 1, 1))
+    f = {"x**2": lambda p: p[:, 0] ** 2, "1 + x - 2*y + 3*z": lambda p: 1 + p @ [1.0, -2.0, 3.0]}[exact]
+    meshio.write(tmp_path / "cube.vtu", meshio.Mesh(cube.points, [("tetra", cube.cells)],
+                                                    point_data={"T": f(cube.points)}))
+    case = write_scene(tmp_path, CUBE_SCENE.format(exact=exact))
+    code, stdout, err = run_cli(capsys, "run", case, "--output", tmp_path / "out")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["description"] == "x^2 carried between two copies of the unit cube"
+    for m in summary["methods"].values():
+        assert m["relative_interpolant_distance"] < 1e-14
+        assert m["relative_l2_error"] == pytest.approx(error, rel=1e-12, abs=1e-15)
+    assert stdout.count("L2 error vs exact") == 2
+
+
+def test_case_table_keys_are_checked(tmp_path, capsys):
+    cube = box_tetrahedra((1, 1, 1))
+    meshio.write(tmp_path / "cube.vtu", meshio.Mesh(cube.points, [("tetra", cube.cells)],
+                                                    point_data={"T": cube.points[:, 0]}))
+    case = write_scene(tmp_path, CUBE_SCENE.format(exact="x").replace("description", "title"))
+    code, _, err = run_cli(capsys, "run", case)
+    assert_clean_error(code, err, "[case] title", "unknown key")
+    code, stdout, err = run_cli(capsys, "check", write_scene(tmp_path, CUBE_SCENE.format(exact="x")))
+    assert code == 0, err

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from .errors import SpaceError
 from .grid import StructuredGrid
 from .mesh import Mesh
-from .quadrature import gauss_tensor
+from .quadrature import gauss_tensor, simplex_rule
 
 FAMILIES = {"P0": 0, "P1": 1, "Q0": 0, "Q1": 1}
 
@@ -80,6 +80,46 @@ class FunctionSpace:
         cell centroids for degree 0."""
         return np.asarray(f(self.dof_coordinates), dtype=np.float64)
 
+    # -- quadrature over the cells ----------------------------------------------
+    def cell_quadrature(self, degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A rule on every cell, exact to `degree` on affine simplices and boxes:
+        points x (m, q, 3), weights w (m, q) (with |det J| of the reference map;
+        sum_q w[K, q] = |K|) and the basis at the reference points phi (q, nb), so
+        that a field with dof values u is u_h(x[K, q]) = phi[q] @ u[cell_dofs[K]].
+        Simplices: :func:`simplex_rule`; quadrilaterals and hexahedra: Gauss on [0,1]^d."""
+        mesh = self.mesh
+        p = mesh.points[mesh.cells]  # (m, k, 3)
+        if mesh.is_simplex:
+            bary, weights = simplex_rule(mesh.tdim, degree)
+            shape, w = bary, mesh.cell_measures()[:, None] * weights[None, :]
+        else:
+            xi, weights = gauss_tensor(mesh.tdim, degree // 2 + 1)
+            shape, dshape = _q1_basis(mesh.tdim, xi)
+            jac = np.einsum("mkd,qke->mqde", p, dshape)  # dx_d / dxi_e
+            if mesh.tdim == 3:
+                det = np.abs(np.linalg.det(jac))
+            else:
+                det = np.linalg.norm(np.cross(jac[..., 0], jac[..., 1]), axis=-1)
+            w = weights[None, :] * det
+        phi = shape if self.degree == 1 else np.ones((len(shape), 1))
+        return np.einsum("qk,mkd->mqd", shape, p), w, phi
+
+    def l2_error(self, values, f, cells=None, degree: int = 4) -> tuple[float, float]:
+        """||u_h - f|| and ||f|| in L2 over `cells` (a mask or indices; default all),
+        u_h the field with dof `values` (n,), f a callable on (n, 3) points, by
+        :meth:`cell_quadrature` of `degree` (Keast's 11 points on tetrahedra, 3^d
+        Gauss points on hexahedra and quadrilaterals): exact for a polynomial f of
+        degree 2 against P1 / Q1 on affine cells, within 1e-4 of the converged
+        value for the smooth field of the transfer demo."""
+        x, w, phi = self.cell_quadrature(degree)
+        dofs = self.cell_dofs
+        if cells is not None:
+            x, w, dofs = x[cells], w[cells], dofs[cells]
+        u_h = np.einsum("qi,mi->mq", phi, np.asarray(values, dtype=np.float64)[dofs])
+        exact = np.asarray(f(x.reshape(-1, 3)), dtype=np.float64).reshape(u_h.shape)
+        return (float(np.sqrt(max(np.sum(w * (u_h - exact) ** 2), 0.0))),
+                float(np.sqrt(max(np.sum(w * exact**2), 0.0))))
+
     # -- mass matrices ----------------------------------------------------
     def element_mass_matrices(self) -> np.ndarray:
         """(m, nb, nb) local mass matrices, exact for affine simplices and
@@ -91,15 +131,8 @@ class FunctionSpace:
             d = mesh.tdim
             ref = (np.ones((nb, nb)) + np.eye(nb)) / ((d + 1) * (d + 2))
             return mesh.cell_measures()[:, None, None] * ref[None]
-        xi, w = gauss_tensor(mesh.tdim, 3)
-        phi, dphi = _q1_basis(mesh.tdim, xi)
-        p = mesh.points[mesh.cells]  # (m, nb, 3)
-        jac = np.einsum("mkd,qke->mqde", p, dphi)  # dx_d / dxi_e
-        if mesh.tdim == 3:
-            det = np.abs(np.linalg.det(jac))
-        else:
-            det = np.linalg.norm(np.cross(jac[..., 0], jac[..., 1]), axis=-1)
-        return np.einsum("q,mq,qi,qj->mij", w, det, phi, phi)
+        _, w, phi = self.cell_quadrature(5)
+        return np.einsum("mq,qi,qj->mij", w, phi, phi)
 
     def mass_matrix(self) -> sp.csr_matrix:
         """Global mass matrix (sparse)."""
