@@ -203,13 +203,18 @@ def from_arrays(points=None, cells=None, triangles=None, triangle_tags=None,
     return _finish(mesh, indices, values, names, boundaries, num_points, num_cells, point_map)
 
 
+def exterior_midpoints(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The local exterior facets and their midpoints, shape (3, n) (the ``x`` of predicates)."""
+    exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+    return exterior, dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim - 1, exterior).T
+
+
 def _finish(mesh, indices, values, names, boundaries, num_points, num_cells, point_map) -> SolidMesh:
     """Add predicate boundaries to the file tags and build the MeshTags."""
     tdim = mesh.topology.dim
     tags = dict(zip(indices.tolist(), values.tolist()))
     if boundaries:
-        exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
-        mid = dolfinx.mesh.compute_midpoints(mesh, tdim - 1, exterior).T  # (3, n)
+        exterior, mid = exterior_midpoints(mesh)
         next_tag = max(list(names.values()) + [0]) + 1
         for name, predicate in boundaries.items():
             if name in names:

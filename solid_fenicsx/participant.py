@@ -16,6 +16,8 @@ coupler can sample the fluid pressure on that surface (paper 2.3, Steps 2-3).
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 from mpi4py import MPI
 
@@ -24,7 +26,7 @@ from coupler.protocol import Field
 from coupler.scene import evaluate_expression
 
 from .elasticity import Elasticity
-from .mesh import BOX_FACES, from_arrays, read_mesh
+from .mesh import BOX_FACES, SolidMeshError, exterior_midpoints, from_arrays, read_mesh
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -38,6 +40,41 @@ def _face_predicate(face: str, lower, upper):
 
 def _expression_predicate(text: str):
     return lambda x: evaluate_expression(text, x.T) > 0.5
+
+
+def _why_empty(solid, name, spec, predicate) -> str:
+    """Why boundary `name` (scene `spec`: an expression, a box face or a file tag, and its
+    `predicate`; None for file tags) has no exterior facet of `solid`."""
+    comm = solid.comm
+    if predicate is None:
+        return f"its tag {solid.tags_of(name)[0]} of the mesh file is on no exterior facet"
+    what = f"box face {spec!r}" if spec in BOX_FACES else f"expression {spec!r}"
+    exterior, midpoints = exterior_midpoints(solid.mesh)
+    owned = exterior < solid.mesh.topology.index_map(solid.mesh.topology.dim - 1).size_local
+    hit = exterior[np.asarray(predicate(midpoints), dtype=bool).reshape(-1) & owned]
+    count = comm.allreduce(len(hit))
+    if count:  # selected, then taken by boundaries given after it
+        now = set().union(*comm.allgather(set(solid.facet_tags.values[np.isin(solid.facet_tags.indices, hit)].tolist())))
+        owners = [n for n, tag in solid.boundaries.items() if tag in now]
+        return (f"the {count} facets {what} selects all carry boundar{'ies' if len(owners) > 1 else 'y'} "
+                f"{', '.join(map(repr, owners))}, given after it (a facet has one tag)")
+    x = solid.mesh.geometry.x
+    lower, upper = comm.allreduce(x.min(axis=0), op=MPI.MIN), comm.allreduce(x.max(axis=0), op=MPI.MAX)
+    axes = sorted(set(re.findall(r"\b[xyz]\b", str(spec)))) or list(_AXES)
+    spans = ", ".join(f"{a} in [{lower[_AXES[a]]:g}, {upper[_AXES[a]]:g}]" for a in axes)
+    return f"{what} is false on every boundary facet midpoint; the mesh spans {spans}"
+
+
+def _boundary_uses(config: dict) -> list[tuple[str, str | int]]:
+    """(scene key, boundary) of every boundary a load, the wetted interface or contact acts on."""
+    uses = [(load.get("key", f"load {i}"), load["boundary"]) for i, load in enumerate(config.get("loads", []), start=1)
+            if load.get("boundary") is not None]
+    wetted = config.get("wetted")
+    uses += [("[coupling] interface", b) for b in ([] if wetted is None else [wetted] if isinstance(wetted, (str, int))
+                                                   else wetted)]
+    if config.get("contact"):
+        uses += [(f"[contact] {side}", config["contact"][side]) for side in ("slave", "master")]
+    return uses
 
 
 class SolidParticipant(Participant):
@@ -78,6 +115,10 @@ class SolidParticipant(Participant):
             if tag not in solid.boundaries.values():
                 raise ValueError(f"boundary {name!r}: tag {tag} is not in {config['mesh']} "
                                  f"(tags: {sorted(solid.boundaries.values())})")
+        for key, name in _boundary_uses(config):  # a load on no facet: a singular system or a lost load
+            if solid.comm.allreduce(len(solid.facets(tags.get(name, name)))) == 0:
+                raise SolidMeshError(f"{key} boundary {name!r}: selects no facet of the mesh "
+                                     f"({_why_empty(solid, name, config['boundaries'].get(name), boundaries.get(name))})")
         material = config["material"]
         self.dynamic = bool(config.get("dynamic"))
         s = Elasticity(solid, E=material["E"], nu=material["nu"], density=material.get("density", 0.0),
