@@ -122,7 +122,7 @@ def test_varcouple_run_refuses_a_load_on_an_empty_boundary(tmp_path, boundary, l
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
                          capture_output=True, text=True, timeout=300)
-    assert run.returncode != 0, run.stderr  # 4 once the coupler maps participant errors (run_status)
+    assert run.returncode == 4, run.stderr  # a participant's error
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed"
     expression = boundary.split(" = ")[1].strip('"')
