@@ -10,8 +10,9 @@ import meshio
 import numpy as np
 import pytest
 
-from coupler.cli import main
 from transfer.generate import box_hexahedra, box_tetrahedra
+
+from cli_helpers import assert_clean_error, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "cases" / "transfer_demo"
@@ -37,21 +38,6 @@ def meshes(tmp_path_factory):
     meshio.write(d / "dst.vtu", meshio.Mesh(dst.points, [("hexahedron", dst.cells)]))
     meshio.write(d / "far.vtu", meshio.Mesh(far.points, [("tetra", far.cells)]))
     return d
-
-
-def run_cli(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_clean_error(code, err, *words):
-    assert code == 2
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("varcouple: error: "), err
-    for w in words:
-        assert w in lines[0], (w, lines[0])
 
 
 # -- varcouple / --help / --version ------------------------------------------------

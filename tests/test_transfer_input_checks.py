@@ -11,26 +11,27 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from coupler.cli import main
 from coupler.meshfile import MeshFile
 from transfer import FunctionSpace, Mesh, MeshError, OverlapWarning, QuadratureError, Transfer, TransferError
 from transfer.generate import box_hexahedra, box_tetrahedra, rectangle
 
+from cli_helpers import assert_clean_error, run_cli, write_mesh
 from vc_helpers import Linear
 
 
-def run_cli(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
+def write_scene(case, source, target, field="T", more='method = "l2"\n'):
+    """A [transfer] scene in the directory `case` (files relative to it); `more`: further lines."""
+    case.mkdir(exist_ok=True)
+    (case / "scene.toml").write_text(f'[transfer]\nsource = "{source}"\ntarget = "{target}"\n'
+                                     f'field = "{field}"\n{more}')
+    return case
 
 
-def assert_clean_error(code, err, *words):
-    assert code == 2 and "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("varcouple: error: "), err
-    for w in words:
-        assert w in lines[0], (w, lines[0])
+def run_scene(capsys, case, out):
+    """stdout and summary.json of ``varcouple run CASE --output OUT``, which must succeed."""
+    code, stdout, err = run_cli(capsys, "run", case, "--output", out)
+    assert code == 0, err
+    return stdout, json.loads((out / "summary.json").read_text())
 
 
 # -- orientation: a convention of the file, not an error ---------------------------------
@@ -124,21 +125,10 @@ def test_file_reading_reorients_and_keeps_cell_data(delaunay_file, tmp_path, cap
     np.testing.assert_array_equal(np.sort(res.cells[0].data, axis=1), np.sort(cells, axis=1))
 
 
-def write_scene(case, text):
-    case.mkdir(exist_ok=True)
-    (case / "scene.toml").write_text(text)
-    return case
-
-
 def test_scene_records_reoriented_cells(delaunay_file, tmp_path, capsys):
     path, cells, _ = delaunay_file
-    box = box_tetrahedra((2, 2, 2))
-    meshio.write(tmp_path / "box.vtu", meshio.Mesh(box.points, [("tetra", box.cells)]))
-    case = write_scene(tmp_path, f'[transfer]\nsource = "{path.name}"\ntarget = "box.vtu"\nfield = "T"\n'
-                                 f'method = "l2"\n')
-    code, stdout, err = run_cli(capsys, "run", case, "--output", tmp_path / "out")
-    assert code == 0, err
-    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    write_mesh(tmp_path / "box.vtu", box_tetrahedra((2, 2, 2)))
+    stdout, summary = run_scene(capsys, write_scene(tmp_path, path.name, "box.vtu"), tmp_path / "out")
     n = np.count_nonzero(volumes(meshio.read(path).points, cells) < 0)
     assert summary["source"]["reoriented_cells"] == n > 0 and summary["target"]["reoriented_cells"] == 0
     assert f"{n} of {len(cells)} tetra cells had negative orientation" in stdout
@@ -169,8 +159,7 @@ def test_cli_and_scene_refuse_a_huge_quadrature_degree(delaunay_file, tmp_path, 
     code, _, err = run_cli(capsys, "transfer", path, path, "-f", "T", "-o", out, "--quadrature-degree", "99")
     assert_clean_error(code, err, "--quadrature-degree", "99", "1 to 20")
     assert not out.exists()
-    case = write_scene(tmp_path, f'[transfer]\nsource = "{path.name}"\ntarget = "{path.name}"\nfield = "T"\n'
-                                 f'method = "l2"\nquadrature_degree = 99\n')
+    case = write_scene(tmp_path, path.name, path.name, more='method = "l2"\nquadrature_degree = 99\n')
     code, _, err = run_cli(capsys, "run", case)
     assert_clean_error(code, err, "scene.toml: [transfer] quadrature_degree", "99", "1 to 20")
     assert not (case / "results").exists()
@@ -224,18 +213,14 @@ def test_nested_meshes_and_surfaces_apart_do_not_warn():
 
 def test_cli_and_scene_report_the_units_warning(tmp_path, capsys):
     for mesh in (MM, M):
-        meshio.write(tmp_path / mesh.name, meshio.Mesh(mesh.points, [("tetra", mesh.cells)],
-                                                       point_data={"T": Linear(1)(mesh.points)}))
+        write_mesh(tmp_path / mesh.name, mesh, {"T": Linear(1)(mesh.points)})
     code, stdout, err = run_cli(capsys, "transfer", tmp_path / MM.name, tmp_path / M.name, "-f", "T",
                                 "-o", tmp_path / "out.vtu")
     assert code == 0, err
     (line,) = [line for line in stdout.splitlines() if line.startswith("warning: ")]
     assert "factor 1000" in line and "[0, 0, 0]..[1000, 1000, 1000]" in line
-    case = write_scene(tmp_path, f'[transfer]\nsource = "{MM.name}"\ntarget = "{M.name}"\nfield = "T"\n'
-                                 f'methods = ["l2", "pseudo_l2"]\n')
-    code, stdout, err = run_cli(capsys, "run", case, "--output", tmp_path / "out")
-    assert code == 0, err
-    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    case = write_scene(tmp_path, MM.name, M.name, more='methods = ["l2", "pseudo_l2"]\n')
+    stdout, summary = run_scene(capsys, case, tmp_path / "out")
     assert len(summary["warnings"]) == 1 and "factor 1000" in summary["warnings"][0]
     assert stdout.count("warning: ") == 1 and summary["warnings"][0] in stdout
 
@@ -247,11 +232,8 @@ def pair(tmp_path):
     d = tmp_path / "in"
     d.mkdir()
     src, dst = box_tetrahedra((2, 2, 2), jitter=0.2, seed=3), box_hexahedra((3, 3, 3))
-    meshio.write(d / "src.vtu", meshio.Mesh(src.points, [("tetra", src.cells)],
-                                            point_data={"T": Linear(2)(src.points)},
-                                            cell_data={"k": [np.arange(src.num_cells, dtype=float)]}))
-    meshio.write(d / "dst.vtu", meshio.Mesh(dst.points, [("hexahedron", dst.cells)]))
-    return d / "src.vtu", d / "dst.vtu"
+    k = np.arange(src.num_cells, dtype=float)
+    return write_mesh(d / "src.vtu", src, {"T": Linear(2)(src.points)}, {"k": k}), write_mesh(d / "dst.vtu", dst)
 
 
 @pytest.mark.parametrize("name, field, words", [
@@ -292,8 +274,7 @@ def test_output_over_an_input_is_refused_and_the_input_kept(pair, tmp_path, caps
 def test_scene_output_over_an_input_is_refused(pair, tmp_path, capsys):
     src, dst = pair
     (src.parent / "source.vtu").symlink_to(src)  # what the scene writes into its output directory
-    case = write_scene(tmp_path / "case", '[transfer]\nsource = "../in/source.vtu"\ntarget = "../in/dst.vtu"\n'
-                                          'field = "T"\nmethod = "l2"\n')
+    case = write_scene(tmp_path / "case", "../in/source.vtu", "../in/dst.vtu")
     before = src.read_bytes()
     code, _, err = run_cli(capsys, "run", case, "--output", src.parent)
     assert_clean_error(code, err, "source.vtu", "overwrite", "input of the scene")
@@ -324,44 +305,35 @@ def test_l2_error_of_constants_and_linear_fields():
         assert space.l2_error(space.interpolate(f), f, cells=half)[1] < norm
 
 
-CUBE_SCENE = """[case]
-description = "x^2 carried between two copies of the unit cube"
+@pytest.fixture
+def cube_case(tmp_path):
+    """A scene directory and a function writing cube.vtu (the six tets of the unit cube) with the
+    point field T = f and a scene from it onto itself, with [case] and exact = `exact`."""
+    def make(f, exact, case="description"):
+        cube = box_tetrahedra((1, 1, 1))
+        write_mesh(tmp_path / "cube.vtu", cube, {"T": f(cube.points)})
+        more = f'methods = ["l2", "pseudo_l2"]\nexact = "{exact}"\n[case]\n{case} = "x^2 on the unit cube"\n'
+        return write_scene(tmp_path, "cube.vtu", "cube.vtu", more=more)
 
-[transfer]
-source = "cube.vtu"
-target = "cube.vtu"
-field = "T"
-methods = ["l2", "pseudo_l2"]
-exact = "{exact}"
-"""
+    return make
 
 
 @pytest.mark.parametrize("exact, error", [("x**2", np.sqrt(1 / 6)), ("1 + x - 2*y + 3*z", 0.0)])
-def test_scene_reports_the_true_l2_error_and_the_interpolant_distance(tmp_path, capsys, exact, error):
+def test_scene_reports_the_true_l2_error_and_the_interpolant_distance(cube_case, tmp_path, capsys, exact, error):
     """Source and target are the same six tetrahedra: both methods give back the source, which
     is the interpolant of exact at the target dofs (distance 0), while the L2 error of the
     interpolant of x^2 against x^2 is sqrt(1/30) / sqrt(1/5) = sqrt(1/6) (see above)."""
-    cube = box_tetrahedra((1, 1, 1))
     f = {"x**2": lambda p: p[:, 0] ** 2, "1 + x - 2*y + 3*z": lambda p: 1 + p @ [1.0, -2.0, 3.0]}[exact]
-    meshio.write(tmp_path / "cube.vtu", meshio.Mesh(cube.points, [("tetra", cube.cells)],
-                                                    point_data={"T": f(cube.points)}))
-    case = write_scene(tmp_path, CUBE_SCENE.format(exact=exact))
-    code, stdout, err = run_cli(capsys, "run", case, "--output", tmp_path / "out")
-    assert code == 0, err
-    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert summary["description"] == "x^2 carried between two copies of the unit cube"
+    stdout, summary = run_scene(capsys, cube_case(f, exact), tmp_path / "out")
+    assert summary["description"] == "x^2 on the unit cube"
     for m in summary["methods"].values():
         assert m["relative_interpolant_distance"] < 1e-14
         assert m["relative_l2_error"] == pytest.approx(error, rel=1e-12, abs=1e-15)
     assert stdout.count("L2 error vs exact") == 2
 
 
-def test_case_table_keys_are_checked(tmp_path, capsys):
-    cube = box_tetrahedra((1, 1, 1))
-    meshio.write(tmp_path / "cube.vtu", meshio.Mesh(cube.points, [("tetra", cube.cells)],
-                                                    point_data={"T": cube.points[:, 0]}))
-    case = write_scene(tmp_path, CUBE_SCENE.format(exact="x").replace("description", "title"))
-    code, _, err = run_cli(capsys, "run", case)
+def test_case_table_keys_are_checked(cube_case, capsys):
+    code, _, err = run_cli(capsys, "run", cube_case(lambda p: p[:, 0], "x", case="title"))
     assert_clean_error(code, err, "[case] title", "unknown key")
-    code, stdout, err = run_cli(capsys, "check", write_scene(tmp_path, CUBE_SCENE.format(exact="x")))
+    code, stdout, err = run_cli(capsys, "check", cube_case(lambda p: p[:, 0], "x"))
     assert code == 0, err
