@@ -307,7 +307,7 @@ class Elasticity:
 
     def output(self, what: str):
         """The Function of an output: ``displacement``, ``velocity``,
-        ``acceleration``, ``von_mises`` (P1 projection), ``von_mises_dg0``, or
+        ``acceleration``, ``von_mises`` (lumped P1 projection), ``von_mises_dg0``, or
         the name of a field load."""
         if what in ("displacement", "u"):
             return self.u
@@ -555,9 +555,12 @@ class Elasticity:
         return self.sigma(self.u)
 
     def von_mises(self, kind: str = "DG0") -> dolfinx.fem.Function:
-        """Von Mises stress of the current displacement: ``"DG0"`` (cellwise,
-        at the cell midpoint; exact for P1) or ``"P1"`` (L2 projection onto
-        continuous P1, for vertex output)."""
+        """Von Mises stress of the current displacement: ``"DG0"`` (cellwise, at the cell
+        midpoint; exact for P1) or ``"P1"`` (vertex values for output): the lumped-mass
+        (row-sum) L2 projection ``vm_i = int vm phi_i / int phi_i``, a weighted mean of the
+        values around vertex i. It never undershoots (vm >= 0, phi_i >= 0), is exact for a
+        uniform stress, keeps the integral and needs no linear solve; the consistent
+        projection overshoots below zero beside stress concentrations (-1.3 MPa on cases/hertz)."""
         kind = kind.upper()
         vm = constitutive.von_mises(self.stress())
         if kind == "DG0":
@@ -570,17 +573,15 @@ class Elasticity:
             f.interpolate(expr)
         elif kind == "P1":
             if "P1" not in self._vm_cache:
-                W = self._p1(False)
-                p, q = ufl.TrialFunction(W), ufl.TestFunction(W)
+                q = ufl.TestFunction(self._p1(False))
                 dx = ufl.dx(domain=self.mesh)
-                M = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(p * q * dx))
-                M.assemble()
-                f = dolfinx.fem.Function(W, name="von_mises")
-                self._vm_cache["P1"] = (f, (M, mass_ksp(M, SolverOptions("cg", rtol=1e-12)),
-                                            dolfinx.fem.form(vm * q * dx)))
-            f, (M, ksp, L) = self._vm_cache["P1"]
+                lumped = self._assemble(dolfinx.fem.form(q * dx))  # row sums of the mass matrix
+                f = dolfinx.fem.Function(self._p1(False), name="von_mises")
+                self._vm_cache["P1"] = (f, (lumped.array.copy(), dolfinx.fem.form(vm * q * dx)))
+                lumped.destroy()
+            f, (lumped, L) = self._vm_cache["P1"]
             b = self._assemble(L)
-            solve(ksp, b, f.vector, "von Mises projection")
+            f.x.array[: len(lumped)] = b.array / lumped
             f.x.scatter_forward()
             b.destroy()
         else:
