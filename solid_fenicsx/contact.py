@@ -90,7 +90,7 @@ class ContactState:
     """The result of one contact solve (arrays on the slave nodes unless said)."""
 
     u: np.ndarray  # (num_dofs,) displacement
-    pressure: np.ndarray  # contact pressure (dual multiplier coefficient), >= 0
+    pressure: np.ndarray  # contact pressure (dual multiplier coefficient), > 0 only where active, exactly 0 elsewhere
     gap: np.ndarray  # current gap g - x_n (NaN where not covered)
     active: np.ndarray  # nodes in contact
     force: np.ndarray  # (3,) total contact force on the slave body (sum of nodal forces)
@@ -199,15 +199,16 @@ class Contact:
         self.elasticity.u.x.array[: self.num_dofs] = u
         self.elasticity.u.x.scatter_forward()
         m = self.mortar
-        lam = qp.multiplier(sol.x)
-        force_n = np.zeros(len(m.slave.nodes))
-        force_n[m.covered] = np.maximum(lam[self.normal_dofs], 0.0)
-        pressure = np.divide(force_n, m.weights, out=np.zeros_like(force_n), where=m.weights > 0)
         gap = np.full(len(m.slave.nodes), np.nan)
         gap[m.covered] = m.gap[m.covered] - sol.x[self.normal_dofs]
         tol = 1e-9 * max(np.max(np.abs(u), initial=0.0), np.nanmax(np.abs(m.gap), initial=0.0), 1e-300)
         active = np.zeros(len(m.slave.nodes), bool)
         active[m.covered] = gap[m.covered] <= tol
+        # the nodal contact force: the multiplier at the normal dof of a closed node, zero at an open
+        # one (where b - A x is only the Krylov error); the pressure its dual-basis coefficient
+        force_n = np.zeros(len(m.slave.nodes))
+        force_n[active] = np.maximum(qp.multiplier(sol.x)[3 * m.slave.nodes[active]], 0.0)
+        pressure = np.divide(force_n, m.weights, out=np.zeros_like(force_n), where=active)
         force = -(force_n[:, None] * m.normals).sum(axis=0)  # the master pushes the slave along -n
         area = float(m.weights[active].sum() / m.weights[m.covered].sum())
         return ContactState(u, pressure, gap, active, force, area, sol,

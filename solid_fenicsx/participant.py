@@ -9,7 +9,14 @@ problem is dynamic (paper eq. 13). ``advance`` solves one step (static: one
 solve) with the coupler's inputs (``pressure`` at the vertices, applied on the
 wetted boundary; with config ``traction = "full"`` the vector ``traction``
 instead) and returns the displacement, velocity and von Mises stress at the
-vertices, in the numbering of ``geometry``. ``geometry`` also returns the
+vertices, in the numbering of ``geometry``; it reports every inner solve
+(``report_solve``: the linear solve, or the contact QP, converged or not) and, with
+contact, the step's contact figures (``report_figures``) and the vertex fields
+``contact_pressure`` (exactly 0 off contact), ``gap``, ``in_contact``, ``slave`` and
+``mortar_weight`` (D_kk of eq. 9's dual basis; zero off the slave face), so that
+``sum(contact_pressure * mortar_weight)`` is the normal contact force. ``configure``
+refuses a load, wetted interface or contact face on a boundary that selects no
+facet, naming the scene key. ``geometry`` also returns the
 wetted boundary's facets as ``interface_triangles`` (outward oriented), so the
 coupler can sample the fluid pressure on that surface (paper 2.3, Steps 2-3).
 """
@@ -212,7 +219,8 @@ class SolidParticipant(Participant):
         out.update({k: s.vertices.gather(f) for k, f in extra.items()})
         if self.rank != 0:
             return {}
-        units = {"displacement": "m", "velocity": "m/s", "von_mises": "Pa", "contact_pressure": "Pa", "gap": "m"}
+        units = {"displacement": "m", "velocity": "m/s", "von_mises": "Pa", "contact_pressure": "Pa", "gap": "m",
+                 "in_contact": "1", "slave": "1", "mortar_weight": "m^2"}
         return {k: Field(k, v, units[k]) for k, v in out.items()}
 
     def _contact_step(self, window) -> dict:
@@ -234,11 +242,14 @@ class SolidParticipant(Participant):
                             area_fraction=state.area_fraction, max_pressure=stats["max_pressure"],
                             **dict(zip(("force_x", "force_y", "force_z"), state.force)), min_gap=stats["min_gap"])
         W = dolfinx.fem.FunctionSpace(self.solver.mesh, ("Lagrange", 1))  # same vertex dofs as the P1 vectors
-        nodes = self.contact.mortar.slave.nodes
-        pressure, gap = dolfinx.fem.Function(W), dolfinx.fem.Function(W)
-        pressure.x.array[nodes] = state.pressure
-        gap.x.array[nodes] = np.nan_to_num(state.gap, nan=0.0)
-        return {"contact_pressure": pressure, "gap": gap}
+        m = self.contact.mortar
+        slave_values = {"contact_pressure": state.pressure, "gap": np.nan_to_num(state.gap, nan=0.0),
+                        "in_contact": state.active, "slave": 1.0, "mortar_weight": m.weights}
+        fields = {}
+        for name, values in slave_values.items():  # zero off the slave face
+            fields[name] = dolfinx.fem.Function(W)
+            fields[name].x.array[m.slave.nodes] = values
+        return fields
 
     def save_state(self, window):
         self.states[int(window)] = self.solver.save_state()

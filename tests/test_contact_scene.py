@@ -90,6 +90,35 @@ def test_solid_participant_ramps_the_load_with_contact():
     assert pressure.shape == (len(u),) and pressure.max() == pytest.approx(last["max_pressure"])
 
 
+def test_contact_fields_are_zero_off_contact_and_balance_the_load():
+    """The vertex fields of a Hertz step: pressure exactly 0 where in_contact is 0 (inactive
+    slave nodes had up to 0.19 Pa), the slave face and its mortar weights D_kk, so that
+    sum(pressure * mortar_weight) is the normal contact force (the active normal multipliers
+    of the QP), along the slave normals the force figures, balanced by the load's reaction."""
+    import dolfinx.fem
+
+    p, steps = _advance(participant_config(load(HERTZ), "solid"), 2)
+    out, _, figures = steps[-1]
+    pressure, in_contact, slave, weight = (out[k].data for k in ("contact_pressure", "in_contact", "slave",
+                                                                 "mortar_weight"))
+    assert all(np.all(np.isfinite(f)) for f in (pressure, in_contact, slave, weight))
+    m = p.contact.mortar
+    assert slave.sum() == len(m.slave.nodes) and set(np.unique(slave)) == set(np.unique(in_contact)) == {0.0, 1.0}
+    assert np.all(slave[in_contact == 1] == 1) and in_contact.sum() == figures["active_nodes"]
+    assert np.all(pressure[in_contact == 0] == 0.0) and pressure.max() > 0 and pressure.min() == 0.0
+    assert np.all(weight[slave == 0] == 0.0) and weight.sum() == pytest.approx(m.weights.sum(), rel=1e-14)
+    qp = p.contact.problem()
+    lam = qp.multiplier(p.contact.x)
+    closed = p.contact.x[p.contact.normal_dofs] >= qp.upper[p.contact.normal_dofs] - 1e-9 * 0.02
+    normal_force = lam[p.contact.normal_dofs][closed].sum()
+    assert (pressure * weight).sum() == pytest.approx(normal_force, rel=1e-10)
+    normals = dolfinx.fem.Function(p.solver.V)
+    normals.x.array.reshape(-1, 3)[m.slave.nodes] = m.normals
+    force = -((pressure * weight)[:, None] * p.solver.vertices.gather(normals)).sum(axis=0)
+    assert force == pytest.approx([figures["force_x"], figures["force_y"], figures["force_z"]], rel=1e-10)
+    assert p.contact.reaction("load")[2] == pytest.approx(-force[2], rel=1e-9)  # 3.7e-12 measured
+
+
 def test_an_unconverged_contact_solve_is_reported():
     """[contact] max_iterations = 1: the step returns its (finite) iterate and reports the
     active-set solve unconverged, its criterion above the tolerance."""
