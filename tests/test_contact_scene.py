@@ -146,28 +146,27 @@ def test_a_scene_without_contact_never_builds_contact_operators(monkeypatch):
     assert report.solver == "LU static" and report.converged
 
 
+def varcouple_run(case, out):
+    """`varcouple run case --output out`: the finished process and its summary.json."""
+    run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
+                         capture_output=True, text=True, timeout=600)
+    return run, json.loads((out / "summary.json").read_text())
+
+
 @pytest.mark.slow
 def test_varcouple_run_hertz(tmp_path):
-    out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(HERTZ), "--output", str(out)],
-                         capture_output=True, text=True, timeout=600)
-    assert run.returncode == 0, run.stderr
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["status"] == "completed"
+    run, summary = varcouple_run(HERTZ, tmp_path / "out")
+    assert run.returncode == 0 and summary["status"] == "completed", run.stderr
     last = summary["steps"][-1]["figures"]["solid"]
     assert last["min_gap"] > -1e-10 and last["force_z"] > 0
-    assert (out / "solid_0001.vtu").exists()
+    assert (tmp_path / "out" / "solid_0001.vtu").exists()
 
 
 def test_varcouple_run_stops_on_an_unconverged_contact_solve(tmp_path):
     """The coupler side: exit 3, status not_converged, stderr naming solver, step and residual."""
     case = hertz_copy(tmp_path, {"search_distance = 0.1": "search_distance = 0.1\nmax_iterations = 1"})
-    out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
-                         capture_output=True, text=True, timeout=600)
-    assert run.returncode == 3, run.stderr
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["status"] == "not_converged"
+    run, summary = varcouple_run(case, tmp_path / "out")
+    assert run.returncode == 3 and summary["status"] == "not_converged", run.stderr
     (step,) = summary["steps"]
     (report,) = step["solves"]["solid"]
     assert report["solver"] == "contact active_set" and not report["converged"] and report["iterations"] == 1
