@@ -29,6 +29,6 @@ from .output import VTUSeries, XDMFSeries
 from .timestepping import Scheme, make_scheme
 from .vertex_io import VertexIO, write_vtu
 
-__all__ = ["Elasticity", "LinearSolve", "LinearSolveError", "LockingWarning", "Material", "Scheme", "SolidMesh", "SolidMeshError",
-           "SolverOptions", "VTUSeries", "VertexIO", "XDMFSeries", "box_mesh", "evaluate", "from_arrays",
-           "graded_nodes", "make_scheme", "read_mesh", "write_vtu"]
+__all__ = ["Elasticity", "LinearSolve", "LinearSolveError", "LockingWarning", "Material", "Scheme", "SolidMesh",
+           "SolidMeshError", "SolverOptions", "VTUSeries", "VertexIO", "XDMFSeries", "box_mesh", "evaluate",
+           "from_arrays", "graded_nodes", "make_scheme", "read_mesh", "write_vtu"]

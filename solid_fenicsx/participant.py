@@ -61,7 +61,8 @@ def _why_empty(solid, name, spec, predicate) -> str:
     hit = exterior[np.asarray(predicate(midpoints), dtype=bool).reshape(-1) & owned]
     count = comm.allreduce(len(hit))
     if count:  # selected, then taken by boundaries given after it
-        now = set().union(*comm.allgather(set(solid.facet_tags.values[np.isin(solid.facet_tags.indices, hit)].tolist())))
+        local = solid.facet_tags.values[np.isin(solid.facet_tags.indices, hit)]
+        now = set().union(*comm.allgather(set(local.tolist())))
         owners = [n for n, tag in solid.boundaries.items() if tag in now]
         return (f"the {count} facets {what} selects all carry boundar{'ies' if len(owners) > 1 else 'y'} "
                 f"{', '.join(map(repr, owners))}, given after it (a facet has one tag)")
@@ -124,8 +125,8 @@ class SolidParticipant(Participant):
                                  f"(tags: {sorted(solid.boundaries.values())})")
         for key, name in _boundary_uses(config):  # a load on no facet: a singular system or a lost load
             if solid.comm.allreduce(len(solid.facets(tags.get(name, name)))) == 0:
-                raise SolidMeshError(f"{key} boundary {name!r}: selects no facet of the mesh "
-                                     f"({_why_empty(solid, name, config['boundaries'].get(name), boundaries.get(name))})")
+                why = _why_empty(solid, name, config.get("boundaries", {}).get(name), boundaries.get(name))
+                raise SolidMeshError(f"{key} boundary {name!r}: selects no facet of the mesh ({why})")
         material = config["material"]
         self.dynamic = bool(config.get("dynamic"))
         s = Elasticity(solid, E=material["E"], nu=material["nu"], density=material.get("density", 0.0),
@@ -211,7 +212,10 @@ class SolidParticipant(Participant):
         if self.contact is not None:
             extra = self._contact_step(window)
         else:
-            s.step(dt) if self.dynamic else s.solve_static()
+            if self.dynamic:
+                s.step(dt)
+            else:
+                s.solve_static()
             for r in s.info.solves:
                 self.report_solve(f"{r.solver} {r.what}", r.converged, r.iterations, r.residual, r.tolerance,
                                   detail=r.reason)
@@ -225,8 +229,8 @@ class SolidParticipant(Participant):
 
     def _contact_step(self, window) -> dict:
         """Load step ``window`` of ``steps`` (loads at (window + 1) / steps of their value),
-        from the last step's solution: the contact solve and its figures reported, the slave
-        face's pressure and gap as vertex fields."""
+        from the last step's solution: the contact solve and its figures reported; the slave
+        face's pressure, gap, contact and slave markers and mortar weights as vertex fields."""
         import dolfinx.fem
 
         factor = (int(window) + 1) / self.steps
