@@ -23,6 +23,7 @@ from typing import Iterable
 
 from .exits import describe_exit, oom_kills
 from .messaging import check_name
+from .mpi_env import mpi_environment
 
 log = logging.getLogger("varcouple.launch")
 
@@ -130,11 +131,16 @@ class Launcher:
 
     ``connect``: the zenoh endpoints every participant connects to (the coupler's,
     :attr:`coupler.messaging.CouplerSession.endpoints`). ``python``: the interpreter
-    (default: this one). ``mpirun``: the MPI launcher for ``ranks > 1``.
+    (default: this one). ``mpirun``: the MPI launcher for ``ranks > 1``. ``env``: the
+    participants' environment (default: this one's), with Open MPI's settings for
+    ``mpi_interfaces`` added (:func:`coupler.mpi_env.mpi_environment`: None reads
+    ``VARCOUPLE_MPI_INTERFACES``, none means this host only); the participants' own mpiruns
+    (the fluid's OpenFOAM) inherit them.
     """
 
     def __init__(self, run_id: str, results_dir, connect: Iterable[str] = (), *,
-                 python: str | None = None, mpirun: str = "mpirun", env: dict | None = None):
+                 python: str | None = None, mpirun: str = "mpirun", env: dict | None = None,
+                 mpi_interfaces: list[str] | None = None):
         self.run_id = check_name("run id", run_id)
         self.results_dir = Path(results_dir)
         self.log_dir = self.results_dir / "logs"
@@ -142,6 +148,7 @@ class Launcher:
         self.python = python or sys.executable
         self.mpirun = mpirun
         self.env = env
+        self.mpi_interfaces = mpi_interfaces
         self.processes: dict[str, Process] = {}
 
     def command(self, name: str, module: str, ranks: int = 1, extra_args: Iterable[str] = ()) -> list[str]:
@@ -165,10 +172,7 @@ class Launcher:
         argv = self.command(name, module, ranks, extra_args)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         log_path = self.log_dir / f"{name}.log"
-        env = dict(os.environ if self.env is None else self.env)
-        env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        env["PYTHONUNBUFFERED"] = "1"
+        env = dict(mpi_environment(self.mpi_interfaces, self.env), PYTHONUNBUFFERED="1")
         oom_before = oom_kills()
         with open(log_path, "ab") as out:
             out.write(f"# {time.strftime('%Y-%m-%d %H:%M:%S')} {shlex.join(argv)}\n".encode())

@@ -18,7 +18,6 @@ values with the neighbour's cells before it uses them. Time directories live in 
 
 from __future__ import annotations
 
-import os
 import shutil
 from pathlib import Path
 
@@ -100,13 +99,14 @@ class Decomposition:
             raise RuntimeError(f"{self.case}: cellProcAddressing does not cover every cell once")
 
     def mpi_command(self, command: list[str]) -> list[str]:
-        """``mpirun -np N <solver> -parallel ...`` for a solver command line. Open MPI's ob1
-        messaging layer unless ``OMPI_MCA_pml`` says otherwise: the solver is relaunched every
-        coupling iteration, and letting Open MPI choose its layer at every start-up costs more
-        (measured here, one simpleFoam iteration on 512 cells, median of 5, load average ~0.5:
-        2 ranks 0.43 s with ``OMPI_MCA_pml=""`` or ``"^ucx"``, 0.21 s with ob1; serial 0.09 s)."""
-        pml = [] if "OMPI_MCA_pml" in os.environ else ["--mca", "pml", "ob1"]
-        return ["mpirun", "-np", str(self.ranks), "--oversubscribe", *pml, command[0], "-parallel", *command[1:]]
+        """``mpirun -np N <solver> -parallel ...`` for a solver command line, to run with the
+        environment of :func:`fluid_openfoam.solver.openfoam_env` (Open MPI's settings,
+        :mod:`coupler.mpi_env`: shared memory, loopback wire-up, messaging layer ob1). The
+        solver is relaunched every coupling iteration, so start-up counts; measured here
+        (one simpleFoam iteration on 512 cells, median of 7, load average ~1): 2 ranks 0.18 s,
+        as with ob1 alone before the loopback settings (0.185 s), 0.39 s when Open MPI chooses
+        its messaging layer at every start-up (``OMPI_MCA_pml=""``); serial about 0.1 s."""
+        return ["mpirun", "-np", str(self.ranks), "--oversubscribe", command[0], "-parallel", *command[1:]]
 
     @property
     def time_root(self) -> Path:

@@ -19,7 +19,6 @@ per launch on small grids.
 from __future__ import annotations
 
 import logging
-import os
 import re
 import shutil
 import subprocess
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from coupler.exits import describe_exit, oom_kills
+from coupler.mpi_env import mpi_environment
 
 from . import case as _case
 from .fields import read_internal_field
@@ -67,10 +67,10 @@ def final_residual(log_text: str, transient: bool) -> float:
 
 
 def openfoam_env() -> dict:
-    env = dict(os.environ)
+    """This environment with OpenFOAM's data directory and the Open MPI settings of
+    :func:`coupler.mpi_env.mpi_environment` (the solver's ranks)."""
+    env = mpi_environment()
     env.setdefault("WM_PROJECT_DIR", OPENFOAM_DIR)
-    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     return env
 
 

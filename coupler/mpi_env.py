@@ -1,0 +1,53 @@
+"""Open MPI settings for every process the project starts that runs MPI: participants under
+``mpirun`` or alone (dolfinx initialises MPI in a one-rank solid too), and the OpenFOAM solvers
+on N ranks. They travel as ``OMPI_MCA_*`` environment variables, which mpirun forwards to its
+daemons and ranks.
+
+One host (the default): shared memory between the ranks (``btl self,vader``: without the TCP
+BTL no rank listens, where each used to listen on ``0.0.0.0`` and ``::`` from port 1024),
+mpirun's wire-up over loopback (``oob_tcp_if_include lo``), and a process that initialises MPI
+without mpirun does not fork the ``orted`` that would listen on all interfaces
+(``ess_singleton_isolated``; it cannot ``MPI_Comm_spawn``, which nothing here does).
+Several hosts: name the interfaces (``VARCOUPLE_MPI_INTERFACES=eth0`` or the ``interfaces``
+argument; names or CIDR networks, as Open MPI's ``*_if_include``): the TCP BTL comes back, on
+those only, and the wire-up uses them. Both: messaging layer ob1 (the BTLs above; also the
+quicker start-up, see :meth:`fluid_openfoam.parallel.Decomposition.mpi_command`).
+
+What still listens: mpirun itself binds its out-of-band (ORTE) listener to the wildcard
+address, IPv4 and IPv6, whatever ``oob_tcp_if_include`` says (Open MPI 4.1,
+``orte/mca/oob/tcp/oob_tcp_listener.c``: ``INADDR_ANY``); only what it advertises and connects
+to is restricted. tests/test_mpi_loopback.py keeps that as an expected failure.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Mapping
+
+INTERFACES_VAR = "VARCOUPLE_MPI_INTERFACES"
+
+
+def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """A copy of ``env`` (default ``os.environ``) with the Open MPI settings above added where
+    ``env`` does not set them itself. ``interfaces``: network interfaces for a run over several
+    hosts; None reads the comma-separated ``VARCOUPLE_MPI_INTERFACES`` of ``env``; empty: this
+    host only."""
+    out = dict(os.environ if env is None else env)
+    if interfaces is None:
+        interfaces = out.get(INTERFACES_VAR, "").split(",")
+    interfaces = [i.strip() for i in interfaces if i.strip()]
+    for name in interfaces:
+        if any(c.isspace() or c == "," for c in name):
+            raise ValueError(f"MPI interface {name!r}: one interface name or CIDR network per entry")
+    if interfaces:
+        names = ",".join(interfaces)
+        mca = {"btl": "self,vader,tcp", "btl_tcp_if_include": names, "oob_tcp_if_include": names}
+    else:
+        mca = {"btl": "self,vader", "oob_tcp_if_include": "lo"}
+    mca.update(pml="ob1", ess_singleton_isolated="1")
+    for key, value in mca.items():
+        out.setdefault(f"OMPI_MCA_{key}", value)
+    # Open MPI refuses to start as root without these (containers, CI).
+    out.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+    out.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    return out
