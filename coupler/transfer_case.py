@@ -56,14 +56,16 @@ def _errors(space, values, covered, error, exact) -> dict:
     :meth:`transfer.FunctionSpace.l2_error`); ``relative_interpolant_distance`` =
     ||u_h - I_h f||_M / ||I_h f||_M with the mass matrix M over the covered dofs, which is
     zero when u_h is the interpolant I_h f, however far f is from the target space."""
-    e = error[covered]
+    e, interpolant = error[covered], (values - error)[covered]
     mass = space.mass_matrix()[covered][:, covered]
-    interpolant = (values - error)[covered]
+
+    def mass_norm(v):
+        return math.sqrt(max(float(v @ (mass @ v)), 0.0))
+
     l2, norm = space.l2_error(values, exact, cells=covered[space.cell_dofs].all(axis=1))
     return {"max_error": float(np.max(np.abs(e))) if e.size else float("nan"),
             "relative_l2_error": _relative(l2, norm),
-            "relative_interpolant_distance": _relative(math.sqrt(max(float(e @ (mass @ e)), 0.0)),
-                                                       math.sqrt(max(float(interpolant @ (mass @ interpolant)), 0.0)))}
+            "relative_interpolant_distance": _relative(mass_norm(e), mass_norm(interpolant))}
 
 
 def _read(scene: scenes.TransferScene, key: str) -> MeshFile:
