@@ -352,9 +352,8 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
         if isinstance(spec, int) and box is not None:
             raise SceneError(f"{where}: tag numbers need a mesh file; the box has faces {', '.join(BOX_FACES)}")
         boundaries[name] = spec
-    if box is not None:
-        for face in BOX_FACES:
-            boundaries.setdefault(face, face)
+    if box is not None:  # the box's faces first: a named boundary takes its facets from them (a facet has one tag)
+        boundaries = {**{face: face for face in BOX_FACES if face not in boundaries}, **boundaries}
     return SolidGeometry(mesh=mesh, box=box, boundaries=boundaries)
 
 

@@ -106,7 +106,7 @@ BAD_FLOW = [
     ("", "[flow] inlet_velocity", "missing"),
     ("\n[flow]\noutlet_pressure = 1.0\n", "[flow] inlet_velocity", "exactly one"),
     ("\n[flow]\ninlet_velocity = [1, 0, 0]\ninlet_pressure = 1.0\n", "[flow] inlet_velocity", "exactly one"),
-    ("\n[flow]\ninlet_velocity = [1, 0]\n", "[flow] inlet_velocity", "list of 3 numbers"),
+    ("\n[flow]\ninlet_velocity = [1, 0]\n", "[flow] inlet_velocity", "list of 3 finite numbers"),
     ("\n[flow]\ninlet_pressure = 1.0\nwalls = \"sticky\"\n", "[flow] walls", "unknown value 'sticky'"),
     ("\n[flow]\ninlet_pressure = 1.0\nfaces = { xmin = \"wall\" }\n", "[flow.faces] xmin", "xmin is the inlet"),
     ("\n[flow]\ninlet_pressure = 1.0\nfaces = { top = \"wall\" }\n", "[flow.faces] top", "unknown face"),

@@ -85,7 +85,7 @@ def test_rock_case_touches_at_asperities_only(tmp_path):
     (("levels = [2, 3, 4]", "levels = [2, 3, 3]"), ["[hierarchy] levels", "listed twice"]),
     (("shape = \"cube\"", "shape = \"sphere\""), ["[body] shape", "'sphere'"]),
     (("E = 1.0e10", "E = -1.0"), ["[material] E", "positive"]),
-    (("displacement = [0.0, 0.0, -3.0e-4]", "displacement = [0.0, -3.0e-4]"), ["[obstacle] displacement", "3 numbers"]),
+    (("displacement = [0.0, 0.0, -3.0e-4]", "displacement = [0.0, -3.0e-4]"), ["[obstacle] displacement", "3 finite numbers"]),
     (("method = \"multilevel\"", "method = \"jacobi\""), ["[solver] method", "'jacobi'"]),
     (("[output]", "[outputs]"), ["[outputs]", "unknown table"]),
 ])
