@@ -4,18 +4,21 @@
 --name NAME --connect ENDPOINT ...`` per participant, each in its own process group with
 its output in ``<results_dir>/logs/<name>.log``. Used as a context manager, it stops
 every process it started (SIGTERM to the whole group, SIGKILL after a grace period) on
-any exit: normal end, exception, Ctrl-C.
+any exit: normal end, exception, Ctrl-C, and then removes the temporary directories
+(:func:`scratch_dir`) its participants could not remove themselves.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import re
 import shlex
 import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,6 +77,13 @@ def descendants(pid: int) -> list[int]:
             out.append(c)
             todo.append(c)
     return out
+
+
+def scratch_dir(run_id: str, name: str) -> Path:
+    """A new temporary directory (under ``TMPDIR``) for participant ``name`` of run ``run_id``,
+    named ``varcouple-<run_id>-<name>-XXXXXXXX`` so that :meth:`Launcher.stop_all` can remove
+    it when the participant could not (SIGKILL)."""
+    return Path(tempfile.mkdtemp(prefix=f"varcouple-{run_id}-{name}-"))
 
 
 @dataclass
@@ -255,6 +265,20 @@ class Launcher:
                 proc.popen.wait(5.0)
             except subprocess.TimeoutExpired:
                 log.error("%s (pid %d) survived SIGKILL", proc.name, proc.pid)
+        self._remove_scratch()
+
+    def _remove_scratch(self) -> None:
+        """Remove the :func:`scratch_dir` directories its ended participants left behind."""
+        tmp = Path((os.environ if self.env is None else self.env).get("TMPDIR") or tempfile.gettempdir())
+        for proc in self.processes.values():
+            if proc.returncode is None:
+                continue
+            prefix = f"varcouple-{self.run_id}-{proc.name}-"
+            for path in tmp.glob(f"{prefix}*"):
+                # mkdtemp's 8 random characters: not a longer run id or name that starts the same
+                if re.fullmatch(r"[a-z0-9_]{8}", path.name[len(prefix):]) and path.is_dir():
+                    log.warning("removing %s, left by %s (%s)", path, proc.name, proc.how())
+                    shutil.rmtree(path, ignore_errors=True)
 
     def __enter__(self):
         return self

@@ -14,7 +14,8 @@ Config (the fluid's part of the scene; same grid conventions as
                                           # second order for grid-aligned walls), "linear"
                                           # (stock table of the fraction), "power"; penalization.py
      "max_iterations": 2000, "tolerance": 1e-7,   # simpleFoam per advance
-     "case_dir": null}                    # default: a fresh temporary directory
+     "case_dir": null}                    # kept; default: a temporary directory, removed on
+                                          # every exit (the launcher removes it after SIGKILL)
 
 From a scene, :func:`coupler.coupled_run.participant_config` fills these keys: ``rho``, ``mu``
 from ``[materials.fluid]``; ``inlet``, ``outlet``, ``walls``, ``boundaries`` from ``[flow]``
@@ -48,13 +49,14 @@ one (a warm start) and makes its result current; ``save_state(w)`` remembers it,
 
 from __future__ import annotations
 
+import atexit
 import logging
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from coupler.launch import scratch_dir
 from coupler.participant import Participant
 from coupler.protocol import Field
 
@@ -72,8 +74,9 @@ class FluidParticipant(Participant):
         self.spec: CaseSpec | None = None
         self.saved: dict[int, str] = {}
         self.fraction: np.ndarray | None = None
-        self._tmp: str | None = None
+        self._tmp: Path | None = None
         self._warned_velocity = False
+        atexit.register(self._cleanup)  # SIGTERM, SIGINT and a lost coupler end through SystemExit
 
     def announce(self) -> dict:
         return {"kind": self.kind, "provides": ["pressure", "velocity"],
@@ -83,14 +86,19 @@ class FluidParticipant(Participant):
         if config.get("location", "cells") != "cells":
             raise ValueError(f"fluid_openfoam serves cell values only (location 'cells'), got {config.get('location')!r}")
         spec = CaseSpec.from_config(config)
+        self._cleanup()
+        self.solver = self.spec = None
         case_dir = config.get("case_dir")
         if case_dir is None:
+            self._tmp = scratch_dir(self.run_id, self.name)
+            case_dir = self._tmp / "case"
+        solver = OpenFOAMSolver(case_dir, spec)
+        try:
+            solver.setup()
+        except Exception:
             self._cleanup()
-            self._tmp = tempfile.mkdtemp(prefix=f"varcouple-{self.name or 'fluid'}-")
-            case_dir = Path(self._tmp) / "case"
-        self.spec = spec
-        self.solver = OpenFOAMSolver(case_dir, spec)
-        self.solver.setup()
+            raise
+        self.spec, self.solver = spec, solver
         self.saved = {}
         self.fraction = np.zeros(spec.grid.n_cells)
         log.info("fluid_openfoam: grid %s (%d cells), nu %g, drag %g 1/s, case %s", spec.grid.shape,

@@ -108,7 +108,9 @@ class OpenFOAMSolver:
 
     # -------------------------------------------------------------- running binaries
     def run(self, app: str, *args: str, log_name: str | None = None) -> float:
-        """Run an OpenFOAM binary in the case; returns wall seconds."""
+        """Run an OpenFOAM binary in the case; returns wall seconds. Interrupted (the
+        participant's SIGTERM or SIGINT), it stops the binary with SIGTERM, so that mpirun ends
+        its ranks and removes its session directory, and with SIGKILL after 5 s."""
         exe = shutil.which(app, path=openfoam_env().get("PATH"))
         if exe is None:
             raise OpenFOAMError(f"{app} not found on PATH (Debian package openfoam)")
@@ -119,8 +121,18 @@ class OpenFOAMSolver:
             cmd = [exe, "-case", str(self.case), *args]
             if self.parallel is not None and app == self.application:
                 cmd = self.parallel.mpi_command(cmd)
-            rc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, env=openfoam_env()).returncode
+            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                    env=openfoam_env())
+            try:
+                rc = proc.wait()
+            except BaseException:
+                proc.terminate()
+                try:
+                    proc.wait(5.0)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+                raise
         dt = time.perf_counter() - t0
         if rc != 0:
             raise OpenFOAMError(f"{app} failed in {self.case}: {describe_exit(rc, oom_before)} (log {logf}):\n"
