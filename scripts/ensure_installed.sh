@@ -3,7 +3,8 @@
 # Installs when:
 #   - VARCOUPLE_INSTALL=1, or
 #   - .venv/bin/varcouple is missing, or the last install did not finish, or
-#   - pyproject.toml, CMakeLists.txt or anything under transfer/_kernels/ changed since.
+#   - scripts/install.sh (its package list), pyproject.toml, CMakeLists.txt or anything under
+#     transfer/_kernels/ or nonsmooth/_kernels/ changed since.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -18,7 +19,7 @@ elif [[ ! -e "$STAMP" ]]; then
   reason="the last install did not finish"
 else
   watched=()
-  for p in pyproject.toml CMakeLists.txt transfer/_kernels; do
+  for p in scripts/install.sh pyproject.toml CMakeLists.txt transfer/_kernels nonsmooth/_kernels; do
     [[ -e "$ROOT/$p" ]] && watched+=("$ROOT/$p")
   done
   if ((${#watched[@]})); then
