@@ -59,13 +59,14 @@ def test_the_kernel_counter_is_read():
 
 # ------------------------------------------------------------------ participants (Launcher)
 
-def write_module(directory: Path, name: str, body: str) -> None:
+def module_env(directory: Path, name: str, body: str) -> dict:
+    """Write module ``name`` into ``directory``; an environment in which it imports."""
     (directory / f"{name}.py").write_text(textwrap.dedent(body))
+    return dict(os.environ, PYTHONPATH=f"{directory}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
 
 
 def test_participant_killed_by_sigkill_is_reported_as_probably_out_of_memory(tmp_path):
-    write_module(tmp_path, "vc_selfkill", "import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n")
-    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+    env = module_env(tmp_path, "vc_selfkill", "import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n")
     with Launcher(f"t-{uuid.uuid4().hex[:8]}", tmp_path, env=env) as launcher:
         launcher.start("solid", "vc_selfkill")
         assert launcher.wait("solid", 30) == -signal.SIGKILL
@@ -74,13 +75,12 @@ def test_participant_killed_by_sigkill_is_reported_as_probably_out_of_memory(tmp
 
 
 def test_participant_the_launcher_kills_is_not_blamed_on_memory(tmp_path):
-    write_module(tmp_path, "vc_stubborn", """\
+    env = module_env(tmp_path, "vc_stubborn", """\
         import signal, sys, time
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         print("ready", flush=True)
         time.sleep(60)
         """)
-    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
     launcher = Launcher(f"t-{uuid.uuid4().hex[:8]}", tmp_path, env=env)
     proc = launcher.start("fluid", "vc_stubborn")
     while "ready" not in proc.log_path.read_text():
@@ -106,7 +106,7 @@ def test_openfoam_binary_killed_by_sigkill(tmp_path, monkeypatch):
     solver = OpenFOAMSolver(tmp_path / "case", spec)
     with pytest.raises(OpenFOAMError) as info:
         solver.run("blockMesh")
-    assert PROBABLY in str(info.value) and "-9" not in str(info.value)
+    assert PROBABLY in str(info.value) and "exit code" not in str(info.value)
 
 
 # ------------------------------------------------------------------ a real out-of-memory kill

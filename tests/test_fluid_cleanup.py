@@ -50,15 +50,18 @@ class Run:
     def wait(self, code: int) -> None:
         assert self.launcher.wait("fluid", 30.0) == code, self.launcher.check("fluid")
 
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.launcher.stop_all(timeout=3.0)
+        self.coupler.close()
+
 
 @pytest.fixture
 def run(tmp_path):
-    r = Run(tmp_path)
-    try:
+    with Run(tmp_path) as r:
         yield r
-    finally:
-        r.launcher.stop_all(timeout=3.0)
-        r.coupler.close()
 
 
 def test_the_case_is_named_after_the_run_and_removed_by_finish(run):
@@ -134,15 +137,11 @@ def test_a_failing_configure_removes_its_case_at_once(tmp_path):
     bin_dir.mkdir()
     (bin_dir / "blockMesh").write_text("#!/bin/sh\necho 'FOAM FATAL ERROR: no mesh today'\nexit 1\n")
     (bin_dir / "blockMesh").chmod(0o755)
-    r = Run(tmp_path, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
-    try:
+    with Run(tmp_path, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}") as r:
         with pytest.raises(ParticipantError, match="blockMesh failed"):
             r.start_fluid()
         assert r.launcher.processes["fluid"].returncode is None
         assert r.cases() == []
-    finally:
-        r.launcher.stop_all(timeout=3.0)
-        r.coupler.close()
 
 
 def test_a_failing_advance_keeps_the_state_until_the_run_stops(run):
