@@ -95,7 +95,7 @@ def participant_config(scene: CoupledScene, name: str) -> dict:
                  for i, load in enumerate(scene.loads, start=1)]
         config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material,
                   "loads": loads, "degree": solver["degree"], "linear_solver": solver["linear_solver"],
-                  "rtol": solver["rtol"], "dynamic": "dynamics" in scene.effects,
+                  "rtol": solver["rtol"], "max_iterations": solver["max_iterations"], "dynamic": "dynamics" in scene.effects,
                   # rho_f of eq. 13 is for a volume-coupled immersed solid; here the fluid loads the rock
                   # through its wetted surface only (the penalized fluid inside it passes its inertia to
                   # the penalty, not to the surface pressure: tests/test_fluid_transient.py, piston), so

@@ -151,7 +151,8 @@ SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI 
                "penalization_exponent": "openfoam: exponent of penalization 'power'",
                "drag": "openfoam: maximum penalization drag [1/s] (default 1e4 x the fastest cell rate)",
                "decomposition": f"openfoam with ranks > 1: decomposePar method, one of {', '.join(DECOMPOSITIONS)}",
-               "max_iterations": "openfoam: simpleFoam iterations per coupling iteration",
+               "max_iterations": "openfoam: simpleFoam iterations per coupling iteration (default 2000); "
+                                 "solid_fenicsx: Krylov iterations per solve (default 1000)",
                "tolerance": "openfoam: simpleFoam (PIMPLE with dynamics) residual tolerance (p and U)",
                "substeps": "openfoam with dynamics: pimpleFoam time steps per coupling step (default 1)",
                "outer_correctors": "openfoam with dynamics: PIMPLE outer iterations per time step at most (default 50)",
@@ -465,6 +466,7 @@ def _solver(path, part, data, participants, default) -> dict:
             raise t.error("degree", f"must be 1 or 2, got {cfg['degree']}")
         cfg["linear_solver"] = t.string("linear_solver", "cg", ("cg", "lu"))
         cfg["rtol"] = t.number("rtol", 1e-10, positive=True)
+        cfg["max_iterations"] = t.integer("max_iterations", 1000)
         if cfg["participant"] == "spring_solid":
             cfg["stiffness"] = t.number("stiffness", positive=True)
     if part == "fluid" and cfg["participant"] == "replay_fluid":

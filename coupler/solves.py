@@ -59,9 +59,12 @@ class StepSolves:
                                          for r in reports if r.accepted and not r.converged]}
 
     def error(self, step: int) -> InnerSolveNotConverged:
-        """The error naming the participant, solver, step, iteration and residual of each failure."""
+        """The error naming the participant, solver, step, iteration and residual of each failure,
+        and where its limits are set (``[contact]`` for contact solvers, else ``[solvers.X]``)."""
         what = "; ".join(f"participant {name!r}: {r.describe()}" for name, r in self.failures)
+        name, report = self.failures[0]
+        table = "[contact]" if report.solver.startswith("contact") else f"[solvers.{name}]"
         return InnerSolveNotConverged(
             f"not converged in time step {step}, coupling iteration {self.final_iteration}: {what}. The step's "
-            f"result is not trustworthy; raise the solver's iteration limit or loosen its tolerance in "
-            f"[solvers.{self.failures[0][0]}], or set allow_unconverged = true there to accept it on purpose")
+            f"result is not trustworthy; raise the solver's iteration limit (max_iterations) or loosen its "
+            f"tolerance in {table}, or set [solvers.{name}] allow_unconverged = true to accept it on purpose")
