@@ -28,10 +28,11 @@ INTERFACES_VAR = "VARCOUPLE_MPI_INTERFACES"
 
 
 def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] | None = None) -> dict[str, str]:
-    """A copy of ``env`` (default ``os.environ``) with the Open MPI settings above added where
-    ``env`` does not set them itself. ``interfaces``: network interfaces for a run over several
-    hosts; None reads the comma-separated ``VARCOUPLE_MPI_INTERFACES`` of ``env``; empty: this
-    host only."""
+    """A copy of ``env`` (default ``os.environ``) with the Open MPI settings above.
+    ``interfaces``: network interfaces for a run over several hosts; None reads the
+    comma-separated ``VARCOUPLE_MPI_INTERFACES`` of ``env``. Named interfaces replace the
+    transport settings ``env`` has; without them (this host only) every setting ``env``
+    already has wins."""
     out = dict(os.environ if env is None else env)
     if interfaces is None:
         interfaces = out.get(INTERFACES_VAR, "").split(",")
@@ -39,13 +40,14 @@ def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] 
     for name in interfaces:
         if any(c.isspace() or c == "," for c in name):
             raise ValueError(f"MPI interface {name!r}: one interface name or CIDR network per entry")
+    defaults = {"pml": "ob1", "ess_singleton_isolated": "1"}
     if interfaces:
         names = ",".join(interfaces)
-        mca = {"btl": "self,vader,tcp", "btl_tcp_if_include": names, "oob_tcp_if_include": names}
+        out.update({"OMPI_MCA_btl": "self,vader,tcp", "OMPI_MCA_btl_tcp_if_include": names,
+                    "OMPI_MCA_oob_tcp_if_include": names})
     else:
-        mca = {"btl": "self,vader", "oob_tcp_if_include": "lo"}
-    mca.update(pml="ob1", ess_singleton_isolated="1")
-    for key, value in mca.items():
+        defaults.update(btl="self,vader", oob_tcp_if_include="lo")
+    for key, value in defaults.items():
         out.setdefault(f"OMPI_MCA_{key}", value)
     # Open MPI refuses to start as root without these (containers, CI).
     out.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")

@@ -179,7 +179,8 @@ def test_mpirun_itself_listens_on_loopback_only(tmp_path):
 
 def test_named_interfaces_for_several_hosts():
     """Several hosts: the interfaces named (argument, else VARCOUPLE_MPI_INTERFACES) carry MPI's
-    TCP traffic and wire-up; settings the environment already has win."""
+    TCP traffic and wire-up, replacing inherited one-host settings; on one host the settings the
+    environment already has win."""
     env = mpi_environment(["eth0", "10.1.0.0/16"], env={})
     assert env["OMPI_MCA_btl"] == "self,vader,tcp"
     assert env["OMPI_MCA_btl_tcp_if_include"] == env["OMPI_MCA_oob_tcp_if_include"] == "eth0,10.1.0.0/16"
@@ -188,5 +189,6 @@ def test_named_interfaces_for_several_hosts():
     assert single["OMPI_MCA_btl"] == "self,vader" and single["OMPI_MCA_oob_tcp_if_include"] == "lo"
     assert "OMPI_MCA_btl_tcp_if_include" not in single
     assert mpi_environment(env={"OMPI_MCA_btl": "self,tcp"})["OMPI_MCA_btl"] == "self,tcp"
+    assert mpi_environment(["eth0"], env=single)["OMPI_MCA_oob_tcp_if_include"] == "eth0"
     with pytest.raises(ValueError):
         mpi_environment(["eth0 eth1"], env={})
