@@ -128,6 +128,7 @@ class FluidParticipant(Participant):
         U, p = self.solver.solve(self.fraction, velocity, t, dt)
         self.solver.prune(set(self.saved.values()))
         log.info("window %d iteration %d: %s", window, iteration, self.solver.last_run)
+        self.report_solve(**self.solver.report())
         return {"pressure": Field("pressure", p * self.spec.rho, "Pa"),
                 "velocity": Field("velocity", U, "m/s")}
 

@@ -186,3 +186,22 @@ def test_a_scene_that_cannot_fit_in_memory_is_refused_before_anything_starts(tmp
                                      (case / "scene.toml").read_text() + "check_memory = false\n")
     assert main(["check", "--quick", str(case)]) == 0
     assert "available" in capsys.readouterr().out
+
+
+@pytest.mark.skipif(not Path("/usr/bin/simpleFoam").exists(), reason="needs Debian's OpenFOAM")
+def test_a_capped_simplefoam_is_not_reported_as_converged(tmp_path, capsys):
+    """small_fracture with [solvers.fluid] max_iterations = 1 gave exit 0, 'completed' and a
+    displacement 2.8x too small; now: exit 3, the solver, step, iteration and residual named."""
+    case = copy_case(SMALL, tmp_path, {"max_iterations = 3000": "max_iterations = 1", "steps = 2": "steps = 1"})
+    out = tmp_path / "out"
+    code, err = run(capsys, case, out)
+    assert code == 3, err
+    line = err.strip().splitlines()[-1]
+    assert "not converged in time step 0, coupling iteration" in line
+    assert "participant 'fluid': simpleFoam did not converge: residual" in line and "after 1 iteration" in line
+    assert "[solvers.fluid]" in line and "allow_unconverged" in line
+    s = summary(out)
+    assert s["status"] == "not_converged" and not s["steps"][0]["converged"]
+    report = s["steps"][0]["solves"]["fluid"][0]
+    assert report["solver"] == "simpleFoam" and not report["converged"] and report["residual"] > 1e-7
+    assert s["steps"][0]["solves"]["solid"][0]["converged"]  # the solid's Krylov solve is reported too
