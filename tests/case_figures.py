@@ -43,7 +43,26 @@ def figures(out: Path) -> dict:
     summary = json.loads((out / "summary.json").read_text())
     if "iterations" in summary:
         found["iterations"] = summary["iterations"]
+    found["summary"] = dict(_numbers(summary))
     return found
+
+
+#: summary keys whose values change from run to run (times, processes, machine) or restate the input
+VOLATILE = ("seconds", "wall", "time", "pid", "run_id", "load_average", "platform", "elapsed", "phases",
+            "participants_announced", "scene", "case", "outputs", "rebuild", "history", "krylov")
+
+
+def _numbers(tree, path=""):
+    """(path, value) of every finite number in a summary, volatile keys left out."""
+    if isinstance(tree, dict):
+        for k, v in tree.items():
+            if not any(word in str(k) for word in VOLATILE):
+                yield from _numbers(v, f"{path}/{k}")
+    elif isinstance(tree, list):
+        for i, v in enumerate(tree):
+            yield from _numbers(v, f"{path}/{i}")
+    elif isinstance(tree, (int, float)) and not isinstance(tree, bool) and np.isfinite(tree):
+        yield path, float(tree)
 
 
 def run_case(name: str, directory: Path) -> Path:
