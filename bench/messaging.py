@@ -31,9 +31,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from coupler.launch import Launcher  # noqa: E402
-from coupler.messaging import CouplerSession, new_run_id  # noqa: E402
-from coupler.protocol import Field  # noqa: E402
+from coupler.run.launch import Launcher  # noqa: E402
+from coupler.run.client import CouplerSession
+from coupler.protocol.transport import new_run_id  # noqa: E402
+from coupler.protocol.wire import Field  # noqa: E402
 
 SIZES = [8_000, 80_000, 800_000, 8_000_000, 80_000_000, 100_000_000]
 GOAL_BYTES = 8_000_000

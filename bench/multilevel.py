@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from nonsmooth.multilevel import asymptotic_rate  # noqa: E402
-from coupler.obstacle_case import build, options, plot_convergence  # noqa: E402
+from coupler.run.studies.obstacle import build, options, plot_convergence  # noqa: E402
 from coupler.scene import load  # noqa: E402
 from nonsmooth.solvers import solve  # noqa: E402
 

@@ -1,17 +1,9 @@
-"""varcouple.coupler: the part that runs a coupled simulation.
+"""varcouple.coupler: everything that reads a scene and runs it.
 
-It reads and validates a case's ``scene.toml``, plans which participants and
-fields a scene needs, launches the participants as their own processes, talks
-to them over zenoh (messaging) and carries fields between their meshes with the
-operators of :mod:`transfer`. It owns all output and the ``varcouple``
-command-line interface (:mod:`coupler.cli`).
-
-For now it holds the CLI, mesh-file input/output and the transfer scene
-(``varcouple transfer``, ``varcouple run`` on a ``[transfer]`` scene); the
-coupled parts (planning, participants, messaging, Steps 1-6) come in later
-issues.
+It reads and validates a case's ``scene.toml`` (:mod:`.scene`), plans which participants
+and fields the scene's effects need (:mod:`.plan`), launches the participants as their own
+processes and talks to them over zenoh (:mod:`.run`, the protocol in :mod:`.protocol`),
+carries fields between their meshes (:mod:`transfer`, :mod:`.fsi`), iterates each time step
+to convergence (:mod:`.coupling`) and owns all output (:mod:`.output`) and the ``varcouple``
+command line (:mod:`.cli`). docs/architecture.md gives the layers and their order.
 """
-
-from .errors import CouplerError, SceneError
-
-__all__ = ["CouplerError", "SceneError"]

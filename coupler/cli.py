@@ -67,9 +67,9 @@ def transfer(args: argparse.Namespace) -> int:
     from transfer import QuadratureError
     from transfer.quadrature import check_degree
 
-    from .errors import CouplerError
-    from .meshfile import MeshFile, check_writable
-    from .projection import project
+    from coupler.errors import CouplerError
+    from transfer.meshfile import MeshFile, check_writable
+    from coupler.run.projection import project
 
     if args.quadrature_degree is not None:
         try:
@@ -116,12 +116,13 @@ def check(args: argparse.Namespace) -> int:
     fields that cross, transfer operators to build; estimate its size and memory, and
     have each participant read its part (meshes, boundaries) without solving anything
     (``--quick``: the scene alone)."""
-    from . import scene as scenes
+    from coupler import scene as scenes
+    from coupler.scene.transfer import TransferScene
 
     scene = scenes.load(args.case)
     study = scenes.study_module(scene)
     print(f"scene         {scene.path}: valid")
-    if isinstance(scene, scenes.TransferScene):
+    if isinstance(scene, TransferScene):
         print(f"transfer      {scene.source.name} -> {scene.target.name}: field {scene.field!r}, "
               f"methods {', '.join(scene.methods)}")
         print("participants  none (a transfer runs in the coupler, no solver is started)")
@@ -129,8 +130,8 @@ def check(args: argparse.Namespace) -> int:
         for line in study.plan_lines(scene):
             print(line)
     else:
-        from .plan import make_plan
-        from .preflight import check_memory, configure_participants, estimate
+        from coupler.plan.plan import make_plan
+        from coupler.run.preflight import check_memory, configure_participants, estimate
 
         plan = make_plan(scene)
         for line in plan.lines():
@@ -159,10 +160,11 @@ def run(args: argparse.Namespace) -> int:
     3 not converged, 4 failed, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
     from transfer import TransferError
 
-    from . import scene as scenes
-    from .errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, SceneError
-    from .messaging import new_run_id
-    from .outdir import OutputLock, prepare
+    from coupler import scene as scenes
+    from coupler.scene.transfer import TransferScene
+    from coupler.errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, SceneError
+    from coupler.protocol.transport import new_run_id
+    from coupler.run.outdir import OutputLock, prepare
 
     start = time.perf_counter()
     scene = scenes.load(args.case, output=args.output)
@@ -179,14 +181,14 @@ def run(args: argparse.Namespace) -> int:
         if lock.note:
             log(f"note: {out}: {lock.note}")
         try:
-            if isinstance(scene, scenes.TransferScene):
-                from .transfer_case import run as run_transfer
+            if isinstance(scene, TransferScene):
+                from coupler.run.studies.transfer import run as run_transfer
 
                 summary = run_transfer(scene, log=log)
             elif study is not None:
                 summary = study.run(scene, log=log)
             else:
-                from .coupled_run import run as run_coupled_case
+                from coupler.run.runner import run as run_coupled_case
 
                 summary = run_coupled_case(scene, log=log, run_id=run_id)
         except (NotConverged, SceneError):  # not converged (3); a scene key found wrong while running (2)
@@ -241,7 +243,7 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _terminate(signum, frame):
-    from .errors import Terminated
+    from coupler.errors import Terminated
 
     raise Terminated(signum)
 
@@ -257,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from transfer import TransferError
 
-    from .errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, Terminated
+    from coupler.errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, Terminated
 
     try:  # SIGTERM (timeout, batch schedulers) ends a run like Ctrl-C: participants stopped, results kept
         previous = signal.signal(signal.SIGTERM, _terminate)

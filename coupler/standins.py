@@ -52,8 +52,8 @@ import time
 
 import numpy as np
 
-from .participant import Participant, main
-from .protocol import Field
+from coupler.protocol.participant import Participant, main
+from coupler.protocol.wire import Field
 
 log = logging.getLogger("varcouple.standins")
 

@@ -1,6 +1,6 @@
 """``python -m fluid_openfoam --run-id R --name NAME --connect ENDPOINT``."""
 
-from coupler.participant import main
+from coupler.protocol.participant import main
 
 from .participant import FluidParticipant
 

@@ -56,9 +56,9 @@ from pathlib import Path
 
 import numpy as np
 
-from coupler.launch import scratch_dir
-from coupler.participant import Participant
-from coupler.protocol import Field
+from coupler.protocol.participant import scratch_dir
+from coupler.protocol.participant import Participant
+from coupler.protocol.wire import Field
 
 from .case import CaseSpec
 from .solver import OpenFOAMSolver

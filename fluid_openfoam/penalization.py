@@ -32,14 +32,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from transfer.grid import wall_distance
+
 MODES = ("linear", "power", "wall")
-
-
-def wall_distance(f_c, f_s, h: float):
-    """Distance from the centre of a fluid-centred cell (fraction ``f_c``) to the wall in the
-    direction of its solid-centred neighbour (``f_s``), spacing ``h``: ``h (3/2 - f_c - f_s)``
-    clipped to ``[h / 50, h]`` (the ``"wall"`` mode above)."""
-    return np.clip(h * (1.5 - f_c - f_s), h / 50.0, h)
 
 
 def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str = "wall",

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from coupler.exits import describe_exit, oom_kills
-from coupler.mpi_env import mpi_environment
+from coupler.protocol.exits import describe_exit, oom_kills
+from coupler.protocol.mpi import mpi_environment
 
 from . import case as _case
 from .fields import read_internal_field

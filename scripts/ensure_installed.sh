@@ -4,11 +4,14 @@
 #   - VARCOUPLE_INSTALL=1, or
 #   - .venv/bin/varcouple is missing, or the last install did not finish, or
 #   - scripts/install.sh (its package list), pyproject.toml, CMakeLists.txt or anything under
-#     transfer/_kernels/ or nonsmooth/_kernels/ changed since.
+#     transfer/_kernels/ or nonsmooth/_kernels/ changed since, or
+#   - a Python module of the packages was added, moved or removed (the editable install maps
+#     every module to its file: a moved one is not found until it is reinstalled).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 STAMP="$ROOT/.venv/.varcouple-installed"
+MODULES="$ROOT/.venv/.varcouple-modules"   # written by install.sh
 
 reason=""
 if [[ "${VARCOUPLE_INSTALL:-0}" == 1 ]]; then
@@ -25,6 +28,9 @@ else
   if ((${#watched[@]})); then
     newer="$(find "${watched[@]}" -newer "$STAMP" -print -quit)"
     [[ -z "$newer" ]] || reason="${newer#"$ROOT"/} changed since the last install"
+  fi
+  if [[ -z "$reason" ]] && ! (cd "$ROOT" && bash scripts/install.sh --list-modules | cmp -s - "$MODULES"); then
+    reason="Python modules were added, moved or removed since the last install"
   fi
 fi
 

@@ -12,8 +12,10 @@
 # is built against Debian's numpy 1.24. pip is held to the installed versions by a
 # constraints file computed here from the system interpreter, and the result is checked.
 #
-# Usage: bash scripts/install.sh [--system-only]
+# Usage: bash scripts/install.sh [--system-only | --list-modules]
 #   --system-only   only the apt step (used by docker/Dockerfile to cache that layer)
+#   --list-modules  print the packages' Python modules (the editable install maps each one;
+#                   ensure_installed.sh reinstalls when the list changes)
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -37,9 +39,15 @@ DEBIAN_PY_DISTS=(numpy scipy meshio matplotlib h5py mpi4py petsc4py slepc4py
 log() { printf '[install] %s\n' "$*"; }
 die() { printf '[install] ERROR: %s\n' "$*" >&2; exit 1; }
 
+list_modules() {
+  (cd "$ROOT" && find transfer coupler solid_fenicsx fluid_openfoam nonsmooth -name '*.py' \
+     -not -path '*/__pycache__/*' | LC_ALL=C sort)
+}
+
 system_only=0
 for arg in "$@"; do
   case "$arg" in
+    --list-modules) list_modules; exit 0 ;;
     --system-only) system_only=1 ;;
     -h|--help) sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown argument: $arg (see --help)" ;;
@@ -168,5 +176,6 @@ else
   cli="not ready"
 fi
 
+list_modules >"$VENV/.varcouple-modules"
 touch "$STAMP"
 log "done in $((SECONDS - t_start))s: python $py_ver, numpy $np_ver, dolfinx $dolfinx_ver; varcouple --help: $cli"

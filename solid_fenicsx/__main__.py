@@ -1,6 +1,6 @@
 """``python -m solid_fenicsx --run-id R --name NAME --connect ENDPOINT``: the solid participant."""
 
-from coupler.participant import main
+from coupler.protocol.participant import main
 
 from .participant import SolidParticipant
 

@@ -28,9 +28,9 @@ import re
 import numpy as np
 from mpi4py import MPI
 
-from coupler.participant import Participant
-from coupler.protocol import Field
-from coupler.scene import evaluate_expression
+from coupler.protocol.participant import Participant
+from coupler.protocol.wire import Field
+from coupler.protocol.expressions import evaluate_expression
 
 from .elasticity import Elasticity
 from .mesh import BOX_FACES, SolidMeshError, exterior_midpoints, from_arrays, read_mesh

@@ -14,7 +14,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from vc_helpers import ROOT
+
 SOURCES = ("transfer", "coupler", "solid_fenicsx", "fluid_openfoam", "nonsmooth", "bench", "tests", "cases")
 
 #: imported only when present, and why that is fine

@@ -11,6 +11,10 @@ import numpy as np
 
 from transfer import Mesh
 
+#: the repository, its cases and benchmarks
+ROOT = Path(__file__).resolve().parent.parent
+CASES = ROOT / "cases"
+
 #: shift of the partially overlapping target box (tests/conftest.py: shifted_tets)
 SHIFT = np.array([0.37, 0.21, -0.13])
 
@@ -18,7 +22,7 @@ SHIFT = np.array([0.37, 0.21, -0.13])
 # -- benchmarks ---------------------------------------------------------------
 def load_bench(name: str):
     """The module bench/NAME.py (benchmarks are scripts, not a package), for smoke runs of --quick."""
-    path = Path(__file__).resolve().parent.parent / "bench" / f"{name}.py"
+    path = ROOT / "bench" / f"{name}.py"
     spec = importlib.util.spec_from_file_location(f"bench_{name}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

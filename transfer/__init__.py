@@ -10,12 +10,12 @@ integrated over exact element intersections) and ``D`` the target mass matrix
 >>> v = T(u)
 """
 
-from .errors import (FieldError, MeshError, NoOverlapError, OverlapWarning, QuadratureError, SpaceError,
-                     TransferError)
+from .errors import (FieldError, MeshError, MeshFileError, NoOverlapError, OverlapWarning, QuadratureError,
+                     SpaceError, TransferError)
 from .grid import StructuredGrid
 from .mesh import Mesh
 from .operators import Coupling, Transfer, coupling_operator
 from .spaces import FunctionSpace
 
-__all__ = ["Coupling", "FieldError", "FunctionSpace", "Mesh", "MeshError", "NoOverlapError", "OverlapWarning",
-           "QuadratureError", "SpaceError", "StructuredGrid", "Transfer", "TransferError", "coupling_operator"]
+__all__ = ["Coupling", "FieldError", "FunctionSpace", "Mesh", "MeshError", "MeshFileError", "NoOverlapError",
+           "OverlapWarning", "QuadratureError", "SpaceError", "StructuredGrid", "Transfer", "TransferError", "coupling_operator"]

@@ -29,6 +29,11 @@ class FieldError(TransferError, ValueError):
     """A field has the wrong shape or contains NaN/inf."""
 
 
+class MeshFileError(TransferError):
+    """A mesh file cannot be read or written as asked (missing, unreadable, no such field,
+    a format that would drop the fields, an output that would overwrite an input)."""
+
+
 class OverlapWarning(UserWarning):
     """Source and target look like different length units or places (sizes far apart, or
     boxes that barely overlap): the transfer runs, but its result is probably not meant."""

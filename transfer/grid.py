@@ -93,3 +93,12 @@ class StructuredGrid:
     def __repr__(self):
         return (f"StructuredGrid(origin={self.origin.tolist()}, spacing={self.spacing.tolist()}, "
                 f"shape={list(self.shape)})")
+
+
+def wall_distance(f_c, f_s, h: float):
+    """Distance from the centre of a fluid-centred cell (fraction ``f_c``) to the wall in the
+    direction of its solid-centred neighbour (``f_s``), spacing ``h``: ``h (3/2 - f_c - f_s)``
+    clipped to ``[h / 50, h]``: the wall a sharp interface would have where the two cells'
+    solid volume fractions (exact L2 projections of the solid's indicator) add up to
+    ``3/2 - d/h`` (used by the fluid's ``"wall"`` penalization and the viscous traction)."""
+    return np.clip(h * (1.5 - f_c - f_s), h / 50.0, h)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import meshio
 
-from coupler.scene import evaluate_expression
+from coupler.protocol.expressions import evaluate_expression
 from transfer.generate import box_tetrahedra
 
 HERE = Path(__file__).resolve().parent

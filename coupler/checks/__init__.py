@@ -1,0 +1,1 @@
+"""Comparisons of a run's result with known solutions (the scene's ``[check]``)."""

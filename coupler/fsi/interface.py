@@ -1,0 +1,235 @@
+"""The fluid-solid interface of a coupled run (paper 2.3, Steps 2, 3 and 6): the
+solid as the fluid grid sees it (volume fractions, velocity transfer) and where the
+fluid pressure loads the solid (the wetted surface, sampled on the fluid side, or
+the volume fallback for solids without boundary triangles), rebuilt from the
+deformed solid in every coupling iteration (two-way coupling)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from transfer import FunctionSpace, Mesh, NoOverlapError, StructuredGrid, Transfer
+
+from coupler.errors import CouplerError
+
+
+class WettedInterface:
+    """Steps 2-3 on the wetted boundary: the trace of the fluid's Q0 pressure on the solid's
+    interface triangles, sampled on the fluid side.
+
+    The interface vertices are moved along their outward normals (area-weighted means of
+    the normals of the interface triangles around them) by half a fluid cell diagonal, so
+    the surface lies in fluid cells and not in the penalized cells inside the solid; the
+    volume -> surface transfer (pseudo-L2, :mod:`transfer.operators`) gives the pressure
+    at its vertices. The interface vector of the fixed point is that pressure (one value
+    per interface vertex); the solid gets it at those vertices and zero elsewhere.
+    """
+
+    method = "surface trace"
+
+    def __init__(self, S, triangles: np.ndarray, G: StructuredGrid, where: str = "[geometry.fluid]",
+                 points=None, depth: float = 1.0, partial: bool = False):
+        triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        self.num_points = S.num_points
+        self.vertices, local = np.unique(triangles, return_inverse=True)
+        self.triangles = local.reshape(-1, 3)
+        # the solid's points (the deformed ones, points + displacement, when given)
+        points = np.asarray(S.points if points is None else points)[self.vertices]
+        a, b, c = (points[self.triangles[:, i]] for i in range(3))
+        area_normals = 0.5 * np.cross(b - a, c - a)  # outward (boundary_triangles orientation), |.| = area
+        normals = np.zeros_like(points)
+        for i in range(3):
+            np.add.at(normals, self.triangles[:, i], area_normals)
+        length = np.linalg.norm(normals, axis=1)
+        if np.any(length <= 0):
+            raise CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel "
+                               f"(a folded surface)")
+        self.normals = normals / length[:, None]
+        self.points = points  # the wall: the interface vertices where the solid is now
+        # half the cell's extent along the normal, scaled so that it is half the cell diagonal on
+        # a cubic grid: 0.5 sqrt(3) |(n_i h_i)|; on anisotropic grids (thin cells across a fracture)
+        # a vertical normal moves by 0.87 h_z, not by half the long diagonal
+        h = np.asarray(G.spacing, float)
+        # (times `depth`: deeper surfaces sample the near-wall velocity profile, coupler/viscous.py)
+        self.offsets = depth * 0.5 * np.sqrt(3.0) * np.linalg.norm(self.normals * h[None, :], axis=1)
+        self.offset = float(self.offsets.max())
+        moved = points + self.offsets[:, None] * self.normals
+        # a vertex on a face of the grid's box (e.g. a fracture face meeting the inlet) stays on it
+        # (a rough face's normal would tilt it out by a few micrometres): clamp the coordinates
+        # that lie on the box's faces; any other vertex moved outside is an error below
+        lo, hi = np.asarray(G.origin, float), np.asarray(G.origin, float) + h * np.asarray(G.shape)
+        tol = 1e-9 * h
+        ref = np.asarray(S.points)[self.vertices]  # undeformed: a face vertex stays on the face when it moves
+        on_face = (np.abs(ref - lo) <= tol) | (np.abs(ref - hi) <= tol)
+        # ... and so does an inside vertex moved out along an axis its normal is nearly tangent to
+        on_face |= (points >= lo - tol) & (points <= hi + tol) & (np.abs(self.normals) < 0.5)
+        moved = np.where(on_face, np.clip(moved, lo, hi), moved)
+        self.surface = Mesh(moved, self.triangles, "triangle", name="interface")
+        uncovered, first = len(self.vertices), ""
+        try:
+            self.transfer = Transfer.assemble(FunctionSpace(G, "Q0"), FunctionSpace(self.surface, "P1"),
+                                              "pseudo_l2")
+            uncovered = self.transfer.uncovered.size
+            if uncovered:
+                first = f"; first at {np.array2string(moved[self.transfer.uncovered[0]], precision=6)}"
+        except NoOverlapError:
+            pass
+        # partial (the deeper velocity samples of coupler/viscous.py): vertices outside the grid read NaN
+        if uncovered == len(self.vertices) or (uncovered and not partial):
+            raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled "
+                               f"up to {self.offset:.3g} m outside the solid ({uncovered} of {len(self.vertices)} "
+                               f"vertices outside the grid{first}): extend the grid beyond the wetted boundary")
+        self.weights = np.asarray(self.transfer.D.sum(axis=1)).ravel()  # lumped surface mass
+        self.area = float(self.surface.cell_measures().sum())
+
+    @property
+    def size(self) -> int:
+        return len(self.vertices)
+
+    num_vertices = size
+
+    @property
+    def num_triangles(self) -> int:
+        return len(self.triangles)
+
+    def from_fluid(self, pressure) -> np.ndarray:
+        """The fluid's cell pressure at the interface vertices."""
+        return self.transfer.apply(pressure)
+
+    def to_solid_vertices(self, x) -> np.ndarray:
+        """The interface pressure (nv,) or traction (nv, 3) at all solid vertices (zero off the interface)."""
+        x = np.asarray(x)
+        full = np.zeros((self.num_points,) + x.shape[1:])
+        full[self.vertices] = x
+        return full
+
+    def describe(self) -> dict:
+        return {"method": self.method, "vertices": int(self.size), "triangles": int(self.num_triangles),
+                "offset": self.offset, "sampled_area": self.area,
+                "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+
+
+class VolumeInterface:
+    """The fallback of Steps 2-3 when the solid gives no interface triangles (stand-in solids
+    such as ``spring_solid``): the volume projection Q0 (grid) -> P1 of the pressure onto
+    every solid vertex, sampled inside the solid (where a penalized fluid sees no wall)."""
+
+    method = "volume projection"
+
+    def __init__(self, S, G: StructuredGrid, where: str = "[geometry.fluid]"):
+        self.transfer = Transfer.assemble(FunctionSpace(G, "Q0"), FunctionSpace(S, "P1"), "pseudo_l2")
+        if not np.all(self.transfer.covered):
+            raise CouplerError(f"{where}: the fluid grid does not cover the solid "
+                               f"({self.transfer.uncovered.size} solid vertices outside it)")
+        self.weights = np.asarray(self.transfer.D.diagonal())  # lumped solid mass
+        self.size = S.num_points
+
+    def from_fluid(self, pressure) -> np.ndarray:
+        return self.transfer.apply(pressure)
+
+    def to_solid_vertices(self, x) -> np.ndarray:
+        return np.asarray(x)
+
+    def describe(self) -> dict:
+        return {"method": self.method, "vertices": int(self.size),
+                "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+
+
+#: depths of the velocity samples beyond the pressure's surface (traction 'full'), in units of its
+#: offset: 1.2 offsets = 1.04 cells apart along a grid axis, so consecutive samples lie in different cells
+DEPTHS = (2.2, 3.4)
+
+
+class SolidOnGrid:
+    """The solid as the fluid sees it, from the solid's current shape (two-way coupling).
+
+    ``fraction``: the solid volume fraction per grid cell (the Q0 projection of the solid's
+    indicator: exact intersection volumes / cell volume); ``to_fluid``: the P1 -> Q0 transfer
+    of the solid velocity; ``interface``: the wetted surface (:class:`WettedInterface`) or the
+    fallback (:class:`VolumeInterface`). :meth:`update` rebuilds all three from the deformed
+    solid (points + displacement), so the flow sees the aperture the pressure made; it keeps
+    the current operators when the displacement is zero (below 1e-12 of the grid spacing) or
+    unchanged since the last build, and always with ``deform=False`` or the volume fallback.
+    The interface vector keeps its size and vertex order (one value per interface vertex),
+    so accelerators see the same unknowns; the residual norm uses the undeformed weights.
+    With ``traction="full"`` (the viscous stress too, :mod:`coupler.viscous`) the surfaces
+    ``deeper`` sample the fluid further from the wall (``DEPTHS`` times the pressure's offset).
+    """
+
+    def __init__(self, S, G: StructuredGrid, triangles, where: str, deform: bool = True,
+                 traction: str = "pressure"):
+        self.S, self.G, self.where = S, G, where
+        self.triangles = None if triangles is None or not len(triangles) else np.asarray(triangles)
+        if traction == "full" and self.triangles is None:
+            raise CouplerError(f"{where}: [coupling] traction = 'full' needs the solid's wetted boundary "
+                               f"triangles (the viscous stress acts on a surface); this solid gives none")
+        self.traction = traction
+        self.deeper = []
+        self.deform = bool(deform) and self.triangles is not None
+        self.threshold = 1e-12 * float(np.min(G.spacing))
+        self.builds, self.build_seconds, self.skipped = 0, 0.0, 0
+        self.max_displacement = 0.0
+        self._u = None
+        self._build(None)
+        self.reference_weights = self.interface.weights
+        self.builds, self.build_seconds = 0, 0.0  # count the rebuilds only, not the initial build
+
+    def _build(self, u) -> None:
+        start = time.perf_counter()
+        S = self.S
+        if u is not None:
+            try:
+                S = Mesh(np.asarray(self.S.points) + u, self.S.cells, "tetra", name="deformed solid")
+            except Exception as exc:  # an inverted tetrahedron: the coupling iteration ran away
+                raise CouplerError(f"the deformed solid is not a valid mesh (largest displacement "
+                                   f"{float(np.max(np.linalg.norm(u, axis=1))):.3g} m): {exc}; the coupling "
+                                   f"iteration diverges: use [coupling] acceleration = 'iqn-ils' or 'aitken', "
+                                   f"or a smaller relaxation") from exc
+        to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(self.G, "Q0"), "pseudo_l2")
+        volumes = np.asarray(to_fluid.D.diagonal())
+        self.outside = max(1.0 - float(volumes.sum()) / float(S.cell_measures().sum()), 0.0)
+        if self.triangles is not None:
+            interface = WettedInterface(self.S, self.triangles, self.G, self.where,
+                                        points=None if u is None else S.points)
+            if self.traction == "full":
+                self.deeper = [self._deeper(depth, None if u is None else S.points) for depth in DEPTHS]
+        else:
+            if self.outside > 1e-9:
+                raise CouplerError(f"{self.where}: the fluid grid does not cover the solid "
+                                   f"({self.outside:.3g} of the solid's volume lies outside it)")
+            interface = VolumeInterface(S, self.G, self.where)
+        self.to_fluid, self.fraction, self.interface = to_fluid, volumes / self.G.cell_measures(), interface
+        self.builds += 1
+        self.build_seconds += time.perf_counter() - start
+
+    def _deeper(self, depth: float, points):
+        """A deeper sampling surface, or None where it leaves the grid entirely (a thin channel)."""
+        try:
+            return WettedInterface(self.S, self.triangles, self.G, self.where, points=points, depth=depth,
+                                   partial=True)
+        except CouplerError:
+            return None
+
+    def update(self, u) -> bool:
+        """Rebuild from the displacement u (num_points, 3) if it changed; True if rebuilt."""
+        if not self.deform or u is None:
+            return False
+        u = np.asarray(u, float).reshape(len(self.S.points), -1)
+        size = float(np.max(np.abs(u))) if u.size else 0.0
+        self.max_displacement = max(self.max_displacement, size)
+        if size <= self.threshold:
+            u = None
+        if (u is None and self._u is None) or (u is not None and self._u is not None and np.array_equal(u, self._u)):
+            self.skipped += 1
+            return False
+        self._build(u)
+        self._u = None if u is None else u.copy()
+        return True
+
+    def describe(self) -> dict:
+        return {"deformed": self.deform, "rebuilds": self.builds, "rebuild_seconds": self.build_seconds,
+                "seconds_per_rebuild": self.build_seconds / self.builds if self.builds else None,
+                "skipped": self.skipped, "solid_volume_outside_grid": self.outside,
+                "fluid_cells_with_solid": int(np.count_nonzero(self.fraction > 0))}

@@ -1,0 +1,1 @@
+"""What runs leave for people and scripts: VTU/PVD series, summary.json, plots, the progress line."""

@@ -1,0 +1,54 @@
+"""Errors of the participant protocol (docs/protocol.md): malformed or mismatched messages,
+fields that cannot travel, and participants that fail, die or do not answer. Each is a
+:class:`coupler.errors.CouplerError`: the CLI prints it as one line."""
+
+from coupler.errors import CouplerError
+
+
+class ProtocolError(CouplerError):
+    """A message breaks the participant protocol: malformed payload, or a reply that does
+    not answer the request (stale or mismatched run id, participant, verb, window,
+    iteration). Such data is rejected, never used."""
+
+
+class FieldError(ProtocolError, ValueError):
+    """A field cannot travel: NaN/inf values, an unsupported dtype, a bad name.
+
+    ``field`` is the field's name."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        super().__init__(f"field {field!r}: {message}")
+
+
+class ParticipantFailure(CouplerError):
+    """Base class of the errors that name the participant that failed (``name``)."""
+
+    def __init__(self, name: str, message: str):
+        self.name = name
+        super().__init__(message)
+
+
+class ParticipantError(ParticipantFailure):
+    """The participant answered with an error (its handler raised): ``message`` is its text."""
+
+    def __init__(self, name: str, message: str):
+        self.message = message
+        super().__init__(name, f"participant {name!r} failed: {message}")
+
+
+class ParticipantDied(ParticipantFailure):
+    """The participant's process is gone (liveliness token lost, process exited)."""
+
+    def __init__(self, name: str, reason: str):
+        self.reason = reason
+        super().__init__(name, f"participant {name!r} died: {reason}")
+
+
+class ParticipantTimeout(ParticipantFailure):
+    """The participant is alive but did not answer ``verb`` within ``seconds``."""
+
+    def __init__(self, name: str, verb: str, seconds: float):
+        self.verb = verb
+        self.seconds = seconds
+        super().__init__(name, f"participant {name!r} did not answer {verb!r} within {seconds:g} s")

@@ -1,0 +1,305 @@
+"""The participant side of the protocol (docs/protocol.md): the interface every solver
+implements, and :func:`main`, the entry point of every participant process.
+
+A participant module ends with::
+
+    from coupler.protocol.participant import Participant, main
+
+    class MySolver(Participant):
+        ...
+
+    if __name__ == "__main__":
+        main(MySolver)
+
+and the coupler starts it as ``[mpirun -n N] python -m my_module --run-id R --name NAME
+--connect tcp/127.0.0.1:PORT`` (see :class:`coupler.launch.Launcher`).
+
+MPI: when the process is one of several MPI ranks, rank 0 alone talks zenoh; every verb
+it receives is broadcast to the other ranks, which call the same method of their own
+participant object with the same arguments (so collective solver code runs on all
+ranks). The reply is rank 0's return value. A non-root rank whose method raises aborts
+the MPI job (the coupler then sees the participant die, with the log).
+"""
+
+from __future__ import annotations
+
+import abc
+import argparse
+import logging
+import os
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable, Mapping
+
+from coupler.errors import CouplerError
+from coupler.protocol.wire import Field, SolveReport
+
+log = logging.getLogger("varcouple.participant")
+
+
+def scratch_dir(run_id: str, name: str) -> Path:
+    """A new temporary directory (under ``TMPDIR``) for participant ``name`` of run ``run_id``,
+    named ``varcouple-<run_id>-<name>-XXXXXXXX`` so that :meth:`Launcher.stop_all` can remove
+    it when the participant could not (SIGKILL)."""
+    return Path(tempfile.mkdtemp(prefix=f"varcouple-{run_id}-{name}-"))
+
+
+class Participant(abc.ABC):
+    """What a participant does for each verb of the protocol (docs/protocol.md).
+
+    Before the first verb, :func:`main` sets ``run_id``, ``name``, ``comm`` (an
+    ``mpi4py`` communicator, or ``None`` for a single process), ``rank``, ``size`` and
+    ``extra_args`` (command-line arguments :func:`main` did not know). An exception
+    raised by a method is sent to the coupler as an error reply
+    (``ParticipantError(name, "<Type>: <message>")``); the participant keeps serving.
+
+    During ``advance`` a participant reports every inner solve with :meth:`report_solve`
+    (converged or not, iterations, final residual against its tolerance) and may add
+    scalar figures of the step with :meth:`report_figures`; both travel in the reply's
+    header (``solves``, ``figures``) and end up in summary.json. A solve that did not
+    converge is reported, not raised: the coupler decides what the run may claim.
+    """
+
+    run_id: str = ""
+    name: str = ""
+    comm = None
+    rank: int = 0
+    size: int = 1
+    extra_args: list[str] = []
+
+    def report_solve(self, solver: str, converged: bool, iterations: int, residual: float, tolerance: float,
+                     detail: str = "", accepted: bool = False) -> SolveReport:
+        """Record how an inner solve of the current ``advance`` ended (see :class:`SolveReport`)."""
+        report = SolveReport(solver, bool(converged), int(iterations), float(residual), float(tolerance), detail,
+                             bool(accepted))
+        self.__dict__.setdefault("_solves", []).append(report)
+        return report
+
+    def report_figures(self, **figures: float) -> None:
+        """Record scalar figures of the current ``advance`` (e.g. contact area fraction)."""
+        self.__dict__.setdefault("_figures", {}).update({k: float(v) for k, v in figures.items()})
+
+    def take_reports(self) -> tuple[list[SolveReport], dict[str, float]]:
+        """The solves and figures reported since the last call (the server sends them with the reply)."""
+        solves, figures = self.__dict__.pop("_solves", []), self.__dict__.pop("_figures", {})
+        return solves, figures
+
+    def bind(self, run_id: str, name: str, comm=None, extra_args=()) -> None:
+        """Called by :func:`main` before serving."""
+        self.run_id, self.name, self.comm = run_id, name, comm
+        self.rank = comm.Get_rank() if comm is not None else 0
+        self.size = comm.Get_size() if comm is not None else 1
+        self.extra_args = list(extra_args)
+
+    @abc.abstractmethod
+    def announce(self) -> dict:
+        """Verb ``announce``: describe this participant.
+
+        Return ``{"kind": str, "provides": [field names], "accepts": [field names]}``
+        and anything else useful; ``name``, ``pid`` and ``ranks`` are filled in."""
+
+    @abc.abstractmethod
+    def configure(self, config: dict) -> None:
+        """Verb ``configure``: this participant's part of the scene (a JSON object)."""
+
+    @abc.abstractmethod
+    def geometry(self) -> tuple[dict, Mapping[str, Field] | None]:
+        """Verb ``geometry``: the mesh or grid the participant's fields live on.
+
+        Either ``({"cell_type": ..., "boundaries": {...}}, {"points": (n,3), "cells": (m,k)})``
+        or ``({"grid": {"origin": [...], "spacing": [...], "shape": [...]}}, None)``."""
+
+    @abc.abstractmethod
+    def advance(self, window: int, iteration: int, t: float, dt: float,
+                inputs: Mapping[str, Field]) -> Mapping[str, Field]:
+        """Verb ``advance``: solve time window ``window`` (from ``t`` to ``t + dt``),
+        fixed-point iteration ``iteration``, with the coupler's ``inputs``; return the
+        output fields (a mapping of name to :class:`Field` or array).
+
+        Input arrays are read-only views of the received message: copy to keep them.
+        The state the participant advances from is its current state: the coupler calls
+        :meth:`restore_state` before repeating a window."""
+
+    def save_state(self, window: int) -> None:
+        """Verb ``save_state``: checkpoint the state at the start of ``window``
+        (implicit coupling). Repeating a window after :meth:`restore_state` must give
+        identical outputs."""
+        raise NotImplementedError(f"{type(self).__name__} does not support checkpoints (save_state)")
+
+    def restore_state(self, window: int) -> None:
+        """Verb ``restore_state``: go back to the state saved for ``window``."""
+        raise NotImplementedError(f"{type(self).__name__} does not support checkpoints (restore_state)")
+
+    def finish(self) -> None:
+        """Verb ``finish``: release resources; the process exits after the reply."""
+
+
+# ------------------------------------------------------------------------------ MPI
+
+_VERB_METHODS = ("announce", "configure", "geometry", "advance", "save_state", "restore_state", "finish")
+
+
+def _mpi_world_size() -> int:
+    for var in ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_SIZE", "MPI_LOCALNRANKS"):
+        if os.environ.get(var, "").isdigit():
+            return int(os.environ[var])
+    return 1
+
+
+class _MpiRoot:
+    """Rank 0's handler: broadcasts each call to the other ranks, then runs it."""
+
+    def __init__(self, handler: Participant, comm):
+        self.handler, self.comm = handler, comm
+
+    def take_reports(self):  # rank 0's own reports: nothing to broadcast
+        return self.handler.take_reports()
+
+    def __getattr__(self, verb):
+        if verb not in _VERB_METHODS:
+            raise AttributeError(verb)
+        method = getattr(self.handler, verb)
+
+        def call(*args):
+            if verb == "advance":  # views of the zenoh payload: pickle plain arrays
+                args = (*args[:4], {k: Field(f.name, f.data, f.units) for k, f in args[4].items()})
+            self.comm.bcast((verb, args), root=0)
+            return method(*args)
+
+        return call
+
+    def stop(self):
+        self.comm.bcast(("__stop__", ()), root=0)
+
+
+def _mpi_worker(handler: Participant, comm) -> None:
+    while True:
+        verb, args = comm.bcast(None, root=0)
+        if verb == "__stop__":
+            return
+        try:
+            getattr(handler, verb)(*args)
+            handler.take_reports()  # rank 0 reports for all ranks
+        except Exception:  # noqa: BLE001
+            log.exception("rank %d: %s failed; aborting the MPI job", comm.Get_rank(), verb)
+            comm.Abort(1)
+        if verb == "finish":
+            return
+
+
+# ------------------------------------------------------------------------------ main
+
+class _Terminated(BaseException):
+    def __init__(self, signum):
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+def _on_signal(signum, frame):
+    raise _Terminated(signum)
+
+
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=prog, description="A varcouple participant process (docs/protocol.md).")
+    p.add_argument("--run-id", required=True, help="run id of the coupled run (key prefix varcouple/<run-id>/)")
+    p.add_argument("--name", required=True, help="this participant's name in the run")
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                   help="zenoh endpoint to listen on (repeatable; rarely needed)")
+    p.add_argument("--mode", default="peer", choices=["peer", "client"], help="zenoh mode (default: peer)")
+    p.add_argument("--no-shm", action="store_true", help="disable zenoh's shared-memory transport")
+    p.add_argument("--connect-timeout", type=float, default=10.0, help="seconds to reach the coupler (default 10)")
+    p.add_argument("--log-file", help="also write this process's log to this file")
+    p.add_argument("--log-level", default=os.environ.get("VARCOUPLE_LOG_LEVEL", "INFO"))
+    return p
+
+
+def _setup_logging(args, rank: int) -> None:
+    fmt = f"%(asctime)s {args.name}[{rank}] %(levelname)s %(name)s: %(message)s"
+    handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
+    if args.log_file:
+        handlers.append(logging.FileHandler(args.log_file))
+    logging.basicConfig(level=args.log_level.upper(), format=fmt, handlers=handlers, force=True)
+
+
+def run(participant_factory: Callable[[], Participant], argv=None, prog: str | None = None) -> int:
+    """Parse ``argv``, serve the participant made by ``participant_factory()``, return the
+    exit code: 0 after ``finish``, 1 on an error, 128 + signal number on SIGTERM/SIGINT."""
+    args, extra = build_parser(prog).parse_known_args(argv)
+    from coupler.protocol.server import CouplerGone, ParticipantServer
+    from coupler.protocol.transport import check_name, open_session
+
+    size = _mpi_world_size()
+    comm = None
+    if size > 1:
+        from mpi4py import MPI
+
+        comm = MPI.COMM_WORLD
+    rank = comm.Get_rank() if comm is not None else 0
+    _setup_logging(args, rank)
+    who = f"participant {args.name!r}"
+    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+    session = server = None
+    handler = None
+    try:
+        check_name("run id", args.run_id)
+        check_name("participant name", args.name)
+        if not args.connect and not args.listen:
+            raise CouplerError("give at least one --connect ENDPOINT (where the coupler listens)")
+        handler = participant_factory()
+        handler.bind(args.run_id, args.name, comm, extra)
+        if rank != 0:
+            _mpi_worker(handler, comm)
+            return 0
+        t0 = time.perf_counter()
+        session = open_session(args.mode, args.connect, args.listen, not args.no_shm,
+                               connect_timeout=args.connect_timeout)
+        log.info("%s: zenoh session open (%s) in %.2f s, pid %d, %d rank(s)",
+                 who, ", ".join(args.connect + args.listen), time.perf_counter() - t0, os.getpid(), size)
+        server = ParticipantServer(session, args.run_id, args.name,
+                                   _MpiRoot(handler, comm) if comm is not None else handler,
+                                   extra_announce={"ranks": size}, shared_memory=not args.no_shm)
+        server.serve_forever()
+        log.info("%s: finished", who)
+        return 0
+    except _Terminated as exc:
+        log.warning("%s: %s received, exiting", who, exc)
+        return 128 + exc.signum
+    except CouplerGone as exc:
+        print(f"varcouple: {who}: error: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # noqa: BLE001 - one clear line, the traceback in the log
+        log.debug("traceback", exc_info=True)
+        print(f"varcouple: {who}: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        for s in old:  # a second signal must not interrupt the cleanup
+            signal.signal(s, signal.SIG_IGN)
+        if comm is not None and rank == 0 and handler is not None and not (server and server.finished):
+            try:  # release the other ranks waiting for the next verb
+                _MpiRoot(handler, comm).stop()
+            except Exception:  # noqa: BLE001
+                pass
+        if server is not None:
+            server.close()
+        if session is not None:
+            try:
+                session.close()
+            except Exception:  # noqa: BLE001
+                pass
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def main(participant_factory: Callable[[], Participant], argv=None, prog: str | None = None):
+    """Entry point of a participant process: :func:`run`, then exit with its code
+    (never returns)."""
+    code = run(participant_factory, argv, prog)
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    raise SystemExit(code)

@@ -1,0 +1,172 @@
+"""The participant's side of the protocol (docs/protocol.md): :class:`ParticipantServer`
+serves one participant's verbs: one queryable per verb, a liveliness token, and a loop that
+runs the handler's methods in the calling (main) thread and answers each query, errors
+included."""
+
+from __future__ import annotations
+
+import logging
+import os
+import queue
+import time
+from typing import Mapping
+
+import zenoh
+
+from .errors import ProtocolError
+from .transport import (COUPLER, SHM_THRESHOLD, VERBS, alive_key, callback, check_name, is_shm, key,
+                        payload_bytes, warm_up_shm, zbytes)
+from .wire import Field, as_fields, decode, encode, json_number
+
+log = logging.getLogger("varcouple.server")
+
+class _Stop:
+    def __init__(self, reason: str):
+        self.reason = reason
+
+
+class CouplerGone(ConnectionError):
+    """The coupler's liveliness token disappeared: the participant should exit."""
+
+
+class ParticipantServer:
+    """Serve one participant's verbs (docs/protocol.md) from a ``handler`` object.
+
+    ``handler`` has the methods of :class:`coupler.participant.Participant`. Queries are
+    received by zenoh threads and queued; :meth:`serve_forever` (call it from the main
+    thread) runs the handler for each in turn and replies. A handler exception is logged
+    and answered as ``{"error": "<Type>: <message>"}``, the server keeps serving.
+
+    ``watch_coupler``: also watch the coupler's liveliness token; once seen, its loss
+    ends :meth:`serve_forever` with :class:`CouplerGone` (the participant does not
+    outlive a coupler that crashed).
+    """
+
+    def __init__(self, session: zenoh.Session, run_id: str, name: str, handler, *,
+                 watch_coupler: bool = True, extra_announce: Mapping | None = None,
+                 shared_memory: bool = True):
+        self.session = session
+        self.run_id = check_name("run id", run_id)
+        self.name = check_name("participant name", name)
+        self.handler = handler
+        self.extra_announce = dict(extra_announce or {})
+        self.shared_memory = shared_memory
+        self.finished = False
+        self._queue: queue.Queue = queue.Queue()
+        self._coupler_seen = False
+        self._closed = False
+        self._queryables = [
+            session.declare_queryable(key(run_id, name, verb), callback(self._queue.put), complete=True)
+            for verb in VERBS
+        ]
+        self._coupler_sub = None
+        if watch_coupler:
+            self._coupler_sub = session.liveliness().declare_subscriber(
+                alive_key(run_id, COUPLER), callback(self._on_coupler), history=True)
+        if shared_memory:
+            warm_up_shm()  # the first large reply must not pay for the pool
+        # The token comes last: a client that sees it finds every queryable declared.
+        self._token = session.liveliness().declare_token(alive_key(run_id, name))
+        log.info("%s: serving %s", name, key(run_id, name, "*"))
+
+    def _on_coupler(self, sample):
+        if sample.kind == zenoh.SampleKind.PUT:
+            self._coupler_seen = True
+        elif self._coupler_seen:
+            self._queue.put(_Stop("the coupler's liveliness token disappeared (coupler stopped or crashed)"))
+
+    def serve_forever(self, poll: float = 0.2) -> None:
+        """Answer queries until ``finish`` has been answered (then return).
+
+        Raises :class:`CouplerGone` if the coupler disappears. Signals (SIGTERM, SIGINT)
+        are handled between queries and at least every ``poll`` seconds."""
+        while not self.finished:
+            try:
+                item = self._queue.get(timeout=poll)
+            except queue.Empty:
+                continue
+            if isinstance(item, _Stop):
+                raise CouplerGone(f"{self.name}: {item.reason}")
+            self.handle(item)
+
+    def handle(self, query) -> None:
+        """Run the handler for one query and reply (never raises for handler errors)."""
+        verb = str(query.key_expr).rsplit("/", 1)[-1]
+        base = {"run_id": self.run_id, "participant": self.name, "verb": verb}
+        t0 = time.perf_counter()
+        if query.payload is not None and len(query.payload) >= SHM_THRESHOLD:
+            base["rx_shm"] = is_shm(query.payload)
+        try:
+            request, fields = decode(payload_bytes(query.payload)) if query.payload else ({}, {})
+            for k in ("window", "iteration"):
+                if k in request:
+                    base[k] = request[k]
+            for k in ("run_id", "participant", "verb"):
+                if k in request and request[k] != base[k]:
+                    raise ProtocolError(f"request for {k}={request[k]!r} reached {base[k]!r}")
+            header, out = self.dispatch(verb, request, fields)
+            base["elapsed"] = time.perf_counter() - t0
+            payload = encode({**header, **base}, out)
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - every failure becomes an error reply
+            # (SystemExit: library code that calls sys.exit, e.g. meshio on a file no reader accepts)
+            message = f"{type(exc).__name__}: {exc}"
+            log.exception("%s: %s failed", self.name, verb)
+            base["elapsed"] = time.perf_counter() - t0
+            payload = encode({**base, "error": message})
+            if verb == "finish":
+                self.finished = True
+        try:
+            query.reply(key(self.run_id, self.name, verb), zbytes(payload, self.shared_memory))
+        finally:
+            query.drop()
+        log.debug("%s: %s answered in %.3f s (%d bytes)", self.name, verb, base["elapsed"], len(payload))
+
+    def dispatch(self, verb: str, request: dict, fields: dict[str, Field]):
+        """Call the handler for ``verb``: returns ``(reply_header, reply_fields)``."""
+        h = self.handler
+        if verb == "announce":
+            info = {"name": self.name, "pid": os.getpid(), "ranks": 1, **self.extra_announce}
+            info.update(h.announce() or {})
+            return info, None
+        if verb == "configure":
+            h.configure(request.get("config", {}))
+            return {}, None
+        if verb == "geometry":
+            header, out = h.geometry()
+            return dict(header or {}), out
+        if verb == "advance":
+            missing = [k for k in ("window", "iteration", "t", "dt") if k not in request]
+            if missing:
+                raise ProtocolError(f"advance request without {missing}")
+            out = h.advance(request["window"], request["iteration"], request["t"], request["dt"], fields)
+            solves, figures = h.take_reports() if hasattr(h, "take_reports") else ([], {})
+            return ({"solves": [s.as_dict() for s in solves], "figures": {k: json_number(v) for k, v in figures.items()}},
+                    as_fields(out))
+        if verb in ("save_state", "restore_state"):
+            if "window" not in request:
+                raise ProtocolError(f"{verb} request without 'window'")
+            getattr(h, verb)(request["window"])
+            return {}, None
+        if verb == "finish":
+            h.finish()
+            self.finished = True
+            return {}, None
+        raise ProtocolError(f"unknown verb {verb!r}")
+
+    def close(self) -> None:
+        """Undeclare the token (the coupler sees the participant go) and the queryables."""
+        if self._closed:
+            return
+        self._closed = True
+        for entity in [self._token, self._coupler_sub, *self._queryables]:
+            if entity is not None:
+                try:
+                    entity.undeclare()
+                except Exception:  # noqa: BLE001 - session may be closed already
+                    pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

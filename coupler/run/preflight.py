@@ -1,0 +1,161 @@
+"""Before anything runs: how big a coupled scene is, whether it fits in memory, and whether
+each participant accepts its part (``varcouple check``, and ``varcouple run`` before the
+first step).
+
+Sizes come from the scene (box and grid shapes) or from reading the mesh files; memory is
+estimated per participant from per-cell costs measured on these machines (peak resident
+memory, Debian 12, 2 cores)::
+
+    OpenFOAM (blockMesh, simpleFoam):  64k cells 188 MB, 512k cells 735 MB  -> 150 MB + 1.4 kB/cell
+    dolfinx P1 elasticity, CG+GAMG:   25k tets 130 MB, 197k tets 298 MB   -> 120 MB + 1.0 kB/tet
+    coupler (operators, fields):      about 2 kB per solid tet + 0.3 kB per fluid cell
+
+A scene whose estimate exceeds the memory available (the smallest of the machine's
+MemAvailable, the cgroup's memory.max, the address-space limit and ``[resources]
+memory_limit``) is refused naming the key that makes it large; ``[resources] check_memory
+= false`` runs it anyway. :func:`configure_participants` starts each participant, hands it
+its configuration and asks for its geometry, then finishes it: the participant's own
+validation (mesh readable, every loaded boundary selects facets, tags present) reaches the
+user before a run is launched.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+from dataclasses import dataclass
+from pathlib import Path
+
+from coupler.errors import SceneError
+
+MB = 2**20
+#: (fixed bytes, bytes per cell) of each participant kind; see the module docstring
+COSTS = {"openfoam": (150 * MB, 1400), "solid_fenicsx": (120 * MB, 1000), "coupler_solid": (100 * MB, 2000),
+         "coupler_fluid": (0, 300), "replay_fluid": (50 * MB, 100), "spring_solid": (50 * MB, 100)}
+
+
+@dataclass
+class Estimate:
+    """Cells and estimated peak memory of one part of a run; `key` is the scene key that sets its size."""
+
+    name: str
+    cells: int
+    bytes: int
+    key: str
+
+
+def available_memory(limit: float | None = None) -> tuple[int, str]:
+    """The memory a run may use and where that figure comes from."""
+    candidates = []
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                candidates.append((int(line.split()[1]) * 1024, "MemAvailable"))
+    except OSError:
+        pass
+    try:
+        cgroup = Path("/proc/self/cgroup").read_text().strip().split("::")[-1]
+        text = Path(f"/sys/fs/cgroup{cgroup}/memory.max").read_text().strip()
+        if text.isdigit():
+            candidates.append((int(text), "the cgroup's memory.max"))
+    except (OSError, IndexError):
+        pass
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        candidates.append((soft, "the address-space limit (ulimit -v)"))
+    if limit is not None:
+        candidates.append((int(limit), "[resources] memory_limit"))
+    return min(candidates) if candidates else (2**62, "unknown")
+
+
+def _mesh_cells(path: Path, where: str) -> int:
+    from transfer.meshfile import MeshFile
+
+    try:
+        return MeshFile.read(path).mesh.num_cells
+    except Exception as exc:  # noqa: BLE001 - any reader error is a bad input file
+        raise SceneError(f"{where}: {exc}") from None
+
+
+def estimate(scene) -> list[Estimate]:
+    """Cells and memory of every part of the coupled `scene` (participants and coupler)."""
+    solid_cfg = scene.solvers["solid"]
+    if scene.solid.box is not None:
+        shape = scene.solid.box["shape"]
+        tets, key = 6 * shape[0] * shape[1] * shape[2], f"{scene.path}: [geometry.solid] shape"
+    else:
+        key = f"{scene.path}: [geometry.solid] mesh"
+        tets = _mesh_cells(scene.solid.mesh, key)
+    fixed, per = COSTS[solid_cfg["participant"]]
+    degree_factor = 5 if solid_cfg.get("degree", 1) == 2 else 1
+    out = [Estimate("solid", tets, fixed * solid_cfg["ranks"] + per * degree_factor * tets, key)]
+    coupler = COSTS["coupler_solid"][0] + COSTS["coupler_solid"][1] * tets
+    if "fluid" in scene.solvers:
+        fluid_cfg = scene.solvers["fluid"]
+        g = scene.fluid.shape
+        cells, key = g[0] * g[1] * g[2], f"{scene.path}: [geometry.fluid] shape"
+        fixed, per = COSTS[fluid_cfg["participant"]]
+        ranks = fluid_cfg.get("solver_ranks", fluid_cfg["ranks"])
+        out.append(Estimate("fluid", cells, fixed * ranks + per * cells, key))
+        coupler += COSTS["coupler_fluid"][1] * cells
+    out.append(Estimate("coupler", 0, coupler, f"{scene.path}: [geometry]"))
+    return out
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("TB", 2**40), ("GB", 2**30), ("MB", MB)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n / 1024:.3g} kB"
+
+
+def check_memory(scene, estimates: list[Estimate]) -> str:
+    """SceneError unless the estimates fit in the available memory (or the scene says not to
+    check); the line describing the estimate otherwise."""
+    total = sum(e.bytes for e in estimates)
+    available, source = available_memory(scene.resources["memory_limit"])
+    parts = ", ".join(f"{e.name} {_size(e.bytes)}" for e in estimates)
+    line = f"about {_size(total)} ({parts}); {_size(available)} available ({source})"
+    if total > available and scene.resources["check_memory"]:
+        big = max((e for e in estimates if e.cells), key=lambda e: e.bytes)
+        raise SceneError(f"{big.key}: {big.cells:,} {big.name} cells: the run would need {line}; make it "
+                         f"smaller, or set [resources] check_memory = false to run it anyway")
+    return line
+
+
+def configure_participants(scene, plan, log=print) -> dict:
+    """Start every participant of `plan`, configure it and ask for its geometry, then finish
+    it: what each says of itself (``kind``, cells, points); its errors come out as
+    :class:`coupler.errors.ParticipantError` naming it."""
+    from coupler.run.runner import participant_config
+    from coupler.run.launch import Launcher
+    from coupler.run.client import CouplerSession
+    from coupler.protocol.transport import new_run_id
+
+    run_id = new_run_id()
+    found = {}
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix=f"varcouple-{run_id}-check-") as logs, \
+            CouplerSession(run_id, mode=scene.messaging["mode"], connect=scene.messaging["connect"],
+                           connect_timeout=min(10.0, scene.messaging["timeout"])) as session, \
+            Launcher(run_id, logs, session.endpoints) as launcher:
+        for p in plan.participants:
+            extra = ["--kind", p.kind] if p.module == "coupler.standins" else []
+            launcher.start(p.name, p.module, ranks=p.ranks, extra_args=extra)
+            client = session.client(p.name, timeout=scene.messaging["timeout"],
+                                    process_check=lambda name=p.name: launcher.check(name))
+            client.wait_alive()
+            config = participant_config(scene, p.name)
+            config.pop("case_dir", None)  # a check keeps nothing
+            client.configure(config)
+            header, fields = client.geometry()
+            if "grid" in header:
+                g = header["grid"]["shape"]
+                found[p.name] = {"kind": p.kind, "cells": g[0] * g[1] * g[2], "grid": header["grid"]}
+            else:
+                found[p.name] = {"kind": p.kind, "cells": len(fields["cells"].data),
+                                 "points": len(fields["points"].data), "boundaries": header.get("boundaries", {})}
+            client.finish()
+            launcher.wait(p.name, timeout=30)
+    return found

@@ -1,0 +1,49 @@
+"""Scene files: ``cases/NAME/scene.toml`` read with tomllib and validated.
+
+A scene is a coupled case (a ``[physics]`` table, :mod:`coupler.scene.coupled`), a study
+run inside the coupler (a marker table, :data:`STUDIES`) or a transfer (a ``[transfer]``
+table, :mod:`coupler.scene.transfer`); cases/README.md documents every key. Every error
+names the scene file, the table and key, and the reason.
+"""
+
+from __future__ import annotations
+
+import importlib
+import tomllib
+from pathlib import Path
+
+from coupler.errors import SceneError
+
+from .tables import STUDIES, scene_path
+
+def load(case, output: str | Path | None = None):
+    """Read and validate the scene of `case` (a case directory or its scene.toml):
+    a :class:`~coupler.scene.coupled.CoupledScene`, a study's scene or a
+    :class:`~coupler.scene.transfer.TransferScene`.
+    `output` overrides ``[output] directory`` (relative to the working directory)."""
+    path, case_dir = scene_path(case)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: invalid TOML: {exc}") from None
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if "physics" in data:
+        from .coupled import parse
+
+        return parse(path, case_dir, data, output)
+    for marker, module in STUDIES.items():
+        if marker in data:
+            return importlib.import_module(module).parse(path, case_dir, data, output)
+    from .transfer import parse
+
+    return parse(path, case_dir, data, output)
+
+
+def study_module(scene):
+    """The module of a study scene (one of :data:`STUDIES`), or None for coupled and transfer scenes."""
+    module = type(scene).__module__
+    return importlib.import_module(module) if module in STUDIES.values() else None
+
+
