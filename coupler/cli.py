@@ -131,7 +131,7 @@ def check(args: argparse.Namespace) -> int:
             print(line)
     else:
         from coupler.plan.plan import make_plan
-        from coupler.run.preflight import check_memory, configure_participants, estimate
+        from coupler.run.preflight import check_memory, estimate
 
         plan = make_plan(scene)
         for line in plan.lines():
@@ -140,9 +140,11 @@ def check(args: argparse.Namespace) -> int:
         print("size          " + "; ".join(f"{e.name} {e.cells:,} cells" for e in estimates if e.cells))
         print(f"memory        {check_memory(scene, estimates)}")
         if not args.quick:
-            for name, found in configure_participants(scene, plan).items():
-                print(f"configured    {name}: {found['kind']} accepts its part ({found['cells']:,} cells"
-                      + (f", {found['points']:,} points" if "points" in found else "") + ")")
+            from coupler.run.runner import rehearse
+
+            for name, mesh in rehearse(scene, plan).items():
+                print(f"configured    {name}: {plan.participant(name).kind} accepts its part "
+                      f"({mesh.num_cells:,} cells, {mesh.num_points:,} points); operators built")
     print(f"output        {scene.output_dir}")
     return 0
 

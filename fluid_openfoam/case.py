@@ -48,6 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .settings import DECOMPOSITIONS, PENALIZATIONS, SOLID_VELOCITIES
+
 FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 # vertex numbering of the block: 0 (x0,y0,z0) 1 (x1,y0,z0) 2 (x1,y1,z0) 3 (x0,y1,z0), 4-7 at z1
 _FACE_VERTS = {"xmin": (0, 4, 7, 3), "xmax": (2, 6, 5, 1), "ymin": (1, 5, 4, 0),
@@ -156,7 +158,7 @@ class CaseSpec:
     solid_velocity: str = "bodies"     # "bodies": one velocity source per solid body (zones.py); "none"
     write_binary: bool = True
     ranks: int = 1                     # MPI ranks of the solver (decomposed case, parallel.py)
-    decomposition: str = "simple"      # decomposePar method with ranks > 1 (parallel.METHODS)
+    decomposition: str = "simple"      # decomposePar method with ranks > 1 (settings.DECOMPOSITIONS)
 
     @property
     def nu(self) -> float:
@@ -202,17 +204,16 @@ class CaseSpec:
                    penalization=str(config.get("penalization", "wall")),
                    penalization_exponent=float(config.get("penalization_exponent", 2.0)),
                    ranks=int(config.get("ranks", 1)), decomposition=str(config.get("decomposition", "simple")))
-        from .parallel import METHODS as DECOMPOSITIONS
         if spec.ranks < 1 or spec.decomposition not in DECOMPOSITIONS:
             raise ValueError(f"ranks must be at least 1 and decomposition one of {', '.join(DECOMPOSITIONS)}, "
                              f"got {spec.ranks}, {spec.decomposition!r}")
-        from .penalization import MODES
-        if spec.penalization not in MODES:
-            raise ValueError(f"penalization must be one of {', '.join(MODES)}, got {spec.penalization!r}")
+        if spec.penalization not in PENALIZATIONS:
+            raise ValueError(f"penalization must be one of {', '.join(PENALIZATIONS)}, got {spec.penalization!r}")
         if spec.drag_table is not None and spec.penalization != "linear":
             raise ValueError("drag_table applies to the fraction itself: it needs penalization 'linear'")
-        if spec.solid_velocity not in ("bodies", "none"):
-            raise ValueError(f"solid_velocity must be 'bodies' or 'none', got {spec.solid_velocity!r}")
+        if spec.solid_velocity not in SOLID_VELOCITIES:
+            raise ValueError(f"solid_velocity must be one of {', '.join(SOLID_VELOCITIES)}, got "
+                             f"{spec.solid_velocity!r}")
         if spec.dt <= 0 or spec.substeps < 1 or spec.outer_correctors < 1:
             raise ValueError(f"dt must be positive and substeps, outer_correctors at least 1, got "
                              f"{spec.dt}, {spec.substeps}, {spec.outer_correctors}")

@@ -25,8 +25,8 @@ import numpy as np
 
 from . import case as _case
 from .fields import read_internal_field, read_label_list, read_patches
+from .settings import DECOMPOSITIONS
 
-METHODS = ("simple",)
 
 
 def simple_split(ranks: int, shape) -> tuple[int, int, int]:
@@ -54,8 +54,8 @@ def simple_split(ranks: int, shape) -> tuple[int, int, int]:
 
 
 def decompose_par_dict(ranks: int, method: str, shape) -> str:
-    if method not in METHODS:
-        raise ValueError(f"decomposition must be one of {', '.join(METHODS)}, got {method!r}")
+    if method not in DECOMPOSITIONS:
+        raise ValueError(f"decomposition must be one of {', '.join(DECOMPOSITIONS)}, got {method!r}")
     n = simple_split(ranks, shape)
     return (_case._header("dictionary", "decomposeParDict", "system")
             + f"numberOfSubdomains {ranks};\n\nmethod          {method};\n\n"

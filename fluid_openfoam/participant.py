@@ -17,7 +17,7 @@ Config (the fluid's part of the scene; same grid conventions as
      "case_dir": null}                    # kept; default: a temporary directory, removed on
                                           # every exit (the launcher removes it after SIGKILL)
 
-From a scene, :func:`coupler.coupled_run.participant_config` fills these keys: ``rho``, ``mu``
+From a scene, the flow rule (:func:`coupler.plan.effects.flow.fluid_config`) fills these keys: ``rho``, ``mu``
 from ``[materials.fluid]``; ``inlet``, ``outlet``, ``walls``, ``boundaries`` from ``[flow]``
 (inlet_velocity / inlet_pressure, outlet_pressure, walls, faces); ``penalization``,
 ``penalization_exponent``, ``drag``, ``max_iterations``, ``tolerance`` from ``[solvers.fluid]``

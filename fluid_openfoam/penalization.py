@@ -34,7 +34,7 @@ import numpy as np
 
 from transfer.grid import wall_distance
 
-MODES = ("linear", "power", "wall")
+from .settings import PENALIZATIONS
 
 
 def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str = "wall",
@@ -47,7 +47,7 @@ def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str =
     if mode == "power":
         return f ** float(exponent)
     if mode != "wall":
-        raise ValueError(f"unknown penalization {mode!r} (one of {', '.join(MODES)})")
+        raise ValueError(f"unknown penalization {mode!r} (one of {', '.join(PENALIZATIONS)})")
     nx, ny, nz = (int(s) for s in shape)
     F = f.reshape(nz, ny, nx)  # [k, j, i]
     solid = F >= 0.5

@@ -2,10 +2,10 @@
 
 Started by the coupler as ``[mpirun -n N] python -m solid_fenicsx --run-id R
 --name solid --connect ENDPOINT``. ``configure`` receives the solid's part of the
-scene (:func:`coupler.coupled_run.participant_config`): the mesh (a file or a
-box), named boundaries (box faces, expressions in x, y, z on facet midpoints,
-or tags of the file), the material, the loads, the solver and whether the
-problem is dynamic (paper eq. 13). ``advance`` solves one step (static: one
+scene (:func:`coupler.plan.effects.elasticity.solid_config`, completed by the other
+effects' rules): the mesh (a file or a box), named boundaries (box faces,
+expressions in x, y, z on facet midpoints, or tags of the file), the material, the
+loads, the solver and whether the problem is dynamic (paper eq. 13). ``advance`` solves one step (static: one
 solve) with the coupler's inputs (``pressure`` at the vertices, applied on the
 wetted boundary; with config ``traction = "full"`` the vector ``traction``
 instead) and returns the displacement, velocity and von Mises stress at the

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -175,3 +176,23 @@ def transfer_figure(path, *, field: str, source: FunctionSpace, source_values: n
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return z
+
+
+def residual_plot(path: Path, result) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for step in result.steps:
+        ax.semilogy(range(1, len(step.residuals) + 1), step.residuals, marker="o", ms=3,
+                    label=f"step {step.window}" if len(result.steps) <= 10 else None)
+    ax.axhline(result.tolerance, color="k", ls="--", lw=0.8, label="tolerance")
+    ax.set_xlabel("coupling iteration")
+    ax.set_ylabel("relative interface residual (mass-weighted L2)")
+    ax.set_title(f"fixed-point residuals ({result.accelerator.get('name', '')})")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -13,10 +13,10 @@ memory, Debian 12, 2 cores)::
 A scene whose estimate exceeds the memory available (the smallest of the machine's
 MemAvailable, the cgroup's memory.max, the address-space limit and ``[resources]
 memory_limit``) is refused naming the key that makes it large; ``[resources] check_memory
-= false`` runs it anyway. :func:`configure_participants` starts each participant, hands it
-its configuration and asks for its geometry, then finishes it: the participant's own
-validation (mesh readable, every loaded boundary selects facets, tags present) reaches the
-user before a run is launched.
+= false`` runs it anyway. :func:`coupler.run.runner.rehearse` then starts the participants
+and builds the operators without advancing anything: the participants' own validation
+(mesh readable, every loaded boundary selects facets, tags present) and the overlap of their
+meshes reach the user before a run is launched.
 """
 
 from __future__ import annotations
@@ -121,41 +121,3 @@ def check_memory(scene, estimates: list[Estimate]) -> str:
         raise SceneError(f"{big.key}: {big.cells:,} {big.name} cells: the run would need {line}; make it "
                          f"smaller, or set [resources] check_memory = false to run it anyway")
     return line
-
-
-def configure_participants(scene, plan, log=print) -> dict:
-    """Start every participant of `plan`, configure it and ask for its geometry, then finish
-    it: what each says of itself (``kind``, cells, points); its errors come out as
-    :class:`coupler.errors.ParticipantError` naming it."""
-    from coupler.run.runner import participant_config
-    from coupler.run.launch import Launcher
-    from coupler.run.client import CouplerSession
-    from coupler.protocol.transport import new_run_id
-
-    run_id = new_run_id()
-    found = {}
-    import tempfile
-
-    with tempfile.TemporaryDirectory(prefix=f"varcouple-{run_id}-check-") as logs, \
-            CouplerSession(run_id, mode=scene.messaging["mode"], connect=scene.messaging["connect"],
-                           connect_timeout=min(10.0, scene.messaging["timeout"])) as session, \
-            Launcher(run_id, logs, session.endpoints) as launcher:
-        for p in plan.participants:
-            extra = ["--kind", p.kind] if p.module == "coupler.standins" else []
-            launcher.start(p.name, p.module, ranks=p.ranks, extra_args=extra)
-            client = session.client(p.name, timeout=scene.messaging["timeout"],
-                                    process_check=lambda name=p.name: launcher.check(name))
-            client.wait_alive()
-            config = participant_config(scene, p.name)
-            config.pop("case_dir", None)  # a check keeps nothing
-            client.configure(config)
-            header, fields = client.geometry()
-            if "grid" in header:
-                g = header["grid"]["shape"]
-                found[p.name] = {"kind": p.kind, "cells": g[0] * g[1] * g[2], "grid": header["grid"]}
-            else:
-                found[p.name] = {"kind": p.kind, "cells": len(fields["cells"].data),
-                                 "points": len(fields["points"].data), "boundaries": header.get("boundaries", {})}
-            client.finish()
-            launcher.wait(p.name, timeout=30)
-    return found

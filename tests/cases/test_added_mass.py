@@ -18,9 +18,8 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
-from coupler.run.runner import participant_config
-from coupler.errors import SceneError
 from coupler.plan.plan import make_plan
+from coupler.errors import SceneError
 from coupler.scene import load
 from vc_helpers import CASES, copy_case
 
@@ -41,11 +40,11 @@ def test_scene_keys_of_a_transient_fluid(tmp_path):
     to the fluid, and bad values named by file, table and key."""
     scene = load(CASES / "added_mass_heavy")
     assert scene.flow["faces"]["zmin"] == {"pressure": 1.0e4}
-    config = participant_config(scene, "fluid")
+    config = make_plan(scene).participant("fluid").config
     assert config["transient"] and config["dt"] == 5.0e-5 and config["substeps"] == 1
     assert config["outer_correctors"] == 50 and config["solid_velocity"] == "bodies"
     assert config["boundaries"]["zmin"] == {"pressure": 1.0e4}
-    assert participant_config(scene, "solid")["fluid_density"] == 0.0  # the rock keeps rho_s
+    assert make_plan(scene).participant("solid").config["fluid_density"] == 0.0  # the rock keeps rho_s
     assert "pimpleFoam" in make_plan(scene).iteration
     for old, new, match in (("zmin = { pressure = 1.0e4 }", 'zmin = { pressure = "high" }', r"\[flow.faces\] zmin"),
                             ("substeps = 1", "substeps = 0", r"\[solvers.fluid\] substeps: must be an integer >= 1"),

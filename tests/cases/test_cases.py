@@ -24,7 +24,7 @@ def run_case(tmp_path, name, replace=None):
 def test_block_compression_matches_uniaxial_stress(tmp_path):
     code, out, s = run_case(tmp_path, "block_compression")
     assert code == 0 and s["status"] == "completed"
-    assert [p["name"] for p in s["participants"]] == ["solid"] and s["couplings"] == []
+    assert [p["name"] for p in s["participants"]] == ["solid"] and s["exchanges"] == []
     assert s["check"]["passed"] and s["check"]["error"] < 1e-6
     # independently of [check]: the exact solution at every vertex of the output
     m = meshio.read(out / "solid_0000.vtu")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
-from coupler.run.runner import participant_config
+from coupler.plan.plan import make_plan
 from coupler.fsi.interface import WettedInterface
 from coupler.errors import CouplerError, SceneError
 from coupler.scene import load
@@ -80,7 +80,7 @@ def scene_in(tmp_path, text):
 
 
 def test_flow_keys_reach_the_openfoam_participant(tmp_path):
-    config = participant_config(load(scene_in(tmp_path, SCENE + FLOW)), "fluid")
+    config = make_plan(load(scene_in(tmp_path, SCENE + FLOW))).participant("fluid").config
     assert config["inlet"] == {"velocity": [0.1, 0.0, 0.0]} and config["outlet"] == {"pressure": 5.0}
     assert config["walls"] == "slip" and config["boundaries"] == {"zmax": "wall"}
     assert (config["penalization"], config["max_iterations"], config["tolerance"], config["drag"]) == \
@@ -96,7 +96,7 @@ def test_flow_keys_reach_the_openfoam_participant(tmp_path):
 
 
 def test_pressure_inlet_and_defaults(tmp_path):
-    config = participant_config(load(scene_in(tmp_path, SCENE + '\n[flow]\ninlet_pressure = 100.0\n')), "fluid")
+    config = make_plan(load(scene_in(tmp_path, SCENE + '\n[flow]\ninlet_pressure = 100.0\n'))).participant("fluid").config
     assert config["inlet"] == {"pressure": 100.0} and config["outlet"] == {"pressure": 0.0}
     assert config["walls"] == "wall" and config["boundaries"] == {}
     assert (config["penalization"], config["max_iterations"], config["tolerance"], config["drag"]) == \
@@ -149,7 +149,7 @@ def test_flow_table_needs_the_flow_effect(tmp_path):
 
 def test_stand_in_fluid_needs_no_flow_table(tmp_path):
     text = SCENE + '\n[solvers.fluid]\nparticipant = "replay_fluid"\n'
-    assert participant_config(load(scene_in(tmp_path, text)), "fluid").get("inlet") is None
+    assert make_plan(load(scene_in(tmp_path, text))).participant("fluid").config.get("inlet") is None
 
 
 # ---------------------------------------------------------------- Steps 2-3 on the interface

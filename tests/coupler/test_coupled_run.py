@@ -28,7 +28,7 @@ def test_implicit_loop_converges_with_iqn_ils(tmp_path, capsys):
     s = summary(out)
     assert s["status"] == "completed"
     assert [p["name"] for p in s["participants"]] == ["solid", "fluid"]
-    assert {"participants", "effects", "couplings", "phases_seconds", "steps"} <= set(s)
+    assert {"participants", "effects", "exchanges", "phases_seconds", "steps"} <= set(s)
     # spring_solid has no boundary triangles: the fallback volume projection onto all vertices
     assert s["interface"]["method"] == "volume projection"
     # the fixed point has gain 3 (plain iteration diverges); IQN-ILS needs a few iterations
@@ -104,7 +104,8 @@ def test_killed_participant_ends_the_run_cleanly(tmp_path, capsys):
 
 def test_swapping_the_solid_is_one_line(tmp_path, capsys):
     """The same coupled scene with dolfinx instead of the spring stand-in."""
-    case = copy_case(CASE, tmp_path, {'participant = "spring_solid"': 'participant = "solid_fenicsx"'})
+    case = copy_case(CASE, tmp_path, {'participant = "spring_solid"': 'participant = "solid_fenicsx"',
+                                      '"dynamics", ': ""})  # a static dolfinx solid: no velocity feedback
     out = tmp_path / "out"
     assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err
     s = summary(out)

@@ -68,10 +68,10 @@ value = 1e6
 def test_elasticity_alone_starts_the_solid_alone(tmp_path):
     plan = make_plan(load(write(tmp_path, scene_text('["elasticity"]'))))
     assert [p.name for p in plan.participants] == ["solid"]
-    assert plan.couplings == []
+    assert plan.exchanges == [] and not plan.implicit
     summary = plan.as_dict()
     assert summary["participants"][0]["kind"] == "solid_fenicsx"
-    assert set(summary) >= {"participants", "effects", "couplings"}
+    assert set(summary) >= {"participants", "effects", "exchanges"}
 
 
 def test_static_fluid_pressure_is_a_load_without_fluid_solver(tmp_path):
@@ -84,10 +84,19 @@ def test_static_fluid_pressure_is_a_load_without_fluid_solver(tmp_path):
 def test_flow_and_deformation_start_both_and_couple_them(tmp_path):
     plan = make_plan(load(write(tmp_path, scene_text('["elasticity", "flow"]', FLUID))))
     assert [p.name for p in plan.participants] == ["solid", "fluid"]
-    crossing = {(c.source, c.target) for c in plan.couplings}
-    assert ("fluid.pressure", "solid.traction") in crossing
-    assert ("solid.velocity", "fluid.solid_velocity") in crossing
-    assert "implicit" in plan.iteration
+    crossing = {(tuple(e.sources), e.target, e.operator, e.accelerated) for e in plan.exchanges}
+    # quasi-static: the pressure is the accelerated interface quantity, the solid fraction follows the
+    # deformed solid, and no solid velocity reaches the grid (the solid is at rest in each step)
+    assert crossing == {(("fluid.pressure",), "solid.pressure", "pressure_trace", True),
+                        (("solid.displacement",), "fluid.solid_fraction", "solid_fraction", False)}
+    assert plan.implicit and "implicit" in plan.iteration
+
+
+def test_a_moving_solid_sends_its_velocity_to_the_grid(tmp_path):
+    plan = make_plan(load(write(tmp_path, scene_text('["elasticity", "dynamics", "flow"]', FLUID))))
+    velocity = [e for e in plan.exchanges if e.target == "fluid.solid_velocity"]
+    assert len(velocity) == 1 and velocity[0].operator == "solid_velocity" and velocity[0].step == "6"
+    assert plan.participant("solid").config["dynamic"]
 
 
 def test_check_prints_the_plan(tmp_path, capsys):
@@ -96,7 +105,7 @@ def test_check_prints_the_plan(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "participant   solid: solid_fenicsx" in out
     assert "fluid" not in out.split("participant")[-1].split("\n")[0]
-    assert "couplings     none" in out
+    assert "exchanges     none" in out
 
 
 def test_nearly_incompressible_gets_a_note(tmp_path):

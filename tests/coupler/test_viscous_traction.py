@@ -13,10 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coupler.run.runner import participant_config
+from coupler.plan.plan import make_plan
 from coupler.errors import CouplerError, SceneError
 from coupler.fsi.interface import SolidOnGrid
-from coupler.plan.plan import make_plan
 from coupler.scene import load
 from coupler.fsi.viscous import FluidTraction, traction_figures, velocity_gradient, wall_shear
 from fluid_openfoam.plates import Plates, geometry
@@ -201,12 +200,14 @@ def test_openfoam_plates_wall_shear_and_force_balance(tmp_path):
 def test_traction_key_in_scenes(tmp_path):
     scene = load(CASE)
     assert scene.coupling["traction"] == "pressure"  # existing cases unchanged
-    assert participant_config(scene, "solid")["traction"] == "pressure"
+    assert make_plan(scene).participant("solid").config["traction"] == "pressure"
     full = copy_case(CASE, tmp_path / "full", {'interface = ["fracture_lower", "fracture_upper"]':
                                                'interface = ["fracture_lower", "fracture_upper"]\ntraction = "full"'})
     scene = load(full)
-    assert scene.coupling["traction"] == "full" and participant_config(scene, "solid")["traction"] == "full"
-    assert any(c.source == "fluid.velocity" for c in make_plan(scene).couplings)
+    assert scene.coupling["traction"] == "full" and make_plan(scene).participant("solid").config["traction"] == "full"
+    traction = [e for e in make_plan(scene).exchanges if e.accelerated]
+    assert [(e.target, e.operator) for e in traction] == [("solid.traction", "viscous_traction")]
+    assert traction[0].sources == ["fluid.pressure", "fluid.velocity", "solid.velocity"]
     bad = copy_case(CASE, tmp_path / "bad", {'interface = ["fracture_lower", "fracture_upper"]':
                                              'interface = ["fracture_lower", "fracture_upper"]\ntraction = "shear"'})
     with pytest.raises(SceneError, match=r"\[coupling\] traction"):

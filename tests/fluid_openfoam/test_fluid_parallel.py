@@ -103,7 +103,7 @@ def test_coupled_small_fracture_with_two_fluid_ranks(tmp_path, capsys):
         if ranks > 1:
             assert main(["check", str(case)]) == 0
             printed = capsys.readouterr().out
-            assert "fluid solver runs on 2 MPI ranks (simple decomposition" in printed
+            assert "fluid: openfoam on 2 MPI ranks (simple decomposition" in printed
             assert "participant   fluid: openfoam (python -m fluid_openfoam, 1 rank)" in printed
         out = tmp_path / f"out{ranks}"
         assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err

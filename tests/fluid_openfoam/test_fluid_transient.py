@@ -70,7 +70,7 @@ def test_a_body_slides_along_a_closed_grid_face_and_moves_through_an_open_one():
 
 def test_transient_keys_are_checked():
     grid = {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [2, 2, 2]}
-    with pytest.raises(ValueError, match="solid_velocity must be 'bodies' or 'none'"):
+    with pytest.raises(ValueError, match="solid_velocity must be one of bodies, none"):
         CaseSpec.from_config({"grid": grid, "solid_velocity": "cells"})
     with pytest.raises(ValueError, match="substeps, outer_correctors at least 1"):
         CaseSpec.from_config({"grid": grid, "transient": True, "substeps": 0})
@@ -87,7 +87,7 @@ def test_piston_moves_the_fluid_column_and_feels_its_added_mass(tmp_path):
     p = -rho V x / dt before, rho V (L - x) / dt after (the added mass rho L_fluid per area).
     The jump across the body is the inertia of the fluid outside it only: the penalized fluid
     inside passes its own to the penalty, which is why a surface-coupled rock keeps its rho_s
-    (coupler/coupled_run.py). Measured: U within 7e-4 of V (the penalization error, ~ grad p /
+    (the flow rule, coupler/plan/effects/flow.py). Measured: U within 7e-4 of V (the penalization error, ~ grad p /
     D_max), p within 0.07%."""
     nx, L, V = 20, 0.2, 0.1
     empty = {f: "empty" for f in ("ymin", "ymax", "zmin", "zmax")}

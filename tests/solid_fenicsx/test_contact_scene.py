@@ -13,9 +13,8 @@ import pytest
 
 pytest.importorskip("gmsh")
 
-from coupler.run.runner import participant_config  # noqa: E402
-from coupler.errors import SceneError  # noqa: E402
 from coupler.plan.plan import make_plan  # noqa: E402
+from coupler.errors import SceneError  # noqa: E402
 from coupler.scene import load  # noqa: E402
 
 from vc_helpers import ROOT, copy_case  # noqa: E402
@@ -33,9 +32,9 @@ def test_plan_of_the_hertz_scene():
                              "max_iterations": 100, "search_distance": 0.1, "max_normal_angle": 45.0}
     plan = make_plan(scene)
     assert [p.name for p in plan.participants] == ["solid"]
-    assert "dual basis on the slave" in plan.couplings[0].operator
+    assert plan.exchanges == [] and "dual basis on the slave" in plan.tasks[0]
     assert "2 load steps" in plan.iteration
-    config = participant_config(scene, "solid")
+    config = make_plan(scene).participant("solid").config
     assert config["contact"]["master"] == "block_top" and config["steps"] == 2
 
 
@@ -75,7 +74,7 @@ def _advance(config, steps):
 
 def test_solid_participant_ramps_the_load_with_contact():
     scene = load(HERTZ)
-    p, steps = _advance(participant_config(scene, "solid"), 2)
+    p, steps = _advance(make_plan(scene).participant("solid").config, 2)
     assert p.contact is not None
     for _, (report,), figures in steps:
         assert report.solver == "contact active_set" and report.converged
@@ -96,7 +95,7 @@ def test_contact_fields_are_zero_off_contact_and_balance_the_load():
     of the QP), along the slave normals the force figures, balanced by the load's reaction."""
     import dolfinx.fem
 
-    p, steps = _advance(participant_config(load(HERTZ), "solid"), 2)
+    p, steps = _advance(make_plan(load(HERTZ)).participant("solid").config, 2)
     out, _, figures = steps[-1]
     pressure, in_contact, slave, weight = (out[k].data for k in ("contact_pressure", "in_contact", "slave",
                                                                  "mortar_weight"))
@@ -121,7 +120,7 @@ def test_contact_fields_are_zero_off_contact_and_balance_the_load():
 def test_an_unconverged_contact_solve_is_reported():
     """[contact] max_iterations = 1: the step returns its (finite) iterate and reports the
     active-set solve unconverged, its criterion above the tolerance."""
-    config = participant_config(load(HERTZ), "solid")
+    config = make_plan(load(HERTZ)).participant("solid").config
     config["contact"] = {**config["contact"], "max_iterations": 1}
     _, [(out, (report,), figures)] = _advance(config, 1)
     assert (report.solver, report.converged, report.iterations) == ("contact active_set", False, 1)
@@ -139,8 +138,8 @@ def test_a_scene_without_contact_never_builds_contact_operators(monkeypatch):
     monkeypatch.setattr(contact.Contact, "__init__", forbidden)
     monkeypatch.setattr(mortar, "mortar", forbidden)
     scene = load(ROOT / "cases" / "block_compression")
-    assert scene.contact is None and "contact" not in participant_config(scene, "solid")
-    p, [(out, (report,), figures)] = _advance(participant_config(scene, "solid"), 1)
+    assert scene.contact is None and "contact" not in make_plan(scene).participant("solid").config
+    p, [(out, (report,), figures)] = _advance(make_plan(scene).participant("solid").config, 1)
     assert p.contact is None and "contact_pressure" not in out and figures == {}
     assert report.solver == "LU static" and report.converged
 

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("dolfinx")
 
-from coupler.run.runner import participant_config  # noqa: E402
+from coupler.plan.plan import make_plan  # noqa: E402
 from coupler.scene import load  # noqa: E402
 from vc_helpers import ROOT
 
@@ -29,7 +29,7 @@ def participant(config):
 
 def block_config(**changes) -> dict:
     """The solid's config of cases/block_compression with `changes`."""
-    return {**participant_config(load(BLOCK), "solid"), **changes}
+    return {**make_plan(load(BLOCK)).participant("solid").config, **changes}
 
 
 def advance(p, window=0, dt=1.0):

@@ -19,7 +19,9 @@ import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from coupler.errors import NotConverged
 from coupler.output.results import write_summary
+from nonsmooth import NonsmoothSolveError
 from coupler.scene.tables import Table, check_tables, output_directory
 
 #: [closure] key -> one-line description (also the list of allowed keys); cases/README.md
@@ -124,7 +126,10 @@ def run(scene: ClosureScene, log=print) -> dict:
         f"{test.contact.num_dofs} dofs, initial mean aperture {test.initial_aperture * 1e6:.1f} um")
     rows, written = [], []
     for mpa in scene.stresses:
-        state, row = test.load_to(mpa * 1e6, rtol=scene.tolerance)
+        try:
+            state, row = test.load_to(mpa * 1e6, rtol=scene.tolerance)
+        except NonsmoothSolveError as exc:
+            raise NotConverged(f"{scene.path}: closure at {mpa:g} MPa: {exc}") from None
         rows.append(row)
         log(f"{mpa:5.1f} MPa: closure {row['closure'] * 1e6:7.2f} um, contact area {row['area_fraction']:.3f}, "
             f"{row['solves']} solves, active-set iterations {row['iterations']}")
@@ -143,7 +148,7 @@ def run(scene: ClosureScene, log=print) -> dict:
                "steps": rows, "area_fraction": [r["area_fraction"] for r in rows], "bandis": fit,
                "setup_seconds": test.setup_seconds, "wall_seconds": time.perf_counter() - start,
                "platform": {"python": platform.python_version(), "machine": platform.machine()},
-               "outputs": [f.name for f in written] + ["summary.json"]}
+               "outputs": [f.name for f in written] + ["summary.json"], "status": "completed"}
     write_summary(out, summary)
     if fit:
         log(f"Bandis: k_ni {fit['k_ni']:.3g} Pa/m, d_max {fit['d_max'] * 1e6:.1f} um, RMS deviation "

@@ -25,6 +25,7 @@ from transfer.fracture import fracture_blocks, rough_surface
 from transfer.grid import StructuredGrid
 from transfer.mesh import lattice_tetrahedra
 
+from coupler.errors import NotConverged
 from coupler.output.results import write_summary
 from coupler.scene.tables import Table, check_tables, output_directory
 
@@ -233,9 +234,15 @@ def run(scene: ObstacleScene, log=print) -> dict:
             f"solve {entry['seconds']['solve']:.1f} s")
     name = scene.case_dir.resolve().name
     plot_convergence(out / "convergence.png", runs, f"{name}: {scene.method}")
+    failed = [r for r in runs if not r["converged"]]
     summary = {"scene": str(scene.path), "case": name, "description": scene.description, "method": scene.method,
-               "tolerance": scene.tolerance, "runs": runs, "load_average": list(os.getloadavg())}
+               "tolerance": scene.tolerance, "runs": runs, "load_average": list(os.getloadavg()),
+               "status": "not_converged" if failed else "completed"}
     write_summary(out, summary)
+    if failed:
+        r = failed[0]
+        raise NotConverged(f"{scene.method} did not converge on {r['levels']} levels: {r['iterations']} iterations, "
+                           f"tolerance {scene.tolerance:g}; raise [solver] max_iterations")
     for f in written:
         log(f"wrote {f} (and its grids {f.stem}_grid<k>.vtu)")
     log(f"wrote {out / 'convergence.png'}")

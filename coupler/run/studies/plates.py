@@ -124,6 +124,7 @@ def run(scene: PlatesScene, log=print) -> dict:
     """Run the study of `scene`, write its outputs, return the summary."""
     from fluid_openfoam import plates as _plates
 
+    from coupler.errors import NotConverged
     from coupler.output.results import write_summary
 
     out = Path(scene.output_dir)
@@ -170,7 +171,13 @@ def run(scene: PlatesScene, log=print) -> dict:
             f"tolerance {c['tolerance']:g}: {'PASS' if passed else 'FAIL'}")
     summary["wall_seconds"] = time.perf_counter() - start
     summary["outputs"] = [f.name for f in written] + ["summary.json"]
+    unconverged = [r for r in table if not r["all_converged"]]
+    summary["status"] = "not_converged" if unconverged else "completed"
     write_summary(out, summary)
+    if unconverged:
+        r = unconverged[0]
+        raise NotConverged(f"simpleFoam did not converge with {r['method']} at {r['n_across']} cells across; raise "
+                           f"[solvers.fluid] max_iterations")
     for f in written:
         log(f"wrote {f}")
     log(f"wrote {out / 'summary.json'}")

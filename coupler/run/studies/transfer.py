@@ -179,6 +179,7 @@ def run(scene: TransferScene, log: Callable[[str], None] = print) -> dict:
 
     summary = {
         "scene": str(scene.path),
+        "status": "completed",
         "description": scene.description,
         "field": {"name": field.name, "kind": kind, "shape": list(field.values.shape[1:]),
                   "source_space": family(source.mesh, kind), "target_space": family(target.mesh, kind)},

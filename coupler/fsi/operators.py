@@ -1,0 +1,183 @@
+"""The operators the plan's exchanges name (:attr:`coupler.plan.plan.Exchange.operator`),
+between the fluid grid and the solid mesh (paper 2.3).
+
+An operator is built once per run from an :class:`OperatorContext` (the participants'
+meshes, their geometry fields, the scene) and then, in every coupling iteration,
+``evaluate(outputs)`` turns the latest outputs of the participants (``{name: {field:
+array}}``) into the exchanged quantity and ``deliver(value)`` into the target's input
+array. The quantity of an accelerated exchange is the fixed point's interface vector x:
+such an operator also gives its ``size`` and ``weights`` (the lumped interface mass of the
+residual's M-norm). The operators of one solid and one grid share one
+:class:`~coupler.fsi.interface.SolidOnGrid`, rebuilt from the deformed solid at most once
+per new displacement.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from coupler.errors import CouplerError
+
+from .interface import SolidOnGrid, WettedInterface
+from .viscous import FluidTraction, traction_figures
+
+
+class OperatorContext:
+    """What operators are built from: the scene, the participants' meshes and geometry fields,
+    the phases timer and the log; :meth:`shared` builds an object once for all operators."""
+
+    def __init__(self, scene, meshes: dict, geometry: dict, phases, log=print):
+        self.scene, self.meshes, self.geometry, self.phases, self.log = scene, meshes, geometry, phases, log
+        self._shared: dict = {}
+
+    def shared(self, key: str, build):
+        if key not in self._shared:
+            self._shared[key] = build(self)
+        return self._shared[key]
+
+    def summary(self) -> dict:
+        """What the shared objects tell of themselves, for summary.json."""
+        out = {}
+        for obj in self._shared.values():
+            out.update(obj.summary() if hasattr(obj, "summary") else {})
+        return out
+
+
+class FluidSolid:
+    """The solid as the grid sees it (:class:`SolidOnGrid`) for the exchanges of a flow scene,
+    updated from the solid's displacement whenever an operator asks."""
+
+    def __init__(self, ctx: OperatorContext):
+        scene = ctx.scene
+        self.ctx = ctx
+        self._seen = None
+        start = time.perf_counter()
+        triangles = ctx.geometry["solid"].get("interface_triangles")
+        triangles = None if triangles is None else np.asarray(triangles)
+        self.on_grid = SolidOnGrid(ctx.meshes["solid"], ctx.meshes["fluid"], triangles,
+                                   f"{scene.path}: [geometry.fluid]", deform=scene.coupling["deformation"],
+                                   traction=scene.coupling["traction"])
+        ctx.phases.add("transfer", time.perf_counter() - start)
+        interface, g = self.on_grid.interface, self.on_grid
+        self.interface = {**interface.describe(), "traction": scene.coupling["traction"]}  # as first built
+        if isinstance(interface, WettedInterface):
+            ctx.log(f"interface {scene.coupling['interface']}: {interface.num_vertices} vertices, "
+                    f"{interface.num_triangles} triangles, pressure sampled up to {interface.offset:.3g} m into "
+                    f"the fluid")
+            if g.outside > 1e-9:
+                ctx.log(f"the fluid grid covers the wetted interface; {g.outside:.3g} of the solid's volume lies "
+                        f"outside it")
+        else:  # stand-in solids without a boundary (spring_solid): the volume projection onto all vertices
+            ctx.log(f"interface: no boundary triangles from the solid; pressure projected onto all "
+                    f"{ctx.meshes['solid'].num_points} solid vertices (volume projection)")
+        ctx.log(f"transfers: {g.to_fluid.stats['pairs_intersected']} cell pairs; solid fills "
+                f"{np.count_nonzero(g.fraction > 0)} fluid cells"
+                f"{'; rebuilt from the deformed solid every iteration' if g.deform else ''}")
+
+    def update(self, outputs) -> SolidOnGrid:
+        """The solid on the grid as the solid's latest displacement deforms it (two-way coupling);
+        once per new output of the solid, however many operators ask."""
+        u = outputs.get("solid", {}).get("displacement")
+        if u is not None and u is self._seen:
+            return self.on_grid
+        self._seen = u
+        try:
+            self.ctx.phases.timed("geometry update", self.on_grid.update, u)
+        except CouplerError as exc:
+            largest = float(np.max(np.linalg.norm(u, axis=1))) if u is not None else 0.0
+            raise CouplerError(f"the deformed solid (largest displacement {largest:.3g} m) no longer fits the "
+                               f"fluid grid: {exc}") from None
+        return self.on_grid
+
+    def summary(self) -> dict:
+        return {"interface": self.interface, "geometry_update": self.on_grid.describe()}
+
+
+def _fluid_solid(ctx: OperatorContext) -> FluidSolid:
+    return ctx.shared("fluid_solid", FluidSolid)
+
+
+class PressureTrace:
+    """Steps 2-3: the fluid's cell pressure traced on the wetted interface (the interface
+    vector: one value per interface vertex), delivered at every solid vertex (zero off it)."""
+
+    units = "Pa"
+
+    def __init__(self, ctx: OperatorContext):
+        self.fs = _fluid_solid(ctx)
+        interface = self.fs.on_grid.interface
+        self.size, self.weights = interface.size, self.fs.on_grid.reference_weights
+
+    def evaluate(self, outputs) -> np.ndarray:
+        return self.fs.on_grid.interface.from_fluid(outputs["fluid"]["pressure"])
+
+    def deliver(self, x) -> np.ndarray:
+        return self.fs.on_grid.interface.to_solid_vertices(x)
+
+
+class ViscousTraction:
+    """Steps 2-3 with the fluid's full stress: the traction (-p I + tau) n at the interface
+    vertices (three values each), the wall shear from three velocity samples
+    (:mod:`coupler.fsi.viscous`); its pressure and viscous forces are the step's figures."""
+
+    units = "Pa"
+
+    def __init__(self, ctx: OperatorContext):
+        self.fs = _fluid_solid(ctx)
+        self.traction = FluidTraction(ctx.scene.fluid_material["viscosity"])
+        interface = self.fs.on_grid.interface
+        self.size, self.weights = 3 * interface.size, np.repeat(self.fs.on_grid.reference_weights, 3)
+        self.last: dict = {}
+
+    def evaluate(self, outputs) -> np.ndarray:
+        g = self.fs.on_grid
+        wall = outputs["solid"]["velocity"][g.interface.vertices]
+        parts = self.traction.parts(g, outputs["fluid"]["pressure"], outputs["fluid"]["velocity"], wall)
+        self.last = {**traction_figures(g.interface.weights, *parts), "fits": self.traction.fits}
+        return (parts[0] + parts[1]).ravel()
+
+    def deliver(self, x) -> np.ndarray:
+        return self.fs.on_grid.interface.to_solid_vertices(np.asarray(x).reshape(-1, 3))
+
+    def figures(self) -> dict:
+        """How much the viscous part matters, for the step's record (``traction``)."""
+        return {"traction": self.last}
+
+
+class SolidFraction:
+    """Before Step 1: the solid volume fraction of every grid cell (exact intersection volumes of
+    the deformed solid's indicator, P0 -> Q0)."""
+
+    units = "1"
+
+    def __init__(self, ctx: OperatorContext):
+        self.fs = _fluid_solid(ctx)
+
+    def evaluate(self, outputs) -> np.ndarray:
+        return self.fs.update(outputs).fraction
+
+    def deliver(self, value) -> np.ndarray:
+        return value
+
+
+class SolidVelocity:
+    """Step 6: the solid velocity on the grid cells, P1 (deformed solid) -> Q0, pseudo-L2; zero
+    in cells the solid does not reach."""
+
+    units = "m/s"
+
+    def __init__(self, ctx: OperatorContext):
+        self.fs = _fluid_solid(ctx)
+
+    def evaluate(self, outputs) -> np.ndarray:
+        return self.fs.update(outputs).to_fluid.apply(outputs["solid"]["velocity"], fill=0.0)
+
+    def deliver(self, value) -> np.ndarray:
+        return value
+
+
+#: operator name (as plans write it) -> class, built as ``cls(context)``
+OPERATORS = {"pressure_trace": PressureTrace, "viscous_traction": ViscousTraction,
+             "solid_fraction": SolidFraction, "solid_velocity": SolidVelocity}

@@ -1,0 +1,49 @@
+"""Effect ``elasticity``: the rock deforms elastically (paper eq. 5 and 7): a solid
+participant on the rock's mesh, with its loads; static, one solve per step."""
+
+NAME = "elasticity"
+DESCRIPTION = "linear elastic deformation of the rock (solid participant)"
+ORDER = 0
+
+
+def describe_load(load) -> str:
+    where = f" on '{load.boundary}'" if load.boundary else ""
+    if load.type == "dirichlet":
+        return f"dirichlet{where}: u_{''.join(load.components)} = {load.value:g}"
+    if load.type in ("pressure", "fluid_pressure"):
+        source = " (static fluid pressure, no fluid solver)" if load.type == "fluid_pressure" else ""
+        return f"pressure{where}: {load.value:g} Pa{source}"
+    return f"{load.type}{where}: {load.value}"
+
+
+def solid_config(scene) -> dict:
+    """What the solid participant is configured with: its mesh (a file or a box), named
+    boundaries, material, loads (each with its scene key) and solver settings."""
+    from pathlib import Path
+
+    solver = scene.solvers["solid"]
+    geometry = {"mesh": str(Path(scene.solid.mesh).resolve())} if scene.solid.mesh else {"box": scene.solid.box}
+    loads = [{"type": "pressure" if load.type == "fluid_pressure" else load.type, "key": f"[loads.{i}]",
+              "boundary": load.boundary, "value": load.value, "components": load.components}
+             for i, load in enumerate(scene.loads, start=1)]
+    config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material, "loads": loads,
+              "degree": solver["degree"], "linear_solver": solver["linear_solver"], "rtol": solver["rtol"],
+              "max_iterations": solver["max_iterations"], "dynamic": False, "fluid_density": 0.0}
+    if solver["participant"] == "spring_solid":
+        config["k"] = solver["stiffness"]
+    return config
+
+
+def plan(scene, plan) -> None:
+    from coupler.plan.plan import PlannedParticipant
+
+    solver = scene.solvers["solid"]
+    plan.participants.append(PlannedParticipant("solid", solver["participant"], solver["module"], solver["ranks"],
+                                                solid_config(scene), solver["allow_unconverged"]))
+    plan.loads += [describe_load(load) for load in scene.loads]
+    steps = scene.time["steps"]
+    plan.iteration = "static: one solve" if steps == 1 else \
+        f"{steps} time steps of {scene.time['dt']:g} s, one solve per step"
+    if scene.material["nu"] > 0.49 and solver.get("degree", 1) == 1:
+        plan.notes.append(f"nu = {scene.material['nu']:g} is nearly incompressible: P1 tetrahedra lock; "
+                          f"use [solvers.solid] degree = 2")

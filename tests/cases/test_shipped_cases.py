@@ -1,0 +1,80 @@
+"""Every shipped case runs, says honestly how it ended, and gives the numbers recorded before
+the coupler was reorganised (tests/data/case_figures.json: the statistics of every field of
+every VTU file, the coupling iterations and the summary's numbers).
+
+Run the long ones with ``bash scripts/test.sh -m slow``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from case_figures import RECORD, figures, run_case
+from vc_helpers import CASES
+
+RECORDED = json.loads(RECORD.read_text())
+SLOW = {"cube_obstacle_large", "fracture_closure", "rock_obstacle", "fracture_flow", "hertz", "parallel_plates"}
+#: fields a case no longer writes, on purpose: the quasi-static flow plan sends no solid velocity to
+#: the grid (the solid is at rest in each step; the field was zero)
+DROPPED = {("small_fracture", "fluid", "cell:solid_velocity"), ("fracture_flow", "fluid", "cell:solid_velocity"),
+           ("plates_fsi", "fluid", "cell:solid_velocity"), ("standin_flow", "fluid", "cell:solid_velocity")}
+#: summary entries that moved in the reorganisation: old path -> new path (None: no longer reported)
+MOVED = {"/couplings": None}
+RTOL = 1e-7
+
+
+def cases() -> list:
+    return [pytest.param(name, marks=pytest.mark.slow) if name in SLOW else name for name in sorted(RECORDED)]
+
+
+def honest(summary: dict) -> None:
+    """summary.json's status and converged flags agree with every inner solve it reports."""
+    assert summary["status"] == "completed", summary.get("error")
+    for step in summary.get("steps", []):
+        if not isinstance(step.get("solves"), dict):  # a study's step (no participant reports)
+            continue
+        final = [r for reports in step["solves"].values() for r in reports]
+        inner = all(r["converged"] or r["accepted"] for r in final)
+        assert step["inner_converged"] == inner and step["converged"] == (inner and step["coupling_converged"])
+        assert step["converged"], step
+        assert final, f"step {step['step']}: no inner solve reported"
+
+
+def close(a, b) -> bool:
+    return np.allclose(np.asarray(a, float), np.asarray(b, float), rtol=RTOL, atol=RTOL * max(
+        np.max(np.abs(np.asarray(b, float)), initial=0.0), 1e-300))
+
+
+@pytest.mark.parametrize("name", cases())
+def test_a_shipped_case_is_honest_and_unchanged(tmp_path, name):
+    out = run_case(name, tmp_path)
+    summary = json.loads((out / "summary.json").read_text())
+    honest(summary)
+    found, recorded = figures(out), RECORDED[name]
+    series = lambda file: file.split("_")[0]  # noqa: E731 - solid_0001.vtu -> solid
+    changed = []
+    for file, fields in recorded.items():
+        if file in ("iterations", "summary"):
+            continue
+        assert file in found, f"{name}: {file} no longer written"
+        for field, stats in fields.items():
+            if (name, series(file), field) in DROPPED:
+                continue
+            assert field in found[file], f"{name}: {file} lost {field}"
+            if not close(found[file][field], stats):
+                changed.append(f"{file} {field}: {found[file][field]} (was {stats})")
+    if "iterations" in recorded:
+        assert found["iterations"] == recorded["iterations"]
+    for path, value in recorded["summary"].items():
+        key = next((old for old in MOVED if path.startswith(old)), None)
+        if key is not None:
+            if MOVED[key] is None:
+                continue
+            path = MOVED[key] + path[len(key):]
+        if path not in found["summary"]:
+            changed.append(f"summary {path}: missing (was {value})")
+        elif not close(found["summary"][path], value):
+            changed.append(f"summary {path}: {found['summary'][path]} (was {value})")
+    assert not changed, f"{name}:\n" + "\n".join(changed)
