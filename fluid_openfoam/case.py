@@ -48,9 +48,10 @@ from pathlib import Path
 
 import numpy as np
 
+from transfer.grid import BOX_FACES
+
 from .settings import DECOMPOSITIONS, PENALIZATIONS, SOLID_VELOCITIES
 
-FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 # vertex numbering of the block: 0 (x0,y0,z0) 1 (x1,y0,z0) 2 (x1,y1,z0) 3 (x0,y1,z0), 4-7 at z1
 _FACE_VERTS = {"xmin": (0, 4, 7, 3), "xmax": (2, 6, 5, 1), "ymin": (1, 5, 4, 0),
                "ymax": (3, 7, 6, 2), "zmin": (0, 3, 2, 1), "zmax": (4, 5, 6, 7)}
@@ -129,12 +130,12 @@ def _face_condition(spec) -> dict:
 def face_conditions(config: dict) -> dict[str, dict]:
     """Condition per box face from the fluid config (see module doc)."""
     walls = config.get("walls", "wall")
-    out = {f: _face_condition(walls) for f in FACES}
+    out = {f: _face_condition(walls) for f in BOX_FACES}
     out["xmin"] = _face_condition(config.get("inlet", {"velocity": [1.0, 0.0, 0.0]}))
     out["xmax"] = _face_condition(config.get("outlet", {"pressure": 0.0}))
     for face, spec in (config.get("boundaries") or {}).items():
-        if face not in FACES:
-            raise ValueError(f"unknown face {face!r} in boundaries (faces: {', '.join(FACES)})")
+        if face not in BOX_FACES:
+            raise ValueError(f"unknown face {face!r} in boundaries (faces: {', '.join(BOX_FACES)})")
         out[face] = _face_condition(spec)
     return out
 
@@ -232,7 +233,7 @@ def block_mesh_dict(grid: Grid, faces: dict) -> str:
     mesh_type = {"wall": "wall", "slip": "patch", "symmetry": "symmetryPlane", "empty": "empty",
                  "velocity": "patch", "pressure": "patch"}
     bnd = []
-    for f in FACES:
+    for f in BOX_FACES:
         bnd.append(f"    {f}\n    {{\n        type {mesh_type[faces[f]['kind']]};\n"
                    f"        faces ( ({' '.join(map(str, _FACE_VERTS[f]))}) );\n    }}")
     return (_header("dictionary", "blockMeshDict", "system")
@@ -249,7 +250,7 @@ def boundary_u(faces: dict, face_values: dict | None = None, binary: bool = Fals
     from .fields import format_list
 
     out = []
-    for f in FACES:
+    for f in BOX_FACES:
         c = faces[f]
         body = {"wall": "type noSlip;", "slip": "type slip;", "symmetry": "type symmetryPlane;",
                 "empty": "type empty;", "pressure": "type zeroGradient;"}.get(c["kind"])
@@ -267,7 +268,7 @@ def boundary_u(faces: dict, face_values: dict | None = None, binary: bool = Fals
 
 def boundary_p(faces: dict, rho: float) -> str:
     out = []
-    for f in FACES:
+    for f in BOX_FACES:
         c = faces[f]
         body = {"symmetry": "type symmetryPlane;", "empty": "type empty;"}.get(c["kind"], "type zeroGradient;")
         if c["kind"] == "pressure":
@@ -279,7 +280,7 @@ def boundary_p(faces: dict, rho: float) -> str:
 def boundary_scalar_passive(faces: dict) -> str:
     """boundaryField of the ``solid`` field (zero gradient wherever a value is allowed)."""
     out = []
-    for f in FACES:
+    for f in BOX_FACES:
         body = {"symmetry": "type symmetryPlane;", "empty": "type empty;"}.get(faces[f]["kind"], "type zeroGradient;")
         out.append(f"    {f} {{ {body} }}")
     return "\n".join(out)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from .case import FACES
+from transfer.grid import BOX_FACES
 
 
 @dataclass
@@ -70,7 +70,7 @@ def body_sources(fraction, velocity, shape, d_max: float, closed=()) -> list[Bod
         us = (w[:, None] * v[where]).sum(axis=0) / w.sum()
         dropped = {}
         for face in closed:
-            axis, side = FACES.index(face) // 2, FACES.index(face) % 2
+            axis, side = BOX_FACES.index(face) // 2, BOX_FACES.index(face) % 2
             edge = np.take(mine, -1 if side else 0, axis=2 - axis)  # the body's cells on that face
             if edge.any() and us[axis] != 0.0:
                 dropped[face] = float(us[axis])

@@ -35,11 +35,8 @@ from mpi4py import MPI
 
 import dolfinx
 import dolfinx.cpp
+from transfer.grid import BOX_FACES
 from transfer.mesh import lattice_tetrahedra
-
-
-#: names of the six faces of a box, in the order (axis, side)
-BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 
 Predicate = Callable[[np.ndarray], np.ndarray]
 

@@ -16,6 +16,10 @@ from .errors import MeshError
 from .mesh import Mesh, lattice_hexahedra
 
 
+#: the six faces of an axis-aligned box (a grid, a box mesh), in the order (axis, side)
+BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+
+
 class StructuredGrid:
     """Boxes ``origin + spacing * [i, i+1] x [j, j+1] x [k, k+1]`` for ``0 <= (i, j, k) < shape``."""
 

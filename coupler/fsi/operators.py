@@ -2,7 +2,7 @@
 between the fluid grid and the solid mesh (paper 2.3).
 
 An operator is built once per run from an :class:`OperatorContext` (the participants'
-meshes, their geometry fields, the scene) and then, in every coupling iteration,
+meshes, their geometry fields, the scene) and its exchange, and then, in every coupling iteration,
 ``evaluate(outputs)`` turns the latest outputs of the participants (``{name: {field:
 array}}``) into the exchanged quantity and ``deliver(value)`` into the target's input
 array. The quantity of an accelerated exchange is the fixed point's interface vector x:
@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from coupler.errors import CouplerError
+from transfer import FunctionSpace, StructuredGrid, Transfer
 
 from .interface import SolidOnGrid, WettedInterface
 from .viscous import FluidTraction, traction_figures
@@ -105,7 +106,7 @@ class PressureTrace:
 
     units = "Pa"
 
-    def __init__(self, ctx: OperatorContext):
+    def __init__(self, ctx: OperatorContext, exchange=None):
         self.fs = _fluid_solid(ctx)
         interface = self.fs.on_grid.interface
         self.size, self.weights = interface.size, self.fs.on_grid.reference_weights
@@ -124,7 +125,7 @@ class ViscousTraction:
 
     units = "Pa"
 
-    def __init__(self, ctx: OperatorContext):
+    def __init__(self, ctx: OperatorContext, exchange=None):
         self.fs = _fluid_solid(ctx)
         self.traction = FluidTraction(ctx.scene.fluid_material["viscosity"])
         interface = self.fs.on_grid.interface
@@ -152,7 +153,7 @@ class SolidFraction:
 
     units = "1"
 
-    def __init__(self, ctx: OperatorContext):
+    def __init__(self, ctx: OperatorContext, exchange=None):
         self.fs = _fluid_solid(ctx)
 
     def evaluate(self, outputs) -> np.ndarray:
@@ -168,7 +169,7 @@ class SolidVelocity:
 
     units = "m/s"
 
-    def __init__(self, ctx: OperatorContext):
+    def __init__(self, ctx: OperatorContext, exchange=None):
         self.fs = _fluid_solid(ctx)
 
     def evaluate(self, outputs) -> np.ndarray:
@@ -178,6 +179,35 @@ class SolidVelocity:
         return value
 
 
-#: operator name (as plans write it) -> class, built as ``cls(context)``
+class Projection:
+    """A field of one participant carried to another's mesh by the variational transfer of
+    paper 2.1 (``T = D^-1 B``, eq. 3-4): P1 at a mesh's points or P0/Q0 in its cells on the
+    source side (by the field's length), P1 at the points of a mesh or Q0 in the cells of a grid
+    on the target side; NaN where the source does not reach is delivered as zero."""
+
+    def __init__(self, ctx: OperatorContext, exchange, method: str):
+        (source,) = exchange.sources
+        self.participant, self.field = source.split(".", 1)
+        S, G = ctx.meshes[self.participant], ctx.meshes[exchange.target_participant]
+        self.units = ""
+        self._spaces = {}
+        for kind, family in (("point", "Q1" if isinstance(S, StructuredGrid) else "P1"),
+                             ("cell", "Q0" if isinstance(S, StructuredGrid) or not S.is_simplex else "P0")):
+            self._spaces[kind] = FunctionSpace(S, family)
+        target = FunctionSpace(G, "Q0" if isinstance(G, StructuredGrid) else "P1")
+        self._transfers = {kind: Transfer.assemble(space, target, method) for kind, space in self._spaces.items()}
+
+    def evaluate(self, outputs) -> np.ndarray:
+        values = np.asarray(outputs[self.participant][self.field])
+        kind = "point" if len(values) == self._spaces["point"].num_dofs else "cell"
+        return self._transfers[kind].apply(values, fill=0.0)
+
+    def deliver(self, value) -> np.ndarray:
+        return value
+
+
+#: operator name (as plans write it) -> class, built as ``cls(context, exchange)``
 OPERATORS = {"pressure_trace": PressureTrace, "viscous_traction": ViscousTraction,
-             "solid_fraction": SolidFraction, "solid_velocity": SolidVelocity}
+             "solid_fraction": SolidFraction, "solid_velocity": SolidVelocity,
+             "l2": lambda ctx, exchange: Projection(ctx, exchange, "l2"),
+             "pseudo_l2": lambda ctx, exchange: Projection(ctx, exchange, "pseudo_l2")}

@@ -182,7 +182,7 @@ class Run:
         self.summary["participants_announced"] = announced
         self.meshes = meshes
         self.context = OperatorContext(self.scene, meshes, geometry, self.phases, self.log)
-        self.operators = [OPERATORS[e.operator](self.context) for e in self.plan.exchanges]
+        self.operators = [OPERATORS[e.operator](self.context, e) for e in self.plan.exchanges]
         self.summary.update(self.context.summary())
         self.series = {name: Series(self.out, name, mesh) for name, mesh in meshes.items()}
 

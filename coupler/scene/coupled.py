@@ -9,7 +9,6 @@ the participants to start and the fields that cross.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,17 +16,8 @@ from coupler.errors import SceneError
 from coupler.protocol.transport import check_endpoint
 from coupler.scene.tables import _REQUIRED, Table, output_directory
 from coupler.protocol.expressions import check_expression
+from transfer.grid import BOX_FACES
 
-#: effects a scene may ask for
-EFFECTS = {
-    "elasticity": "linear elastic deformation of the rock (solid participant)",
-    "dynamics": "inertia: elastodynamics with time steps (paper eq. 13)",
-    "fluid_pressure": "a static fluid pressure on fracture faces, applied as a load (no fluid solver)",
-    "flow": "fluid flow on a structured grid, coupled to the solid (fluid participant, paper 2.3)",
-    "contact": "contact between fracture faces (mortar coupling, paper 2.2)",
-}
-#: nonsmooth solvers of [contact] solver (nonsmooth.solvers)
-CONTACT_SOLVERS = ("active_set", "snes_vi", "multilevel")
 #: participant kinds -> the module started as ``python -m MODULE``
 SOLID_PARTICIPANTS = {"solid_fenicsx": "solid_fenicsx", "spring_solid": "coupler.standins"}
 FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "replay_fluid": "coupler.standins"}
@@ -35,9 +25,6 @@ LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 #: [coupling] traction: the fluid's pressure only, or its full stress with the viscous part (coupler/viscous.py)
 TRACTIONS = ("pressure", "full")
-BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
-#: conditions of the fluid grid's side faces ([flow] walls, faces); xmin is the inlet, xmax the outlet
-FACE_CONDITIONS = ("wall", "slip", "symmetry", "empty")
 #: how the openfoam participant turns solid fractions into drag (fluid_openfoam/penalization.py)
 PENALIZATIONS = ("wall", "linear", "power")
 #: decomposePar methods of a parallel openfoam fluid (fluid_openfoam/parallel.py)
@@ -83,9 +70,18 @@ class CoupledScene:
     output_dir: Path
     output: dict
     check: dict | None = None  # expected displacement: {"x"|"y"|"z": expr, "where": expr, "tolerance": float}
-    flow: dict | None = None  # fluid boundary conditions: inlet, outlet, walls, faces ([flow])
-    contact: dict | None = None  # [contact]: slave, master, solver, tolerances (effect 'contact')
     resources: dict = field(default_factory=lambda: {"memory_limit": None, "check_memory": True})
+    effect_settings: dict = field(default_factory=dict)  # effect -> what its rule read of its own tables
+
+    @property
+    def flow(self) -> dict | None:
+        """The fluid's boundary conditions ([flow], effect 'flow')."""
+        return self.effect_settings.get("flow")
+
+    @property
+    def contact(self) -> dict | None:
+        """The contact faces and solver ([contact], effect 'contact')."""
+        return self.effect_settings.get("contact")
 
     def error(self, table: str, key: str, reason: str) -> SceneError:
         return SceneError(f"{self.path}: [{table}] {key}: {reason}")
@@ -93,7 +89,7 @@ class CoupledScene:
 
 TABLES = {
     "case": {"description": "one line on what the case shows"},
-    "physics": {"effects": f"list of effects: {', '.join(EFFECTS)}"},
+    "physics": {"effects": "list of effects (coupler/plan/effects: one module each)"},
     "geometry": {"solid": "table: the rock mesh", "fluid": "table: the structured fluid grid"},
     "materials": {"solid": "table: E, nu, density of the rock", "fluid": "table: density, viscosity"},
     "loads": {},
@@ -109,21 +105,6 @@ TABLES = {
                              "((-p I + tau) n with the viscous wall shear)"},
     "messaging": {"mode": "zenoh mode: peer (default) or client", "connect": "zenoh endpoints to connect to",
                   "timeout": "seconds to wait for a participant's answer"},
-    "flow": {"inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
-             "inlet_pressure": "fixed inlet pressure on the grid face xmin [Pa]",
-             "outlet_pressure": "fixed outlet pressure on the grid face xmax [Pa] (default 0)",
-             "walls": f"condition of the other grid faces: one of {', '.join(FACE_CONDITIONS)} (default wall)",
-             "faces": "table: face (ymin ... zmax) -> condition ({ pressure = p } for an open face), "
-                      "overriding walls"},
-    "contact": {"slave": "the boundary carrying the contact pressure (dual basis; the finer or curved side)",
-                "master": "the opposite boundary (another body of the same mesh)",
-                "solver": f"nonsmooth solver, one of {', '.join(CONTACT_SOLVERS)} (default active_set)",
-                "tolerance": "active_set: scaled KKT residual (default 1e-10); snes_vi: relative residual; "
-                             "multilevel: step length [m]",
-                "max_iterations": "nonsmooth iterations per load step (default 100)",
-                "search_distance": "how far along the slave normal the master is looked for [m] (default: "
-                                   "half the slave's mean edge); at least the largest gap that may close",
-                "max_normal_angle": "largest angle between paired slave and master faces [deg] (default 45)"},
     "resources": {"memory_limit": "memory this run may use [bytes] (default: what the machine has available)",
                   "check_memory": "refuse a scene whose estimated memory exceeds what is available (default "
                                   "true; false runs it anyway)"},
@@ -167,13 +148,18 @@ SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI 
 
 
 def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
-    """Validate the tables of a coupled scene (already read from TOML)."""
+    """Validate the tables of a coupled scene (already read from TOML): the tables every scene
+    has here, then each effect's own tables through its rule (:mod:`coupler.plan.effects`)."""
+    from coupler.plan.effects import RULES
+
+    owned = {table: name for name, rule in RULES.items() for table in getattr(rule, "TABLES", {})}
     for name in data:
-        if name not in TABLES:
-            raise SceneError(f"{path}: unknown table [{name}]; known tables: {', '.join(f'[{t}]' for t in TABLES)}")
+        if name not in TABLES and name not in owned:
+            known = ", ".join(f"[{t}]" for t in [*TABLES, *owned])
+            raise SceneError(f"{path}: unknown table [{name}]; known tables: {known}")
     case = Table(path, "case", data.get("case", {}), TABLES["case"])
     physics = Table(path, "physics", data["physics"], TABLES["physics"])
-    effects = physics.strings("effects", choices=list(EFFECTS))
+    effects = physics.strings("effects", choices=list(RULES))
     if not effects:
         raise physics.error("effects", "must name at least one effect")
     if "elasticity" not in effects:
@@ -184,11 +170,7 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     if "solid" not in geometry.data:
         raise geometry.error("solid", "missing (the rock: a mesh file or a box)")
     solid = _solid_geometry(path, case_dir, geometry.data["solid"])
-    fluid = None
-    if "fluid" in geometry.data:
-        fluid = _fluid_geometry(path, geometry.data["fluid"])
-    if "flow" in effects and fluid is None:
-        raise geometry.error("fluid", "missing: the scene asks for 'flow' but has no fluid domain (a grid)")
+    fluid = _fluid_geometry(path, geometry.data["fluid"]) if "fluid" in geometry.data else None
 
     materials = Table(path, "materials", data.get("materials", {}), TABLES["materials"])
     if "solid" not in materials.data:
@@ -206,13 +188,15 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
 
     solvers = Table(path, "solvers", data.get("solvers", {}), TABLES["solvers"])
     solver_cfg = {"solid": _solver(path, "solid", solvers.data.get("solid", {}), SOLID_PARTICIPANTS, "solid_fenicsx")}
-    if "flow" in effects:
+    if any("fluid" in getattr(RULES[e], "ROLES", ()) for e in effects):
+        if fluid is None:
+            raise geometry.error("fluid", "missing: the scene asks for 'flow' but has no fluid domain (a grid)")
         solver_cfg["fluid"] = _solver(path, "fluid", solvers.data.get("fluid", {}), FLUID_PARTICIPANTS, "openfoam")
 
     time = Table(path, "time", data.get("time", {}), TABLES["time"])
-    dynamic = "dynamics" in effects or "flow" in effects
-    time_cfg = {"dt": time.number("dt", default=_REQUIRED if dynamic else 1.0, positive=True),
-                "steps": time.integer("steps", default=_REQUIRED if dynamic else 1)}
+    stepped = any(getattr(RULES[e], "TIME_STEPS", False) for e in effects)  # dynamics, flow: dt and steps given
+    time_cfg = {"dt": time.number("dt", default=_REQUIRED if stepped else 1.0, positive=True),
+                "steps": time.integer("steps", default=_REQUIRED if stepped else 1)}
 
     coupling = Table(path, "coupling", data.get("coupling", {}), TABLES["coupling"])
     coupling_cfg = {"acceleration": coupling.string("acceleration", "iqn-ils", ACCELERATIONS),
@@ -229,20 +213,6 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     if coupling_cfg["traction"] == "full" and solver_cfg["solid"]["participant"] != "solid_fenicsx":
         raise coupling.error("traction", "'full' needs a solid with a wetted surface (solid_fenicsx), got "
                                          f"{solver_cfg['solid']['participant']!r}")
-    if "flow" in effects:
-        if coupling_cfg["interface"] is None:
-            raise coupling.error("interface", "missing: the solid boundary the fluid pressure acts on")
-        names = [coupling_cfg["interface"]] if isinstance(coupling_cfg["interface"], str) else coupling_cfg["interface"]
-        for name in names:
-            if name not in solid.boundaries:
-                raise coupling.error("interface", f"unknown boundary {name!r}; named boundaries: "
-                                                  f"{', '.join(solid.boundaries)}")
-
-    flow = _flow(path, data["flow"], fluid, effects) if "flow" in data else None
-    if flow is None and "flow" in effects and solver_cfg["fluid"]["participant"] == "openfoam":
-        raise SceneError(f"{path}: [flow] inlet_velocity: missing: the openfoam fluid needs a [flow] table with "
-                         f"inlet_velocity = [u, v, w] or inlet_pressure = p (Pa)")
-
     messaging = Table(path, "messaging", data.get("messaging", {}), TABLES["messaging"])
     messaging_cfg = {"mode": messaging.string("mode", "peer", ("peer", "client")),
                      "connect": messaging.strings("connect", []),
@@ -266,50 +236,24 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
             raise t.error("z", "give the expected displacement of at least one component (x, y or z)")
         check["tolerance"] = t.number("tolerance", positive=True)
 
-    contact = _contact(path, data.get("contact"), solid, effects, solver_cfg["solid"])
-
     res = Table(path, "resources", data.get("resources", {}), TABLES["resources"])
     resources = {"memory_limit": res.number("memory_limit", None, positive=True),
                  "check_memory": res.boolean("check_memory", True)}
 
     out = Table(path, "output", data.get("output", {}), TABLES["output"])
     output_dir = output_directory(case_dir, out, output)
-    return CoupledScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
+    scene = CoupledScene(path=path, case_dir=case_dir, description=case.string("description", None) or "",
                         effects=effects, solid=solid, fluid=fluid, material=material,
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
-                        output={"every": out.integer("every", 1)}, check=check, flow=flow,
-                        contact=contact, resources=resources)
-
-
-def _contact(path, data, solid: SolidGeometry, effects, solid_solver: dict) -> dict | None:
-    """[contact]: the two contact boundaries and the nonsmooth solver (effect 'contact')."""
-    if data is None:
-        if "contact" in effects:
-            raise SceneError(f"{path}: [contact] slave: missing: the effect 'contact' needs a [contact] table "
-                             f"with slave and master boundaries")
-        return None
-    t = Table(path, "contact", data, TABLES["contact"])
-    if "contact" not in effects:
-        raise t.error("slave", "a [contact] table needs the effect 'contact' in [physics] effects")
-    for other in ("flow", "dynamics"):
-        if other in effects:
-            raise SceneError(f"{path}: [physics] effects: 'contact' with '{other}' is not supported "
-                             f"(contact is static: load steps over [time] steps)")
-    if solid_solver["participant"] != "solid_fenicsx" or solid_solver["ranks"] != 1 or solid_solver["degree"] != 1:
-        raise SceneError(f"{path}: [solvers.solid]: contact needs participant solid_fenicsx, ranks = 1, degree = 1")
-    cfg = {"slave": t.string("slave"), "master": t.string("master"),
-           "solver": t.string("solver", "active_set", CONTACT_SOLVERS),
-           "tolerance": t.number("tolerance", 1e-10, positive=True),
-           "max_iterations": t.integer("max_iterations", 100),
-           "search_distance": t.number("search_distance", None, positive=True),
-           "max_normal_angle": t.number("max_normal_angle", 45.0, positive=True, maximum=90.0)}
-    for key in ("slave", "master"):
-        if cfg[key] not in solid.boundaries:
-            raise t.error(key, f"unknown boundary {cfg[key]!r}; named boundaries: {', '.join(solid.boundaries)}")
-    if cfg["slave"] == cfg["master"]:
-        raise t.error("master", f"the same boundary as slave ({cfg['slave']!r}): contact is between two bodies")
-    return cfg
+                        output={"every": out.integer("every", 1)}, check=check, resources=resources)
+    for table, name in owned.items():
+        if table in data and name not in effects:
+            raise SceneError(f"{path}: [{table}]: needs the effect {name!r} in [physics] effects")
+    for name in effects:
+        if hasattr(RULES[name], "parse"):
+            RULES[name].parse(scene, data)
+    return scene
 
 
 def _interface(coupling: Table):
@@ -371,52 +315,6 @@ def _fluid_geometry(path, data) -> FluidGeometry:
     if any(h <= 0 for h in spacing):
         raise t.error("spacing", f"must be positive, got {spacing}")
     return FluidGeometry(t.vector("origin"), spacing, shape)
-
-
-def _flow(path, data, fluid: FluidGeometry | None, effects) -> dict:
-    """The fluid's boundary conditions on the faces of its grid ([flow])."""
-    t = Table(path, "flow", data, TABLES["flow"])
-    if "flow" not in effects:
-        raise SceneError(f"{path}: [flow]: fluid boundary conditions need the effect 'flow' in [physics] effects")
-    if ("inlet_velocity" in t.data) == ("inlet_pressure" in t.data):
-        raise t.error("inlet_velocity", "give exactly one of inlet_velocity = [u, v, w] (m/s) or "
-                                        "inlet_pressure = p (Pa)")
-    if "inlet_velocity" in t.data:
-        inlet = {"velocity": t.vector("inlet_velocity")}
-    else:
-        inlet = {"pressure": t.number("inlet_pressure")}
-    outlet = {"pressure": t.number("outlet_pressure", 0.0)}
-    walls = t.string("walls", "wall", FACE_CONDITIONS)
-    faces_data = t.data.get("faces", {})
-    if not isinstance(faces_data, dict):
-        raise t.error("faces", f"must be a table face -> condition, got {faces_data!r}")
-    sides = BOX_FACES[2:]
-    faces = {}
-    for face, condition in faces_data.items():
-        where = f"{path}: [flow.faces] {face}"
-        if face in ("xmin", "xmax"):
-            raise SceneError(f"{where}: xmin is the inlet and xmax the outlet (inlet_*, outlet_pressure); "
-                             f"faces sets {', '.join(sides)}")
-        if face not in sides:
-            raise SceneError(f"{where}: unknown face; use one of {', '.join(sides)}")
-        if isinstance(condition, dict):  # an open face: { pressure = p } (Pa), e.g. where a moving body leaves the grid
-            if set(condition) != {"pressure"} or isinstance(condition["pressure"], bool) \
-                    or not isinstance(condition["pressure"], (int, float)) or not math.isfinite(condition["pressure"]):
-                raise SceneError(f"{where}: a table condition is {{ pressure = p }} (Pa, finite), got {condition!r}")
-            faces[face] = {"pressure": float(condition["pressure"])}
-            continue
-        if condition not in FACE_CONDITIONS:
-            raise SceneError(f"{where}: unknown condition {condition!r}; use one of "
-                             f"{', '.join(map(repr, FACE_CONDITIONS))} or {{ pressure = p }}")
-        faces[face] = condition
-    for axis, (lo, hi) in ((1, ("ymin", "ymax")), (2, ("zmin", "zmax"))):
-        a, b = faces.get(lo, walls), faces.get(hi, walls)
-        if (a == "empty") != (b == "empty"):
-            raise t.error("faces", f"'empty' (2D) needs both {lo} and {hi}, got {lo} = {a!r}, {hi} = {b!r}")
-        if a == "empty" and fluid is not None and fluid.shape[axis] != 1:
-            raise t.error("faces", f"'empty' on {lo} and {hi} needs one cell along {'xyz'[axis]} in "
-                                   f"[geometry.fluid] shape, got {fluid.shape[axis]}")
-    return {"inlet": inlet, "outlet": outlet, "walls": walls, "faces": faces}
 
 
 def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:

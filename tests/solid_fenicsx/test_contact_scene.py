@@ -43,7 +43,7 @@ def test_plan_of_the_hertz_scene():
     ({'master = "block_top"': 'master = "nope"'}, r"\[contact\] master: unknown boundary 'nope'"),
     ({'master = "block_top"': 'master = "slave"'}, r"\[contact\] master: the same boundary as slave"),
     ({'effects = ["elasticity", "contact"]': 'effects = ["elasticity"]'},
-     r"\[contact\] slave: a \[contact\] table needs the effect 'contact'"),
+     r"\[contact\]: needs the effect 'contact'"),
     ({'effects = ["elasticity", "contact"]': 'effects = ["elasticity", "contact", "dynamics"]',
       "steps = 2": "steps = 2\ndt = 1.0"}, r"'contact' with 'dynamics' is not supported"),
     ({"search_distance = 0.1": "search_distance = -1.0"}, r"\[contact\] search_distance: must be positive"),

@@ -3,6 +3,7 @@
 NAME = "dynamics"
 DESCRIPTION = "inertia: elastodynamics with time steps (paper eq. 13)"
 ORDER = 1
+TIME_STEPS = True  # [time] dt and steps are required
 
 
 def plan(scene, plan) -> None:

@@ -11,9 +11,91 @@ velocity on the grid (Step 6). A quasi-static scene sends no velocity: the solid
 in each step.
 """
 
+import math
+
+from coupler.errors import SceneError
+from coupler.scene.tables import Table
+from transfer.grid import BOX_FACES
+
 NAME = "flow"
 DESCRIPTION = "fluid flow on a structured grid, coupled to the solid (fluid participant, paper 2.3)"
 ORDER = 3
+TIME_STEPS = True  # [time] dt and steps are required
+ROLES = ("fluid",)  # the [solvers.X] tables it needs
+#: conditions of the fluid grid's side faces ([flow] walls, faces); xmin is the inlet, xmax the outlet
+FACE_CONDITIONS = ("wall", "slip", "symmetry", "empty")
+TABLES = {"flow": {
+    "inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
+    "inlet_pressure": "fixed inlet pressure on the grid face xmin [Pa]",
+    "outlet_pressure": "fixed outlet pressure on the grid face xmax [Pa] (default 0)",
+    "walls": f"condition of the other grid faces: one of {', '.join(FACE_CONDITIONS)} (default wall)",
+    "faces": "table: face (ymin ... zmax) -> condition ({ pressure = p } for an open face), overriding walls"}}
+
+
+def parse(scene, data: dict) -> None:
+    """The fluid domain, the wetted interface and the fluid's boundary conditions ([flow])."""
+    path = scene.path
+    if scene.fluid is None:
+        raise SceneError(f"{path}: [geometry] fluid: missing: the scene asks for 'flow' but has no fluid domain "
+                         f"(a grid)")
+    interface = scene.coupling["interface"]
+    if interface is None:
+        raise SceneError(f"{path}: [coupling] interface: missing: the solid boundary the fluid pressure acts on")
+    for name in [interface] if isinstance(interface, str) else interface:
+        if name not in scene.solid.boundaries:
+            raise SceneError(f"{path}: [coupling] interface: unknown boundary {name!r}; named boundaries: "
+                             f"{', '.join(scene.solid.boundaries)}")
+    if "flow" in data:
+        scene.effect_settings[NAME] = _boundary_conditions(path, data["flow"], scene.fluid)
+    elif scene.solvers["fluid"]["participant"] == "openfoam":
+        raise SceneError(f"{path}: [flow] inlet_velocity: missing: the openfoam fluid needs a [flow] table with "
+                         f"inlet_velocity = [u, v, w] or inlet_pressure = p (Pa)")
+
+
+def _boundary_conditions(path, data, fluid) -> dict:
+    """The fluid's boundary conditions on the faces of its grid ([flow])."""
+    t = Table(path, "flow", data, TABLES["flow"])
+    if ("inlet_velocity" in t.data) == ("inlet_pressure" in t.data):
+        raise t.error("inlet_velocity", "give exactly one of inlet_velocity = [u, v, w] (m/s) or "
+                                        "inlet_pressure = p (Pa)")
+    if "inlet_velocity" in t.data:
+        inlet = {"velocity": t.vector("inlet_velocity")}
+    else:
+        inlet = {"pressure": t.number("inlet_pressure")}
+    outlet = {"pressure": t.number("outlet_pressure", 0.0)}
+    walls = t.string("walls", "wall", FACE_CONDITIONS)
+    faces_data = t.data.get("faces", {})
+    if not isinstance(faces_data, dict):
+        raise t.error("faces", f"must be a table face -> condition, got {faces_data!r}")
+    sides = BOX_FACES[2:]
+    faces = {}
+    for face, condition in faces_data.items():
+        where = f"{path}: [flow.faces] {face}"
+        if face in ("xmin", "xmax"):
+            raise SceneError(f"{where}: xmin is the inlet and xmax the outlet (inlet_*, outlet_pressure); "
+                             f"faces sets {', '.join(sides)}")
+        if face not in sides:
+            raise SceneError(f"{where}: unknown face; use one of {', '.join(sides)}")
+        if isinstance(condition, dict):  # an open face: { pressure = p } (Pa), e.g. where a moving body leaves the grid
+            if set(condition) != {"pressure"} or isinstance(condition["pressure"], bool) \
+                    or not isinstance(condition["pressure"], (int, float)) or not math.isfinite(condition["pressure"]):
+                raise SceneError(f"{where}: a table condition is {{ pressure = p }} (Pa, finite), got {condition!r}")
+            faces[face] = {"pressure": float(condition["pressure"])}
+            continue
+        if condition not in FACE_CONDITIONS:
+            raise SceneError(f"{where}: unknown condition {condition!r}; use one of "
+                             f"{', '.join(map(repr, FACE_CONDITIONS))} or {{ pressure = p }}")
+        faces[face] = condition
+    for axis, (lo, hi) in ((1, ("ymin", "ymax")), (2, ("zmin", "zmax"))):
+        a, b = faces.get(lo, walls), faces.get(hi, walls)
+        if (a == "empty") != (b == "empty"):
+            raise t.error("faces", f"'empty' (2D) needs both {lo} and {hi}, got {lo} = {a!r}, {hi} = {b!r}")
+        if a == "empty" and fluid is not None and fluid.shape[axis] != 1:
+            raise t.error("faces", f"'empty' on {lo} and {hi} needs one cell along {'xyz'[axis]} in "
+                                   f"[geometry.fluid] shape, got {fluid.shape[axis]}")
+    return {"inlet": inlet, "outlet": outlet, "walls": walls, "faces": faces}
+
+
 
 
 def fluid_config(scene) -> dict:
@@ -34,8 +116,8 @@ def fluid_config(scene) -> dict:
         config.update(transient="dynamics" in scene.effects, dt=scene.time["dt"])
         if solver["keep_case"]:
             config["case_dir"] = str((Path(scene.output_dir) / "logs" / "fluid_case").resolve())
-        if scene.flow:
-            f = scene.flow
+        f = scene.effect_settings.get(NAME)
+        if f:
             config.update(inlet=f["inlet"], outlet=f["outlet"], walls=f["walls"], boundaries=dict(f["faces"]))
     return config
 
