@@ -29,6 +29,8 @@ APT_PACKAGES=(
   python3-dolfinx python3-mpi4py python3-petsc4py
   python3-scipy python3-numpy python3-meshio python3-vtk9 python3-matplotlib python3-gmsh
   python3-h5py    # meshio's XDMF needs it; only a Recommends of python3-meshio
+  libegl1 libosmesa6   # offscreen pictures: PyPI's vtk wheel renders through EGL, no X server
+  chromium         # the report page is tested in a real headless browser
   python3-venv python3-dev python3-pip
   build-essential cmake ninja-build git
 )

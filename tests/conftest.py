@@ -57,3 +57,10 @@ def grid():
 @pytest.fixture(scope="session")
 def spaces(src_tets, dst_tets):
     return FunctionSpace(src_tets, "P1"), FunctionSpace(dst_tets, "P1")
+
+
+@pytest.fixture(autouse=True)
+def no_pictures(monkeypatch):
+    """Runs in tests render no pictures unless the test asks for them ([output] pictures = true
+    or VARCOUPLE_PICTURES=1): rendering is tested on its own (tests/coupler/test_pictures.py)."""
+    monkeypatch.setenv("VARCOUPLE_PICTURES", "0")

@@ -249,7 +249,8 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
         of the last iteration and the window's :class:`StepRecord` (already in the
         result), once per window.
     progress:
-        an object with ``update(n, status)`` and ``close()`` told of every window
+        an object with ``update(n, status)`` and ``close()`` told of every window, and
+        optionally ``iteration(window, iteration, residual)`` of every coupling iteration
         (e.g. :class:`coupler.output.progress.ProgressBar`), or ``None``.
     weights:
         the lumped mass per dof of ``x`` (M-norm of the residual); also given to
@@ -344,6 +345,8 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                     t_iterate += time.perf_counter() - tic
                     _check_finite(Hx, window, k, "H(x)")
                     res = monitor.measure(x, Hx)
+                    if hasattr(bar, "iteration"):
+                        bar.iteration(n, k, res.relative)
                     if monitor.is_converged(res):
                         converged = True
                         break

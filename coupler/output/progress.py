@@ -4,9 +4,10 @@ On a terminal the bar redraws one line (``\\r``)::
 
     coupling [###########-------------------]  37/100  37%  00:12 < 00:20  it=4 res=3.1e-07
 
-When the stream is not a terminal (a log file, CI) and the bar was asked for
-explicitly, it writes a plain line at every tenth of the run instead; when it was
-not asked for (``enabled=None``) it stays silent there.
+On a terminal the status also follows the coupling iterations of the current step
+(:meth:`ProgressBar.iteration`). When the stream is not a terminal (a log file, CI) and the
+bar was asked for, it writes a plain line at every tenth of the run instead; when it was not
+asked for (``enabled=None``) it stays silent there.
 """
 
 from __future__ import annotations
@@ -99,6 +100,16 @@ class ProgressBar:
                 self._last_decile = decile
                 self.stream.write(self.line() + "\n")
                 self.stream.flush()
+
+    def iteration(self, window: int, iteration: int, residual: float) -> None:
+        """A coupling iteration of step `window` ended with this relative residual: shown live
+        on a terminal (a plain line per step elsewhere, from :meth:`update`)."""
+        self.status = f"step {window + 1}: iteration {iteration + 1}, residual {residual:.2e}"
+        if self.enabled and self.dynamic and not self._closed:
+            now = time.perf_counter()
+            if now - self._last_draw >= self.min_interval:
+                self._draw_dynamic()
+                self._last_draw = now
 
     def _draw_dynamic(self) -> None:
         text = self.line()

@@ -35,6 +35,7 @@ from coupler.errors import CouplerError, run_status
 from coupler.fsi.operators import OPERATORS, OperatorContext
 from coupler.output.plots import residual_plot
 from coupler.output.progress import ProgressBar
+from coupler.output.publish import publish
 from coupler.output.results import Series, write_summary
 from coupler.plan.plan import Plan, make_plan
 from coupler.protocol.transport import new_run_id
@@ -93,7 +94,7 @@ def _as_arrays(fields: dict) -> dict:
     return {k: np.asarray(f.data if isinstance(f, Field) else f) for k, f in fields.items()}
 
 
-def run(scene, log=print, progress: bool | None = None, run_id: str | None = None) -> dict:
+def run(scene, log=print, progress: bool | None = True, run_id: str | None = None) -> dict:
     """Run the coupled `scene`; return its summary (also in ``summary.json``)."""
     plan = make_plan(scene)
     log(f"memory: {check_memory(scene, estimate(scene))}")
@@ -103,7 +104,8 @@ def run(scene, log=print, progress: bool | None = None, run_id: str | None = Non
         log(f"warning: {note}")
     run_id = run_id or new_run_id()
     phases = Phases()
-    summary = {"case": str(scene.case_dir), "scene": str(scene.path), "run_id": run_id,
+    summary = {"case": str(scene.case_dir), "scene": str(scene.path), "description": scene.description,
+               "run_id": run_id,
                **plan.as_dict(), "status": "running", "steps": [], "phases_seconds": phases.seconds}
     write_summary(out, summary)
     start = time.perf_counter()
@@ -120,6 +122,7 @@ def run(scene, log=print, progress: bool | None = None, run_id: str | None = Non
     finally:
         summary["wall_seconds"] = time.perf_counter() - start
         write_summary(out, summary)
+        publish(out, summary, scene.output["pictures"], log)
     return summary
 
 

@@ -9,6 +9,7 @@ the participants to start and the fields that cross.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +30,14 @@ TRACTIONS = ("pressure", "full")
 PENALIZATIONS = ("wall", "linear", "power")
 #: decomposePar methods of a parallel openfoam fluid (fluid_openfoam/parallel.py)
 DECOMPOSITIONS = ("simple",)  # scotch: only a dummy library in Debian's OpenFOAM v1912
+
+#: environment variable giving the default of ``[output] pictures`` (the tests set it to 0)
+PICTURES_VAR = "VARCOUPLE_PICTURES"
+
+
+def pictures_default() -> bool:
+    return os.environ.get(PICTURES_VAR, "1").strip().lower() not in ("0", "false", "no", "off")
+
 
 @dataclass
 class SolidGeometry:
@@ -109,7 +118,9 @@ TABLES = {
                   "check_memory": "refuse a scene whose estimated memory exceeds what is available (default "
                                   "true; false runs it anyway)"},
     "output": {"directory": "output directory, relative to the case (default 'results')",
-               "every": "write fields every N steps (default 1)"},
+               "every": "write fields every N steps (default 1)",
+               "pictures": "render PNG pictures of what the scene simulated (default true; the environment "
+                           "variable VARCOUPLE_PICTURES=0 makes false the default)"},
     "check": {"x": "expected x displacement (expression in x, y, z)", "y": "expected y displacement",
               "z": "expected z displacement", "where": "expression selecting the vertices compared (default all)",
               "tolerance": "largest relative error accepted"},
@@ -246,7 +257,9 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                         effects=effects, solid=solid, fluid=fluid, material=material,
                         fluid_material=fluid_material, loads=loads, solvers=solver_cfg, time=time_cfg,
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
-                        output={"every": out.integer("every", 1)}, check=check, resources=resources)
+                        output={"every": out.integer("every", 1),
+                                "pictures": out.boolean("pictures", pictures_default())},
+                        check=check, resources=resources)
     for table, name in owned.items():
         if table in data and name not in effects:
             raise SceneError(f"{path}: [{table}]: needs the effect {name!r} in [physics] effects")

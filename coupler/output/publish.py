@@ -1,0 +1,30 @@
+"""What a finished (or failed) run leaves for people besides its data: the pictures of what
+it simulated and its report page, timed as the phase ``pictures``. Rendering is offscreen and
+never decides a run's status: a failure to render is written into the summary and the page."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from .report import write_page
+from .results import write_summary
+
+def publish(out: Path, summary: dict, pictures: bool, log=print) -> Path:
+    """Render the pictures of the run in `out` (when `pictures`), write its report page; returns it."""
+    rendered = []
+    if pictures and summary.get("steps"):
+        start = time.perf_counter()
+        try:
+            from .pictures import render
+
+            rendered = render(out, summary.get("effects", []))
+        except Exception as exc:  # noqa: BLE001 - a picture must not turn a run into a failure
+            summary["pictures_error"] = f"{type(exc).__name__}: {exc}"
+            log(f"warning: pictures not rendered: {summary['pictures_error']}")
+        summary.setdefault("phases_seconds", {})["pictures"] = time.perf_counter() - start
+        summary["pictures"] = [p.file for p in rendered]
+        write_summary(out, summary)
+    page = write_page(out, summary, rendered)
+    log(f"report: {page}")
+    return page

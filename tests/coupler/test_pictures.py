@@ -1,0 +1,128 @@
+"""Pictures and the report page of a run (coupler/output): rendered offscreen, not blank,
+showing a known field's extremes where they are, and a page a real browser loads without
+errors with every image resolved."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from coupler.cli import main
+from coupler.output import pictures
+from coupler.output.report import write_page
+from transfer.generate import box_tetrahedra
+from vc_helpers import CASES, copy_case
+
+VIRIDIS_MAX, VIRIDIS_MIN = np.array([253, 231, 37]), np.array([68, 1, 84])
+
+
+def image(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB"), dtype=float)
+
+
+def not_blank(path: Path) -> None:
+    """More than 5 % of the pixels differ from the (white) background, in more than one colour."""
+    pixels = image(path).reshape(-1, 3)
+    drawn = pixels[np.any(pixels < 250, axis=1)]
+    assert len(drawn) > 0.05 * len(pixels), path
+    assert np.std(drawn, axis=0).max() > 20, path
+
+
+def nearest(path: Path, colour) -> np.ndarray:
+    """(row, column) of the pixels closest to `colour`, averaged, above the colour bar."""
+    img = image(path)
+    img = img[: int(0.85 * len(img))]
+    distance = np.linalg.norm(img - np.asarray(colour, float), axis=2)
+    rows, cols = np.nonzero(distance <= distance.min() + 10)
+    return np.array([rows.mean(), cols.mean()])
+
+
+def grid_with_speed(tmp_path):
+    """A fluid grid (unit square, thin in z) whose speed x + y is largest at (1, 1)."""
+    import pyvista as pv
+
+    grid = pv.ImageData(dimensions=(21, 21, 3), spacing=(0.05, 0.05, 0.01)).cast_to_unstructured_grid()
+    centres = grid.cell_centers().points
+    grid.cell_data["velocity"] = np.column_stack([centres[:, 0] + centres[:, 1], np.zeros(len(centres)),
+                                                  np.zeros(len(centres))])
+    grid.cell_data["solid_fraction"] = np.zeros(grid.n_cells)
+    return grid
+
+
+def test_the_speed_slice_shows_the_fastest_and_slowest_corners_where_they_are(tmp_path):
+    pictures.flow_slice(grid_with_speed(tmp_path), None, tmp_path)
+    path = tmp_path / "flow_speed.png"
+    not_blank(path)
+    fast, slow = nearest(path, VIRIDIS_MAX), nearest(path, VIRIDIS_MIN)
+    # viewed from +z with y up: (1, 1) is the top right, (0, 0) the bottom left of the square
+    assert fast[1] > slow[1] + 200 and fast[0] < slow[0] - 200, (fast, slow)
+
+
+def solid_with_fields():
+    """A unit cube of tets: displacement growing with x (largest at x = 1), a contact face z = 0
+    in contact for x < 0.5 with a pressure 1 - x there."""
+    import pyvista as pv
+
+    mesh = box_tetrahedra((6, 6, 6))
+    solid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.cells}, mesh.points)
+    x = solid.points
+    solid.point_data["displacement"] = np.column_stack([0.01 * x[:, 0], np.zeros(len(x)), np.zeros(len(x))])
+    solid.point_data["von_mises"] = 1e6 * (1 + x[:, 0])
+    slave = np.isclose(x[:, 2], 0.0)
+    solid.point_data["slave"] = slave.astype(float)
+    solid.point_data["in_contact"] = (slave & (x[:, 0] < 0.5)).astype(float)
+    solid.point_data["contact_pressure"] = np.where(solid.point_data["in_contact"] > 0, 1e6 * (1 - x[:, 0]), 0.0)
+    solid.point_data["pressure"] = np.where(np.isclose(x[:, 2], 1.0), 1e5, 0.0)
+    return solid
+
+
+def test_every_effect_has_its_pictures_and_none_is_blank(tmp_path):
+    solid = solid_with_fields()
+    made = [pictures.deformed_solid(solid, tmp_path), pictures.von_mises_cut(solid, tmp_path),
+            pictures.wetted_pressure(solid, tmp_path), *pictures.contact_face(solid, tmp_path)]
+    assert [p.file for p in made] == ["solid_displacement.png", "solid_von_mises.png", "fluid_pressure_on_faces.png",
+                                      "contact_pressure.png", "contact_map.png"]
+    for p in made:
+        not_blank(tmp_path / p.file)
+    assert "displacement scaled x" in made[0].caption or "warped by" in made[0].caption
+    assert "50.0 %" not in made[4].caption  # the map counts the slave vertices in contact only
+
+
+def test_a_run_renders_its_pictures_and_a_report_a_browser_loads(tmp_path, monkeypatch, capsys):
+    if shutil.which("chromium") is None:
+        pytest.fail("chromium is not installed: scripts/install.sh installs it (the report page test needs it)")
+    from playwright.sync_api import sync_playwright
+
+    monkeypatch.setenv("VARCOUPLE_PICTURES", "1")
+    case = copy_case(CASES / "small_fracture", tmp_path, {"steps = 2": "steps = 1"})
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--output", str(out)]) == 0, capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["pictures"] == ["solid_displacement.png", "solid_von_mises.png", "flow_speed.png",
+                                   "fluid_pressure_on_faces.png"]
+    assert summary["phases_seconds"]["pictures"] > 0
+    for name in summary["pictures"]:
+        not_blank(out / name)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
+        page = browser.new_page()
+        problems = []
+        page.on("console", lambda m: problems.append(m.text) if m.type in ("error", "warning") else None)
+        page.on("pageerror", lambda e: problems.append(str(e)))
+        page.goto((out / "index.html").as_uri())
+        images = page.evaluate("Array.from(document.images).map(i => [i.complete, i.naturalWidth, i.alt])")
+        text = page.inner_text("body")
+        browser.close()
+    assert not problems, problems
+    assert len(images) == 5 and all(done and width > 0 for done, width, _ in images), images  # 4 + residuals
+    assert "completed" in text and "pressure_trace" in text and "simpleFoam" in text
+
+
+def test_the_report_of_a_failed_run_says_so(tmp_path):
+    summary = {"case": "cases/x", "status": "not_converged", "error": "InnerSolveNotConverged: boom", "steps": []}
+    page = write_page(tmp_path, summary, []).read_text()
+    assert 'class="status bad">not_converged' in page and "boom" in page and "No step finished" in page
