@@ -7,6 +7,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from .plots import solver_convergence
 from .report import write_page
 from .results import write_summary
 
@@ -25,6 +26,8 @@ def publish(out: Path, summary: dict, pictures: bool, log=print) -> Path:
         summary.setdefault("phases_seconds", {})["pictures"] = time.perf_counter() - start
         summary["pictures"] = [p.file for p in rendered]
         write_summary(out, summary)
+    if pictures:
+        solver_convergence(out / "convergence.png", summary.get("steps", []))
     page = write_page(out, summary, rendered)
     log(f"report: {page}")
     return page

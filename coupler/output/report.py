@@ -131,7 +131,9 @@ def _files(out: Path) -> str:
 
 #: plots a run may write besides its pictures: file -> (title, caption)
 PLOTS = {"residuals.png": ("Coupling residuals", "The relative interface residual (mass-weighted L2) of every "
-                                                 "coupling iteration of each step, and the tolerance.")}
+                                                 "coupling iteration of each step, and the tolerance."),
+         "convergence.png": ("Inner solver convergence", "The criterion of every inner solve that reports its "
+                                                         "history, per iteration of each step.")}
 
 
 def write_page(out: Path, summary: dict, pictures: list) -> Path:

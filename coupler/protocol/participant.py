@@ -71,10 +71,10 @@ class Participant(abc.ABC):
     extra_args: list[str] = []
 
     def report_solve(self, solver: str, converged: bool, iterations: int, residual: float, tolerance: float,
-                     detail: str = "", accepted: bool = False) -> SolveReport:
+                     detail: str = "", accepted: bool = False, history=()) -> SolveReport:
         """Record how an inner solve of the current ``advance`` ended (see :class:`SolveReport`)."""
         report = SolveReport(solver, bool(converged), int(iterations), float(residual), float(tolerance), detail,
-                             bool(accepted))
+                             bool(accepted), tuple(float(h) for h in history))
         self.__dict__.setdefault("_solves", []).append(report)
         return report
 

@@ -78,7 +78,8 @@ class SolveReport:
     ``residual`` is the final value of the solver's own stopping criterion and ``tolerance``
     the value it had to reach; ``iterations`` what it took; ``detail`` a short reason
     (``"iteration limit"``, a PETSc reason). ``accepted``: the participant was told to accept
-    this solve unconverged (a scene key such as ``allow_unconverged``).
+    this solve unconverged (a scene key such as ``allow_unconverged``). ``history``: the
+    criterion after each iteration, for solvers that keep it (the convergence plot).
     """
 
     solver: str
@@ -88,18 +89,23 @@ class SolveReport:
     tolerance: float
     detail: str = ""
     accepted: bool = False
+    history: tuple = ()
 
     def as_dict(self) -> dict:
         """JSON-ready (non-finite numbers as strings, which JSON has no words for)."""
-        return {"solver": self.solver, "converged": bool(self.converged), "iterations": int(self.iterations),
-                "residual": json_number(self.residual), "tolerance": json_number(self.tolerance),
-                "detail": self.detail, "accepted": bool(self.accepted)}
+        out = {"solver": self.solver, "converged": bool(self.converged), "iterations": int(self.iterations),
+               "residual": json_number(self.residual), "tolerance": json_number(self.tolerance),
+               "detail": self.detail, "accepted": bool(self.accepted)}
+        if self.history:
+            out["history"] = [json_number(h) for h in self.history]
+        return out
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "SolveReport":
         try:
             return cls(str(d["solver"]), bool(d["converged"]), int(d["iterations"]), float(d["residual"]),
-                       float(d["tolerance"]), str(d.get("detail", "")), bool(d.get("accepted", False)))
+                       float(d["tolerance"]), str(d.get("detail", "")), bool(d.get("accepted", False)),
+                       tuple(float(h) for h in d.get("history", ())))
         except (KeyError, TypeError, ValueError) as exc:
             raise ProtocolError(f"malformed solve report {d!r}: {exc}") from None
 

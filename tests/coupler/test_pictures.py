@@ -126,3 +126,15 @@ def test_the_report_of_a_failed_run_says_so(tmp_path):
     summary = {"case": "cases/x", "status": "not_converged", "error": "InnerSolveNotConverged: boom", "steps": []}
     page = write_page(tmp_path, summary, []).read_text()
     assert 'class="status bad">not_converged' in page and "boom" in page and "No step finished" in page
+
+
+def test_solvers_that_report_their_history_get_a_convergence_plot(tmp_path):
+    from coupler.output.plots import solver_convergence
+    from coupler.protocol.wire import SolveReport
+
+    report = SolveReport("contact multilevel", True, 4, 1e-11, 1e-10, history=(1e-2, 1e-5, 1e-8, 1e-11))
+    assert SolveReport.from_dict(report.as_dict()) == report  # the history travels
+    steps = [{"step": 0, "solves": {"solid": [report.as_dict()]}}]
+    assert solver_convergence(tmp_path / "convergence.png", steps)
+    not_blank(tmp_path / "convergence.png")
+    assert not solver_convergence(tmp_path / "none.png", [{"step": 0, "solves": {"solid": []}}])
