@@ -286,3 +286,22 @@ def test_monitor_summary_records_every_iteration():
     assert s["windows"][0]["iterations"] == 2 and s["windows"][0]["residuals"][0] == 1.0
     assert s["all_converged"] and s["norm"] == "euclidean"
     assert monitor.is_converged(interface_residual(np.zeros(2), np.full(2, 1e-13)))  # absolute floor
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_on_a_terminal_the_progress_line_follows_every_coupling_iteration():
+    p = StatefulParticipant()
+    terminal = _Terminal()
+    bar = ProgressBar(2, label="case", stream=terminal, min_interval=0.0)
+    run_coupled(2, 0.1, p.iterate, np.zeros(12), IQNILS(0.3), tolerance=1e-8, max_iterations=60, checkpoint=p,
+                progress=bar)
+    bar.close()
+    frames = terminal.getvalue().split("\r")
+    iterations = [f for f in frames if "step 1: iteration" in f]
+    assert len(iterations) >= 3 and "residual" in iterations[-1]  # redrawn in place, one frame per iteration
+    assert any("step 2: iteration 1," in f for f in frames) and "2/2" in frames[-1]
+    assert "<" in iterations[0]  # elapsed < estimated time left
