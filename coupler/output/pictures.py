@@ -242,8 +242,25 @@ def contact_face(solid, out: Path) -> list[Picture]:
     return pictures
 
 
-def render(out: Path, effects: list[str]) -> list[Picture]:
-    """The pictures of a run's effects from its last VTU files in `out`."""
+def render(out: Path, effects: list[str], timeout: float = 600.0) -> list[Picture]:
+    """The pictures of a run's effects from its last VTU files in `out`, rendered in a child
+    process: VTK's wheel and dolfinx's Debian libraries must not meet in one process (a
+    render after ``import dolfinx`` aborts with std::bad_alloc), and a crash in the renderer
+    must not take the coupler with it. Raises RuntimeError with the child's last words."""
+    import json
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", __name__, str(out), *effects], capture_output=True, text=True,
+                          timeout=timeout)
+    if done.returncode != 0:
+        last = " | ".join(done.stderr.strip().splitlines()[-3:])
+        raise RuntimeError(f"the renderer exited with code {done.returncode}: {last}")
+    return [Picture(**p) for p in json.loads(done.stdout.strip().splitlines()[-1])]
+
+
+def render_here(out: Path, effects: list[str]) -> list[Picture]:
+    """:func:`render` in this process (the child's work)."""
     import pyvista as pv
 
     pictures: list[Picture] = []
@@ -259,3 +276,13 @@ def render(out: Path, effects: list[str]) -> list[Picture]:
     if "contact" in effects and solid is not None:
         pictures += contact_face(solid, out)
     return [p for p in pictures if p is not None]
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+    from dataclasses import asdict
+
+    made = render_here(Path(sys.argv[1]), sys.argv[2:])
+    print(json.dumps([asdict(p) for p in made]))
+

@@ -7,7 +7,6 @@ import json
 from pathlib import Path
 
 import meshio
-import numpy as np
 
 from transfer import StructuredGrid
 

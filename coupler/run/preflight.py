@@ -21,7 +21,6 @@ meshes reach the user before a run is launched.
 
 from __future__ import annotations
 
-import os
 import resource
 from dataclasses import dataclass
 from pathlib import Path

@@ -3,7 +3,6 @@ processes over zenoh) and match their analytical solutions."""
 
 import json
 import shutil
-from pathlib import Path
 
 import meshio
 import numpy as np

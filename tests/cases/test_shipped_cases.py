@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from case_figures import RECORD, figures, run_case
-from vc_helpers import CASES
+
 
 RECORDED = json.loads(RECORD.read_text())
 SLOW = {"cube_obstacle_large", "fracture_closure", "rock_obstacle", "fracture_flow", "hertz", "parallel_plates"}

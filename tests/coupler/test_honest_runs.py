@@ -74,18 +74,21 @@ def _wait_for_steps(out, timeout=60):
     raise AssertionError("the run wrote no step")
 
 
-def test_sigterm_stops_the_participants_and_keeps_the_results(tmp_path):
+@pytest.mark.parametrize("sig, code, status, said", [(signal.SIGINT, 130, "interrupted", "interrupted"),
+                                                     (signal.SIGTERM, 143, "terminated", "terminated by signal 15")],
+                         ids=["ctrl_c", "sigterm"])
+def test_a_signal_stops_the_participants_and_keeps_the_results(tmp_path, sig, code, status, said):
     case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _wait_for_steps(out)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 143, err
-    assert err.strip().splitlines()[-1].startswith("varcouple: error: terminated by signal 15")
+    assert proc.returncode == code, err
+    assert err.strip().splitlines()[-1].startswith(f"varcouple: error: {said}")
     s = summary(out)
-    assert s["status"] == "terminated" and len(s["steps"]) >= 1
+    assert s["status"] == status and len(s["steps"]) >= 1
     time.sleep(0.5)
     for p in s["participants_announced"].values():
         with pytest.raises(ProcessLookupError):

@@ -4,7 +4,6 @@ and ``varcouple run``: outputs, physics checks and clean errors on bad scene fil
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import meshio
 import numpy as np

@@ -6,7 +6,6 @@ cases/hertz` end to end (slow)."""
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -4,7 +4,6 @@ loads on boundaries that select no facet refused at configure."""
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
