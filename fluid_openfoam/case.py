@@ -4,17 +4,8 @@ Grid: ``origin``, ``spacing``, ``shape`` (cells); one blockMesh block, so the ce
 numbered x fastest, then y, then z, as :class:`transfer.StructuredGrid`. Every face of
 the box is its own patch, named ``xmin xmax ymin ymax zmin zmax``.
 
-Boundary description (the fluid's part of the scene, JSON-like)::
-
-    {"inlet":  {"velocity": [1, 0, 0]}   # at xmin: fixed velocity (m/s), p zeroGradient
-               or {"pressure": 1.0e3},   #          fixed pressure (Pa), U zeroGradient
-     "outlet": {"pressure": 0.0},        # at xmax: fixed pressure (Pa), U zeroGradient
-     "walls": "wall",                    # every other face (default no-slip wall)
-     "boundaries": {"zmin": "empty", "zmax": "empty"}}   # per-face override
-
-A face condition is ``"wall"`` (no slip), ``"slip"``, ``"symmetry"`` (symmetryPlane),
-``"empty"`` (2D: both faces of the direction with one cell), ``{"velocity": [u, v, w]}``
-or ``{"pressure": p}``.
+Boundary conditions: ``inlet`` (xmin), ``outlet`` (xmax), ``walls`` and ``boundaries`` of the
+fluid config, one condition per face (:mod:`coupler.protocol.fluid_faces`).
 
 Units. The case is incompressible (simpleFoam): ``nu = mu / rho`` (m^2/s) in
 constant/transportProperties, and OpenFOAM's ``p`` is the *kinematic* pressure p/rho
@@ -28,7 +19,7 @@ per cell, 0..1) is loaded by a ``readFields`` function object and drives an
 ``boxToCell`` + ``setToCellZone``). The model adds ``-D(solid) U`` to the kinematic
 momentum equation (implicitly, on the diagonal); ``D`` is a table linear in the
 field, from 0 at 0 to ``drag`` (1/s) at 1. The field written is not always the fraction
-itself: ``penalization`` (default ``"wall"``, see :mod:`fluid_openfoam.penalization`) maps
+itself: ``penalization`` (default ``"wall"``, see :mod:`transfer.penalization`) maps
 fractions to a per-cell drag with a sub-cell wall position; ``"linear"`` writes the fraction.
 
 Inlet masking: a fixed-velocity inlet (xmin) gets per-face values ``u_in (1 - f)``, f the
@@ -48,7 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from coupler.protocol.fluid_faces import face_conditions
 from transfer.grid import BOX_FACES
+from transfer.penalization import default_drag
 
 from .settings import DECOMPOSITIONS, PENALIZATIONS, SOLID_VELOCITIES
 
@@ -107,39 +100,6 @@ class Grid:
         return self.origin + (ijk + 0.5) * self.spacing
 
 
-def _face_condition(spec) -> dict:
-    """Normalize a face condition to {"kind": wall|slip|symmetry|empty|velocity|pressure, "value"}."""
-    if isinstance(spec, str):
-        if spec not in ("wall", "slip", "symmetry", "empty"):
-            raise ValueError(f"unknown face condition {spec!r} (wall, slip, symmetry, empty, "
-                             "{'velocity': [u,v,w]}, {'pressure': p})")
-        return {"kind": spec}
-    if isinstance(spec, dict) and len(spec) == 1 and "velocity" in spec:
-        v = np.asarray(spec["velocity"], dtype=float).reshape(-1)
-        if v.shape != (3,) or not np.all(np.isfinite(v)):
-            raise ValueError(f"velocity must be 3 finite numbers, got {spec!r}")
-        return {"kind": "velocity", "value": v}
-    if isinstance(spec, dict) and len(spec) == 1 and "pressure" in spec:
-        p = float(spec["pressure"])
-        if not np.isfinite(p):
-            raise ValueError(f"pressure must be finite, got {spec!r}")
-        return {"kind": "pressure", "value": p}
-    raise ValueError(f"bad face condition {spec!r}")
-
-
-def face_conditions(config: dict) -> dict[str, dict]:
-    """Condition per box face from the fluid config (see module doc)."""
-    walls = config.get("walls", "wall")
-    out = {f: _face_condition(walls) for f in BOX_FACES}
-    out["xmin"] = _face_condition(config.get("inlet", {"velocity": [1.0, 0.0, 0.0]}))
-    out["xmax"] = _face_condition(config.get("outlet", {"pressure": 0.0}))
-    for face, spec in (config.get("boundaries") or {}).items():
-        if face not in BOX_FACES:
-            raise ValueError(f"unknown face {face!r} in boundaries (faces: {', '.join(BOX_FACES)})")
-        out[face] = _face_condition(spec)
-    return out
-
-
 @dataclass
 class CaseSpec:
     grid: Grid
@@ -148,7 +108,7 @@ class CaseSpec:
     mu: float = 1.0e-3
     drag: float | None = None          # 1/s, see module doc
     drag_table: list | None = None     # [[fraction, D], ...] overriding the linear table
-    penalization: str = "wall"         # how fractions become drag, see penalization.py
+    penalization: str = "wall"         # how fractions become drag, see transfer/penalization.py
     penalization_exponent: float = 2.0  # for penalization "power"
     max_iterations: int = 2000         # simpleFoam iterations per advance
     tolerance: float = 1.0e-7          # residualControl for p and U
@@ -173,11 +133,10 @@ class CaseSpec:
     def drag_value(self) -> float:
         if self.drag is not None:
             return float(self.drag)
-        h = float(self.grid.spacing.min())
         u_ref = max((float(np.linalg.norm(c["value"])) for c in self.faces.values()
                      if c["kind"] == "velocity"), default=0.0)
         rate = 1.0 / self.time_step if self.transient else 0.0
-        return 1.0e4 * max(self.nu / h ** 2, rate, u_ref / h)
+        return default_drag(self.nu, float(self.grid.spacing.min()), u_ref, rate)
 
     def table(self) -> list:
         if self.drag_table is not None:

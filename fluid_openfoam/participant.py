@@ -12,7 +12,7 @@ Config (the fluid's part of the scene; same grid conventions as
      "drag": null,                        # 1/s, maximum penalization (default: see case.py)
      "penalization": "wall",              # fractions -> drag: "wall" (sub-cell wall position,
                                           # second order for grid-aligned walls), "linear"
-                                          # (stock table of the fraction), "power"; penalization.py
+                                          # (stock table of the fraction), "power"; transfer/penalization.py
      "max_iterations": 2000, "tolerance": 1e-7,   # simpleFoam per advance
      "case_dir": null}                    # kept; default: a temporary directory, removed on
                                           # every exit (the launcher removes it after SIGKILL)

@@ -15,7 +15,7 @@ Fraction handling (``method``):
   penalization ``"linear"``;
 * ``"linear"``: exact fractions with the stock linear drag table;
 * ``"power"``: exact fractions, drag ``D_max f^k``;
-* ``"wall"``: exact fractions, sub-cell wall drag (:mod:`fluid_openfoam.penalization`).
+* ``"wall"``: exact fractions, sub-cell wall drag (:mod:`transfer.penalization`).
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ from coupler.protocol.mpi import mpi_environment
 from . import case as _case
 from .fields import read_internal_field
 from .parallel import Decomposition, patch_cells
-from .penalization import drag_fraction
+from transfer.penalization import drag_fraction
 from .zones import body_sources, write_cell_set
 
 log = logging.getLogger("varcouple.fluid_openfoam")

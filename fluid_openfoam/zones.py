@@ -12,7 +12,7 @@ of tests/test_fluid_transient.py) pimpleFoam ran 50 unconverged PIMPLE iteration
 returned U ~ 1e4 m/s and p ~ 1e11 Pa after one step, against U = 0.1 m/s, p ~ 800 Pa.
 
 A body is a connected set (face neighbours) of solid-centred cells (fraction >= 1/2, the
-cells the penalization stops: :mod:`fluid_openfoam.penalization`). Its velocity ``U_s`` is
+cells the penalization stops: :mod:`transfer.penalization`). Its velocity ``U_s`` is
 the mean of the projected solid velocity over its *interface layer* (its cells with a
 fluid-centred face neighbour), weighted by the solid fraction: the velocity of the
 wetted wall, which is what the fluid must see (displacement flux, added mass). The body

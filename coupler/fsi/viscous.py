@@ -22,7 +22,7 @@ tests/test_viscous_traction.py against plane Poiseuille flow):
 ``"stress"``
     ``tau`` on the grid (:func:`velocity_gradient`: central differences, one-sided at
     the grid's faces, and next to a solid-centred cell a three-point difference through
-    the wall at its sub-cell distance, as :mod:`fluid_openfoam.penalization` places it),
+    the wall at its sub-cell distance, as :mod:`transfer.penalization` places it),
     traced to the pressure's surface. ``tau`` there is the stress half a cell or more
     from the wall: first order in the cell size (``1 - 2 d / w`` of the wall shear in a
     channel of aperture w).

@@ -26,7 +26,7 @@ LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 #: [coupling] traction: the fluid's pressure only, or its full stress with the viscous part (coupler/viscous.py)
 TRACTIONS = ("pressure", "full")
-#: how the openfoam participant turns solid fractions into drag (fluid_openfoam/penalization.py)
+#: how the openfoam participant turns solid fractions into drag (transfer/penalization.py)
 PENALIZATIONS = ("wall", "linear", "power")
 #: decomposePar methods of a parallel openfoam fluid (fluid_openfoam/parallel.py)
 DECOMPOSITIONS = ("simple",)  # scotch: only a dummy library in Debian's OpenFOAM v1912

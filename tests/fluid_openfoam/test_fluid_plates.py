@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from fluid_openfoam import plates
-from fluid_openfoam.penalization import drag_fraction
+from transfer.penalization import drag_fraction
 
 needs_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")
 

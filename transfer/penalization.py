@@ -1,9 +1,11 @@
-"""Drag (penalization) fields from solid volume fractions.
+"""Drag (volume penalization) fields from solid volume fractions, for the fluids on the grid.
 
-The stock ``solidification`` porosity model adds ``-D(T) U`` (kinematic, implicit) in
-every cell, with ``D`` a table of the cell's field value ``T``. The participant writes
-``T`` itself, so any per-cell drag can be imposed: ``T = D / D_max`` with the linear table
-``[(0, 0), (1, D_max)]``. Modes (``"penalization"`` in the fluid config):
+A fluid participant adds ``-D (U - U_s)`` (kinematic, per cell, ``U_s`` the solid's velocity)
+to its momentum equation, ``D = T D_max``: ``T`` in [0, 1] comes from the cell's solid volume
+fraction (exact, from :mod:`transfer`) and ``D_max`` (1/s) from :func:`default_drag` unless a
+scene gives it. The OpenFOAM fluid writes ``T`` as its ``solid`` field under the linear
+``solidification`` table ``[(0, 0), (1, D_max)]``; the Chorin fluid multiplies it out. Modes
+(``"penalization"`` in the fluid config):
 
 ``"linear"``
     ``T = f`` (the solid fraction). Because ``D_max`` is huge (about 1e4 viscous rates of
@@ -32,9 +34,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from transfer.grid import wall_distance
+from .grid import wall_distance
 
-from .settings import PENALIZATIONS
+#: how solid volume fractions become drag (the modes above)
+PENALIZATIONS = ("wall", "linear", "power")
+
+
+def default_drag(nu: float, h_min: float, u_ref: float = 0.0, rate: float = 0.0) -> float:
+    """``D_max = 1e4 max(nu / h_min^2, rate, u_ref / h_min)`` [1/s]: ``nu/h^2`` is the viscous
+    relaxation rate of one cell, ``rate`` the time-step rate ``1/dt`` of a transient solver,
+    ``u_ref/h`` the advective rate (``u_ref`` the inlet speed, if given). A fully solid cell then
+    carries a velocity about 1e-4 of its fluid neighbours' (relative to its solid velocity)."""
+    return 1.0e4 * max(nu / h_min ** 2, rate, u_ref / h_min)
 
 
 def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str = "wall",
