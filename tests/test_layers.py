@@ -8,13 +8,13 @@ import importlib.util
 
 from vc_helpers import ROOT
 
-PACKAGES = ("transfer", "nonsmooth", "coupler", "solid_fenicsx", "fluid_openfoam")
+PACKAGES = ("transfer", "nonsmooth", "coupler", "solid_fenicsx", "fluid_openfoam", "fluid_chorin")
 
 #: module prefix -> layer (the longest matching prefix wins); docs/architecture.md
 LAYERS = {
     "transfer": 0, "nonsmooth": 0,
     "coupler.errors": 1, "coupler.protocol": 1, "coupler.coupling": 1,
-    "solid_fenicsx": 2, "fluid_openfoam": 2, "coupler.standins": 2,
+    "solid_fenicsx": 2, "fluid_openfoam": 2, "fluid_chorin": 2, "coupler.standins": 2,
     "coupler.scene": 3, "coupler.plan": 3, "coupler.fsi": 3, "coupler.checks": 3,
     "coupler.run": 4, "coupler.output": 4,
     "coupler.cli": 5, "coupler": 5,
@@ -107,7 +107,7 @@ def test_every_import_goes_to_the_same_or_a_lower_layer():
 
 
 def test_participants_import_only_the_protocol_of_the_coupler():
-    participants = ("solid_fenicsx", "fluid_openfoam", "coupler.standins")
+    participants = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin", "coupler.standins")
     wrong = [f"{a} -> {b}" for a, targets in graph().items() if a.startswith(participants) for b in targets
              if b.startswith("coupler") and not b.startswith(PARTICIPANT_MAY_IMPORT + participants)]
     assert not wrong, "\n".join(sorted(wrong))
@@ -120,7 +120,7 @@ PENDING = {"coupler.run.studies.closure -> solid_fenicsx.contact_fracture",
 
 
 def test_the_coupler_imports_no_participant():
-    participants = ("solid_fenicsx", "fluid_openfoam")
+    participants = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin")
     wrong = {f"{a} -> {b}" for a, targets in graph().items() if a.startswith("coupler")
              and not a.startswith("coupler.standins") for b in targets if b.startswith(participants)}
     assert wrong == PENDING, "\n".join(sorted(wrong ^ PENDING))

@@ -29,7 +29,7 @@ from coupler.errors import SceneError
 
 MB = 2**20
 #: (fixed bytes, bytes per cell) of each participant kind; see the module docstring
-COSTS = {"openfoam": (150 * MB, 1400), "solid_fenicsx": (120 * MB, 1000), "coupler_solid": (100 * MB, 2000),
+COSTS = {"openfoam": (150 * MB, 1400), "chorin": (120 * MB, 2000), "solid_fenicsx": (120 * MB, 1000), "coupler_solid": (100 * MB, 2000),
          "coupler_fluid": (0, 300), "replay_fluid": (50 * MB, 100), "spring_solid": (50 * MB, 100)}
 
 

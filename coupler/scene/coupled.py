@@ -21,13 +21,15 @@ from transfer.grid import BOX_FACES
 
 #: participant kinds -> the module started as ``python -m MODULE``
 SOLID_PARTICIPANTS = {"solid_fenicsx": "solid_fenicsx", "spring_solid": "coupler.standins"}
-FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "replay_fluid": "coupler.standins"}
+FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "chorin": "fluid_chorin", "replay_fluid": "coupler.standins"}
 LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure")
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 #: [coupling] traction: the fluid's pressure only, or its full stress with the viscous part (coupler/viscous.py)
 TRACTIONS = ("pressure", "full")
 #: how the openfoam participant turns solid fractions into drag (transfer/penalization.py)
 PENALIZATIONS = ("wall", "linear", "power")
+#: pressure solvers of the chorin fluid (fluid_chorin/poisson.py)
+POISSON_METHODS = ("auto", "direct", "gamg")
 #: decomposePar methods of a parallel openfoam fluid (fluid_openfoam/parallel.py)
 DECOMPOSITIONS = ("simple",)  # scotch: only a dummy library in Debian's OpenFOAM v1912
 
@@ -140,15 +142,23 @@ SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI 
                "pressure": "replay_fluid: uniform pressure served",
                "feedback": "replay_fluid: pressure drop per unit mean solid velocity [Pa s/m]",
                "unconverged": "replay_fluid: time steps in which it reports an unconverged solve (for tests)",
-               "penalization": f"openfoam: solid fractions -> drag, one of {', '.join(PENALIZATIONS)}",
-               "penalization_exponent": "openfoam: exponent of penalization 'power'",
-               "drag": "openfoam: maximum penalization drag [1/s] (default 1e4 x the fastest cell rate)",
+               "penalization": f"openfoam, chorin: solid fractions -> drag, one of {', '.join(PENALIZATIONS)}",
+               "penalization_exponent": "openfoam, chorin: exponent of penalization 'power'",
+               "drag": "openfoam, chorin: maximum penalization drag [1/s] (default 1e4 x the fastest cell rate)",
+               "cfl": "chorin: Courant number of the explicit convection (default 0.5)",
+               "poisson": f"chorin: pressure solver, one of {', '.join(POISSON_METHODS)} (default auto: Cholesky "
+                          f"up to 30000 cells, CG + GAMG beyond)",
                "decomposition": f"openfoam with ranks > 1: decomposePar method, one of {', '.join(DECOMPOSITIONS)}",
                "max_iterations": "openfoam: simpleFoam iterations per coupling iteration (default 2000); "
+                                 "chorin: pseudo-time steps per coupling iteration (default 20000); "
                                  "solid_fenicsx: Krylov iterations per solve (default 1000)",
-               "tolerance": "openfoam: simpleFoam (PIMPLE with dynamics) residual tolerance (p and U)",
-               "substeps": "openfoam with dynamics: pimpleFoam time steps per coupling step (default 1)",
-               "outer_correctors": "openfoam with dynamics: PIMPLE outer iterations per time step at most (default 50)",
+               "tolerance": "openfoam: simpleFoam (PIMPLE with dynamics) residual tolerance (p and U); chorin: "
+                            "relative change of velocity and pressure per pseudo-time step (per outer iteration "
+                            "with dynamics)",
+               "substeps": "openfoam with dynamics: pimpleFoam time steps per coupling step (default 1); chorin: "
+                           "at least this many time steps (more if the explicit stability bound asks)",
+               "outer_correctors": "openfoam, chorin with dynamics: outer iterations per time step at most "
+                                   "(default 50)",
                "solid_velocity": "openfoam: 'bodies' (each solid body moves rigidly with its wetted layer's mean "
                                  "velocity, default) or 'none' (penalized towards rest)",
                "allow_unconverged": "accept this participant's unconverged inner solves on purpose (e.g. a "
@@ -403,4 +413,19 @@ def _solver(path, part, data, participants, default) -> dict:
         cfg["outer_correctors"] = t.integer("outer_correctors", 50)
         cfg["solid_velocity"] = t.string("solid_velocity", "bodies", ("bodies", "none"))
         cfg["keep_case"] = t.boolean("keep_case", False)
+    if part == "fluid" and cfg["participant"] == "chorin":
+        # types and choices checked here; a key the scene leaves out is None: the default of
+        # fluid_chorin/settings.py, which the participant fills in
+        if cfg["ranks"] != 1:
+            raise t.error("ranks", "the chorin fluid runs on one process (no grid slabs over MPI ranks yet)")
+        cfg["penalization"] = t.string("penalization", None, PENALIZATIONS)
+        cfg["penalization_exponent"] = t.number("penalization_exponent", None, positive=True)
+        if "penalization_exponent" in t.data and cfg["penalization"] != "power":
+            raise t.error("penalization_exponent", "applies to penalization = \"power\" only")
+        cfg["drag"] = t.number("drag", None, positive=True)
+        cfg["tolerance"] = t.number("tolerance", None, positive=True)
+        cfg["cfl"] = t.number("cfl", None, positive=True, maximum=1.0)
+        for key in ("max_iterations", "substeps", "outer_correctors"):
+            cfg[key] = t.integer(key) if key in t.data else None
+        cfg["poisson"] = t.string("poisson", None, POISSON_METHODS)
     return cfg

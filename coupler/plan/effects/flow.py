@@ -47,8 +47,9 @@ def parse(scene, data: dict) -> None:
                              f"{', '.join(scene.solid.boundaries)}")
     if "flow" in data:
         scene.effect_settings[NAME] = _boundary_conditions(path, data["flow"], scene.fluid)
-    elif scene.solvers["fluid"]["participant"] == "openfoam":
-        raise SceneError(f"{path}: [flow] inlet_velocity: missing: the openfoam fluid needs a [flow] table with "
+    elif scene.solvers["fluid"]["participant"] in ("openfoam", "chorin"):
+        raise SceneError(f"{path}: [flow] inlet_velocity: missing: the {scene.solvers['fluid']['participant']} "
+                         f"fluid needs a [flow] table with "
                          f"inlet_velocity = [u, v, w] or inlet_pressure = p (Pa)")
 
 
@@ -113,9 +114,13 @@ def fluid_config(scene) -> dict:
         config.update({k: solver[k] for k in ("penalization", "penalization_exponent", "drag", "max_iterations",
                                               "tolerance", "decomposition", "substeps", "outer_correctors",
                                               "solid_velocity")}, ranks=solver["solver_ranks"])
-        config.update(transient="dynamics" in scene.effects, dt=scene.time["dt"])
         if solver["keep_case"]:
             config["case_dir"] = str((Path(scene.output_dir) / "logs" / "fluid_case").resolve())
+    if solver["participant"] == "chorin":
+        config.update({k: solver[k] for k in ("penalization", "penalization_exponent", "drag", "max_iterations",
+                                              "tolerance", "substeps", "outer_correctors", "cfl", "poisson")})
+    if solver["participant"] in ("openfoam", "chorin"):
+        config.update(transient="dynamics" in scene.effects, dt=scene.time["dt"])
         f = scene.effect_settings.get(NAME)
         if f:
             config.update(inlet=f["inlet"], outlet=f["outlet"], walls=f["walls"], boundaries=dict(f["faces"]))
@@ -165,6 +170,13 @@ def plan(scene, plan) -> None:
             plan.tasks.append(f"fluid: openfoam on {solver['solver_ranks']} MPI ranks ({solver['decomposition']} "
                               f"decomposition by decomposePar once; fields written and read per processor, no "
                               f"reconstructPar)")
+    if solver["participant"] == "chorin":
+        quasi = (", transient: Chorin projection time steps over each step (implicit Euler) and an elastodynamic "
+                 "solid" if dynamic else ", quasi-static: Chorin projection in pseudo-time to steady state and a "
+                 "static solid per step")
+        if dynamic:
+            plan.notes.append("chorin: the solid velocity is applied per cell (the fluid follows rotating and "
+                              "deforming solids)")
     plan.iteration = (f"{scene.time['steps']} time steps of {scene.time['dt']:g} s{quasi}; implicit fixed point per "
                       f"step ({c['acceleration']}, tolerance {c['tolerance']:g}, at most {c['max_iterations']} "
                       f"iterations)")

@@ -1,0 +1,101 @@
+"""``ChorinParticipant``: the Chorin fluid as a protocol participant (docs/protocol.md).
+
+Config: :mod:`fluid_chorin.spec` (the same grid, fluid and face conditions as the OpenFOAM
+fluid; the flow rule fills them from the scene). Inputs of ``advance``: ``solid_fraction``
+(n_cells,) in [0, 1] (clipped) and ``solid_velocity`` (n_cells, 3) m/s, applied per cell
+(:mod:`fluid_chorin.solver`). Outputs: ``pressure`` (n_cells,) Pa and ``velocity``
+(n_cells, 3) m/s at the cell centres, x fastest.
+
+Steady (no ``transient``): each ``advance`` makes pseudo-time steps from the current state
+(a warm start) to the tolerance. Transient: from ``t`` over ``dt``. Both report the
+stepping and the pressure Poisson solves (``report_solve``).
+
+State: in memory. ``save_state(w)`` copies the velocity, pressure and time;
+``restore_state(w)`` goes back to the copy, so a repeated window gives identical outputs.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from coupler.protocol.participant import Participant
+from coupler.protocol.wire import Field
+
+from .solver import ChorinSolver, Run, State
+from .spec import ChorinSpec
+
+log = logging.getLogger("varcouple.fluid_chorin")
+
+
+class ChorinParticipant(Participant):
+    kind = "chorin_fluid"
+
+    def __init__(self):
+        self.solver: ChorinSolver | None = None
+        self.saved: dict[int, State] = {}
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": ["pressure", "velocity"],
+                "accepts": ["solid_fraction", "solid_velocity"], "location": "cells"}
+
+    def configure(self, config: dict) -> None:
+        spec = ChorinSpec.from_config(config)
+        self.solver, self.saved = ChorinSolver(spec), {}
+        log.info("fluid_chorin: grid %s (%d cells), nu %g, drag %g 1/s, %s", spec.grid.shape, spec.grid.num_cells,
+                 spec.nu, self.solver.d_max, "transient" if spec.transient else "steady (pseudo-time)")
+
+    def geometry(self):
+        if self.solver is None:
+            raise RuntimeError("geometry before configure")
+        g = self.solver.spec.grid
+        return {"grid": {"origin": g.origin.tolist(), "spacing": g.spacing.tolist(), "shape": list(g.shape)},
+                "location": "cells"}, None
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.solver is None:
+            raise RuntimeError("advance before configure")
+        solver = self.solver
+        n = solver.spec.grid.num_cells
+        arrays = {}
+        for name, want in (("solid_fraction", (n,)), ("solid_velocity", (n, 3))):
+            if name in inputs:
+                data = np.asarray(inputs[name].data, dtype=float)
+                if data.shape != want:
+                    raise ValueError(f"input {name!r} has shape {data.shape}, expected {want}")
+                if not np.all(np.isfinite(data)):
+                    raise ValueError(f"input {name!r} holds NaN/inf at index {int(np.argmin(np.isfinite(data)))}")
+                arrays[name] = data
+        if arrays:
+            fraction = arrays.get("solid_fraction", solver.fraction.ravel())
+            solver.set_solid(fraction, arrays.get("solid_velocity"))
+        t0 = time.perf_counter()
+        run = solver.transient(t, dt) if solver.spec.transient else solver.steady()
+        log.info("window %d iteration %d: %s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
+                 iteration, run.solver, run.iterations, run.residual, len(run.poisson), time.perf_counter() - t0)
+        self.report(run)
+        return {"pressure": Field("pressure", solver.cell_pressure(), "Pa"),
+                "velocity": Field("velocity", solver.cell_velocity(), "m/s")}
+
+    def report(self, run: Run) -> None:
+        """The stepping and, in one report, its pressure Poisson solves (the worst of them)."""
+        self.report_solve(run.solver, run.converged, run.iterations, run.residual, run.tolerance, run.detail)
+        if run.poisson:
+            first = run.poisson[0]
+            self.report_solve(f"pressure Poisson ({first.method})", all(r.converged for r in run.poisson),
+                              max(r.iterations for r in run.poisson), max(r.residual for r in run.poisson),
+                              first.tolerance, f"{len(run.poisson)} solves; iterations and residual of the worst")
+
+    def save_state(self, window):
+        if self.solver is None:
+            raise RuntimeError("save_state before configure")
+        self.saved[int(window)] = self.solver.state.copy()
+        for w in [w for w in self.saved if w < int(window) - 1]:
+            del self.saved[w]  # keep the last two windows
+
+    def restore_state(self, window):
+        if int(window) not in self.saved:
+            raise KeyError(f"no state saved for window {window} (saved: {sorted(self.saved)})")
+        self.solver.state = self.saved[int(window)].copy()

@@ -1,0 +1,101 @@
+"""The Chorin fluid's configuration (the fluid's part of the scene, JSON)::
+
+    {"grid": {"origin": [x, y, z], "spacing": [hx, hy, hz], "shape": [nx, ny, nz]},
+     "location": "cells",
+     "rho": 1000.0, "mu": 1.0e-3,          # kg/m^3, Pa s
+     "inlet": ..., "outlet": ..., "walls": ..., "boundaries": {...},   # coupler/protocol/fluid_faces.py
+     "penalization": "wall", "penalization_exponent": 2.0, "drag": null,
+     "max_iterations": 20000, "tolerance": 1e-7, "cfl": 0.5, "poisson": "auto",
+     "transient": false, "dt": 1.0, "substeps": 1, "outer_correctors": 50}
+
+Defaults: :data:`fluid_chorin.settings.DEFAULTS`. The flow rule
+(:func:`coupler.plan.effects.flow.fluid_config`) fills these keys from the scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from coupler.protocol.fluid_faces import face_conditions
+from transfer.grid import BOX_FACES, StructuredGrid
+from transfer.penalization import default_drag
+
+from .settings import DEFAULTS, PENALIZATIONS, POISSON_METHODS
+
+
+@dataclass
+class ChorinSpec:
+    grid: StructuredGrid
+    faces: dict
+    rho: float
+    mu: float
+    penalization: str
+    penalization_exponent: float
+    drag: float | None
+    max_iterations: int
+    tolerance: float
+    cfl: float
+    transient: bool
+    dt: float
+    substeps: int
+    outer_correctors: int
+    poisson: str
+
+    @property
+    def nu(self) -> float:
+        return self.mu / self.rho
+
+    def drag_value(self) -> float:
+        """The maximum drag D_max [1/s]: as given, else :func:`default_drag` (as the OpenFOAM fluid)."""
+        if self.drag is not None:
+            return float(self.drag)
+        u_ref = max((float(np.linalg.norm(c["value"])) for c in self.faces.values() if c["kind"] == "velocity"),
+                    default=0.0)
+        rate = self.substeps / self.dt if self.transient else 0.0
+        return default_drag(self.nu, float(self.grid.spacing.min()), u_ref, rate)
+
+    @classmethod
+    def from_config(cls, config: dict) -> "ChorinSpec":
+        if config.get("location", "cells") != "cells":
+            raise ValueError(f"fluid_chorin serves cell values only (location 'cells'), got {config.get('location')!r}")
+        g = config.get("grid")
+        if not isinstance(g, dict):
+            raise ValueError("fluid config needs 'grid' = {origin, spacing, shape}")
+        grid = StructuredGrid(g.get("origin"), g.get("spacing"), g.get("shape"))
+        faces = face_conditions(config)
+        value = {k: config.get(k, d) if config.get(k) is not None else d for k, d in DEFAULTS.items()}
+        spec = cls(grid, faces, rho=float(config.get("rho", 1000.0)), mu=float(config.get("mu", 1.0e-3)),
+                   penalization=str(value["penalization"]),
+                   penalization_exponent=float(value["penalization_exponent"]),
+                   drag=None if value["drag"] is None else float(value["drag"]),
+                   max_iterations=int(value["max_iterations"]), tolerance=float(value["tolerance"]),
+                   cfl=float(value["cfl"]), transient=bool(config.get("transient", False)),
+                   dt=float(config.get("dt", 1.0)), substeps=int(value["substeps"]),
+                   outer_correctors=int(value["outer_correctors"]), poisson=str(value["poisson"]))
+        spec.check()
+        return spec
+
+    def check(self) -> None:
+        if self.penalization not in PENALIZATIONS:
+            raise ValueError(f"penalization must be one of {', '.join(PENALIZATIONS)}, got {self.penalization!r}")
+        if self.poisson not in POISSON_METHODS:
+            raise ValueError(f"poisson must be one of {', '.join(POISSON_METHODS)}, got {self.poisson!r}")
+        if self.rho <= 0 or self.mu <= 0:
+            raise ValueError(f"rho and mu must be positive, got {self.rho}, {self.mu}")
+        if self.dt <= 0 or self.substeps < 1 or self.outer_correctors < 1 or self.max_iterations < 1:
+            raise ValueError(f"dt must be positive and substeps, outer_correctors, max_iterations at least 1, got "
+                             f"{self.dt}, {self.substeps}, {self.outer_correctors}, {self.max_iterations}")
+        if not (self.tolerance > 0 and 0 < self.cfl <= 1):
+            raise ValueError(f"tolerance must be positive and cfl in (0, 1], got {self.tolerance}, {self.cfl}")
+        if self.drag is not None and not self.drag > 0:
+            raise ValueError(f"drag must be positive, got {self.drag}")
+        for d, (a, b) in enumerate(zip(BOX_FACES[::2], BOX_FACES[1::2])):
+            ea, eb = self.faces[a]["kind"] == "empty", self.faces[b]["kind"] == "empty"
+            if ea != eb or (ea and self.grid.shape[d] != 1):
+                raise ValueError(f"'empty' needs both {a} and {b} and one cell in that direction")
+            for face in (a, b):
+                if self.faces[face]["kind"] == "pressure" and self.grid.shape[d] < 2:
+                    raise ValueError(f"a fixed-pressure face ({face}) needs at least 2 cells along "
+                                     f"{'xyz'[d]}, got {self.grid.shape[d]}")
