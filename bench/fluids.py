@@ -1,0 +1,182 @@
+"""The two fluids side by side: the OpenFOAM participant (stock binaries, a relaunch per
+coupling iteration) and the Chorin participant (fluid_chorin, state in memory).
+
+* ``coupled``: each case (default small_fracture, added_mass_heavy, added_mass_light) run
+  through ``varcouple run`` once per fluid (the one ``participant`` line swapped): wall time,
+  fluid time and its share, coupling iterations, wall time per coupling iteration, the maximum
+  displacement per step, the pressure drop (small_fracture: mean pressure of the fluid-centred
+  cells of the inlet column minus the outlet column), and the Chorin run's differences to the
+  OpenFOAM run;
+* ``plates``: the fluid alone on the immersed plates of fluid_openfoam/plates.py (4 to 32 cells
+  across the aperture, offset 0.3 of a cell): error of the flow rate against the cubic law and
+  solve time per fluid (accuracy against cost).
+
+Goal (PASS/MISS): coupled small_fracture at least 2x faster end to end with the Chorin fluid.
+
+    .venv/bin/python bench/fluids.py [--cases small_fracture ...] [--across 4 8 16 32] [--quick] [-o FILE]
+
+``--quick`` (smoke test): small_fracture only, plates at 4 and 8 across; output
+bench/results/fluids_quick.json unless ``-o`` is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+FLUIDS = ("openfoam", "chorin")
+CASES = ("small_fracture", "added_mass_heavy", "added_mass_light")
+GOAL_SPEEDUP = 2.0
+
+
+def pressure_drop(out: Path, step: int) -> float | None:
+    """Mean pressure of the fluid-centred cells (solid fraction < 1/2) of the first grid column
+    minus that of the last, from the fluid's VTU of ``step``."""
+    import meshio
+
+    path = out / f"fluid_{step:04d}.vtu"
+    if not path.exists():
+        return None
+    m = meshio.read(path)
+    nx, ny, nz = (len(np.unique(np.round(m.points[:, d], 12))) - 1 for d in range(3))  # a structured box
+    p = m.cell_data["pressure"][0].reshape(nz, ny, nx)
+    fluid = m.cell_data["solid_fraction"][0].reshape(nz, ny, nx) < 0.5
+    return float(p[..., 0][fluid[..., 0]].mean() - p[..., -1][fluid[..., -1]].mean())
+
+
+def run_case(case: str, fluid: str) -> dict:
+    """``varcouple run`` on a copy of cases/CASE with ``participant = FLUID`` for the fluid."""
+    from coupler.cli import main
+
+    with tempfile.TemporaryDirectory(prefix=f"bench-fluids-{case}-{fluid}-") as tmp:
+        copy = Path(tmp) / case
+        shutil.copytree(ROOT / "cases" / case, copy, ignore=shutil.ignore_patterns("results"))
+        scene = (copy / "scene.toml").read_text()
+        if 'participant = "openfoam"' not in scene:
+            raise SystemExit(f"cases/{case}/scene.toml: no 'participant = \"openfoam\"' line to swap")
+        scene = scene.replace('participant = "openfoam"', f'participant = "{fluid}"')
+        if fluid == "chorin":  # simpleFoam's iteration budget is not a pseudo-time step budget
+            scene = scene.replace("max_iterations = 3000\n", "")
+        (copy / "scene.toml").write_text(scene)
+        out = Path(tmp) / "out"
+        t0 = time.perf_counter()
+        code = main(["run", str(copy), "--output", str(out)])
+        wall = time.perf_counter() - t0
+        summary = json.loads((out / "summary.json").read_text())
+        steps = summary.get("steps", [])
+        phases = summary.get("phases_seconds", {})
+        iterations = sum(s.get("iterations", 0) for s in steps)
+        fluid_seconds = phases.get("fluid", 0.0)
+        return {"fluid": fluid, "exit_code": code, "status": summary.get("status"), "error": summary.get("error"),
+                "wall_seconds": wall, "fluid_seconds": fluid_seconds,
+                "fluid_share": fluid_seconds / wall if wall else None,
+                "coupling_iterations": iterations, "iterations_per_step": [s.get("iterations") for s in steps],
+                "seconds_per_coupling_iteration": wall / iterations if iterations else None,
+                "fluid_seconds_per_coupling_iteration": fluid_seconds / iterations if iterations else None,
+                "max_displacement": [s.get("max_displacement") for s in steps],
+                "pressure_drop": pressure_drop(out, len(steps) - 1) if steps else None}
+
+
+def compare(runs: dict) -> dict:
+    """The Chorin run against the OpenFOAM run: relative differences and the speed-up."""
+    of, ch = runs["openfoam"], runs["chorin"]
+    out = {"speedup_end_to_end": of["wall_seconds"] / ch["wall_seconds"],
+           "fluid_speedup": of["fluid_seconds"] / ch["fluid_seconds"] if ch["fluid_seconds"] else None,
+           "max_displacement_difference": [b / a - 1 if a and b else None
+                                           for a, b in zip(of["max_displacement"], ch["max_displacement"])]}
+    if of["pressure_drop"] and ch["pressure_drop"]:
+        out["pressure_drop_difference"] = ch["pressure_drop"] / of["pressure_drop"] - 1
+    return out
+
+
+def plates_side_by_side(across) -> list[dict]:
+    """The immersed plates at offset 0.3 with both fluids: error against the cubic law and time."""
+    from fluid_chorin.solver import ChorinSolver
+    from fluid_chorin.spec import ChorinSpec
+    from fluid_openfoam import plates
+
+    rows = []
+    p = plates.Plates()
+    for n in across:
+        with tempfile.TemporaryDirectory(prefix="bench-fluids-plates-") as tmp:
+            of = plates.run(n, "wall", 0.3, Path(tmp) / "case")
+        grid, lower, upper = plates.geometry(n, 0.3)
+        t0 = time.perf_counter()
+        config = {"grid": grid, "inlet": {"pressure": p.dp}, "outlet": {"pressure": 0.0}, "rho": p.rho, "mu": p.mu,
+                  "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-7}
+        solver = ChorinSolver(ChorinSpec.from_config(config))
+        solver.set_solid(plates.exact_fractions(grid, (lower, upper)))
+        run = solver.steady()
+        ny = grid["shape"][1]
+        Q = solver.cell_velocity()[:, 0].reshape(ny, plates.NX).sum(axis=0) * grid["spacing"][1]
+        rows.append({"cells_across": n, "cells": of["cells"],
+                     "openfoam": {"error": of["error"], "seconds": of["time_setup"] + of["time_solve"],
+                                  "iterations": of["iterations"], "converged": of["converged"]},
+                     "chorin": {"error": float(Q.mean() / p.q_cubic - 1), "seconds": time.perf_counter() - t0,
+                                "iterations": run.iterations, "converged": run.converged}})
+    return rows
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
+    ap.add_argument("--across", nargs="+", type=int, default=[4, 8, 16, 32])
+    ap.add_argument("--quick", action="store_true", help="small_fracture and plates at 4, 8 across only")
+    ap.add_argument("-o", "--output", type=Path)
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.cases, args.across = ["small_fracture"], [4, 8]
+    output = args.output or ROOT / "bench" / "results" / ("fluids_quick.json" if args.quick else "fluids.json")
+    os.environ.setdefault("VARCOUPLE_PICTURES", "0")  # time the solvers, not the renderings
+    result = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(),
+              "cpu_count": os.cpu_count(), "load_average_before": os.getloadavg(), "coupled": {}, "goals": {}}
+    for case in args.cases:
+        runs = {fluid: run_case(case, fluid) for fluid in FLUIDS}
+        result["coupled"][case] = {"runs": runs, "chorin_against_openfoam": compare(runs)}
+        print(f"\n{case}")
+        print(f"  {'fluid':9s} {'status':10s} {'wall s':>7s} {'fluid s':>8s} {'share':>6s} {'iters':>6s} "
+              f"{'s/iter':>7s} {'max displacement [m]':>22s} {'dp [Pa]':>8s}")
+        for fluid, r in runs.items():
+            disp = r["max_displacement"][-1] if r["max_displacement"] else float("nan")
+            dp = r["pressure_drop"] if r["pressure_drop"] is not None else float("nan")
+            print(f"  {fluid:9s} {str(r['status']):10s} {r['wall_seconds']:7.2f} {r['fluid_seconds']:8.2f} "
+                  f"{r['fluid_share']:6.2f} {r['coupling_iterations']:6d} {r['seconds_per_coupling_iteration']:7.3f} "
+                  f"{disp:22.4e} {dp:8.1f}")
+        c = result["coupled"][case]["chorin_against_openfoam"]
+        diffs = ", ".join(f"{d:+.2%}" if d is not None else "-" for d in c["max_displacement_difference"])
+        print(f"  chorin against openfoam: {c['speedup_end_to_end']:.2f}x end to end, fluid "
+              f"{c['fluid_speedup']:.1f}x; max displacement per step {diffs}"
+              + (f"; pressure drop {c['pressure_drop_difference']:+.2%}" if "pressure_drop_difference" in c else ""))
+    if "small_fracture" in result["coupled"]:
+        speedup = result["coupled"]["small_fracture"]["chorin_against_openfoam"]["speedup_end_to_end"]
+        result["goals"]["small_fracture_speedup"] = {"value": speedup, "goal": f">= {GOAL_SPEEDUP}",
+                                                     "status": "PASS" if speedup >= GOAL_SPEEDUP else "MISS"}
+    print("\nimmersed plates (fluid alone, offset 0.3): error against the cubic law and seconds")
+    print(f"  {'across':>6s} {'cells':>6s} {'openfoam err':>13s} {'s':>6s} {'chorin err':>11s} {'s':>6s}")
+    result["plates"] = plates_side_by_side(args.across)
+    for row in result["plates"]:
+        print(f"  {row['cells_across']:6d} {row['cells']:6d} {row['openfoam']['error']:+13.3%} "
+              f"{row['openfoam']['seconds']:6.2f} {row['chorin']['error']:+11.3%} {row['chorin']['seconds']:6.2f}")
+    for name, g in result["goals"].items():
+        print(f"goal {name}: {g['value']:.2f} ({g['goal']}) {g['status']}")
+    result["load_average_after"] = os.getloadavg()
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(json.dumps(result, indent=1))
+    print(f"written {output}")
+    return result
+
+
+if __name__ == "__main__":
+    main()
