@@ -125,7 +125,7 @@ def plates_side_by_side(across) -> list[dict]:
                      "openfoam": {"error": of["error"], "seconds": of["time_setup"] + of["time_solve"],
                                   "iterations": of["iterations"], "converged": of["converged"]},
                      "chorin": {"error": float(Q.mean() / p.q_cubic - 1), "seconds": time.perf_counter() - t0,
-                                "iterations": run.iterations, "converged": run.converged}})
+                                "iterations": run.report.iterations, "converged": run.converged}})
     return rows
 
 

@@ -74,14 +74,16 @@ class ChorinParticipant(Participant):
         t0 = time.perf_counter()
         run = solver.transient(t, dt) if solver.spec.transient else solver.steady()
         log.info("window %d iteration %d: %s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
-                 iteration, run.solver, run.iterations, run.residual, len(run.poisson), time.perf_counter() - t0)
+                 iteration, run.report.solver, run.report.iterations, run.report.residual, len(run.poisson),
+                 time.perf_counter() - t0)
         self.report(run)
         return {"pressure": Field("pressure", solver.cell_pressure(), "Pa"),
                 "velocity": Field("velocity", solver.cell_velocity(), "m/s")}
 
     def report(self, run: Run) -> None:
         """The stepping and, in one report, its pressure Poisson solves (the worst of them)."""
-        self.report_solve(run.solver, run.converged, run.iterations, run.residual, run.tolerance, run.detail)
+        r = run.report
+        self.report_solve(r.solver, r.converged, r.iterations, r.residual, r.tolerance, r.detail)
         if run.poisson:
             first = run.poisson[0]
             self.report_solve(f"pressure Poisson ({first.method})", all(r.converged for r in run.poisson),

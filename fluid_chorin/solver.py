@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from coupler.protocol.wire import SolveReport
 from transfer.penalization import drag_fraction
 
 from .poisson import PoissonReport, PressurePoisson
@@ -63,15 +64,14 @@ class State:
 
 @dataclass
 class Run:
-    """How one steady solve or one transient coupling step ended."""
+    """How one steady solve or one transient coupling step ended, and its Poisson solves."""
 
-    solver: str
-    converged: bool
-    iterations: int
-    residual: float
-    tolerance: float
-    detail: str = ""
+    report: SolveReport
     poisson: list = field(default_factory=list)  # PoissonReport per solve
+
+    @property
+    def converged(self) -> bool:
+        return self.report.converged
 
 
 def _relative(change, value) -> float:
@@ -210,8 +210,9 @@ class ChorinSolver:
             if bound < dt:
                 dt = 0.9 * bound
         converged = residual < spec.tolerance
-        return Run("chorin pseudo-time", converged, it, residual, spec.tolerance,
-                   "" if converged else f"limit of {spec.max_iterations} pseudo-time steps reached", reports)
+        return Run(SolveReport("chorin pseudo-time", converged, it, residual, spec.tolerance,
+                               "" if converged else f"limit of {spec.max_iterations} pseudo-time steps reached"),
+                   reports)
 
     def transient(self, t: float, dt: float) -> Run:
         """From ``t`` (the state's time) to ``t + dt``: ``n >= substeps`` time steps within the
@@ -240,9 +241,9 @@ class ChorinSolver:
             converged &= residual < spec.tolerance
             self.state = k
         self.state.t = t + dt
-        return Run("chorin time stepping", converged, iterations, worst, spec.tolerance,
-                   f"{n} time steps of {h:.3g} s" + ("" if converged else
-                                                     f"; limit of {spec.outer_correctors} outer iterations reached"),
+        return Run(SolveReport("chorin time stepping", converged, iterations, worst, spec.tolerance,
+                               f"{n} time steps of {h:.3g} s" + ("" if converged else f"; limit of "
+                                                                 f"{spec.outer_correctors} outer iterations reached")),
                    reports)
 
     # ------------------------------------------------------------------ fields

@@ -42,7 +42,7 @@ def cavity(n: int, re: float) -> ChorinSolver:
               "boundaries": {"zmin": "empty", "zmax": "empty", "ymax": {"velocity": [1.0, 0.0, 0.0]}}}
     solver = ChorinSolver(ChorinSpec.from_config(config))
     run = solver.steady()
-    assert run.converged and run.residual < 1e-6, run
+    assert run.converged and run.report.residual < 1e-6, run
     assert all(p.converged for p in run.poisson)
     return solver
 
