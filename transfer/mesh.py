@@ -135,6 +135,18 @@ class Mesh:
             raise MeshError(f"{name}: no cells of type {cell_type!r}")
         return cls(mesh.points, np.concatenate(blocks), cell_type, name=name, reorient=reorient)
 
+    @classmethod
+    def empty(cls, cell_type: str, name: str = "mesh") -> "Mesh":
+        """A mesh without cells: the part of a distributed mesh on a rank that holds none
+        (the constructor, which every input goes through, rejects empty meshes)."""
+        if cell_type not in CELL_TYPES:
+            raise MeshError(f"{name}: unsupported cell type {cell_type!r}; use one of {sorted(CELL_TYPES)}")
+        mesh = object.__new__(cls)
+        for key, value in (("points", np.zeros((0, 3))), ("cells", np.zeros((0, CELL_TYPES[cell_type][1]), np.int64)),
+                           ("cell_type", cell_type), ("name", name), ("_cache", {}), ("reoriented", 0)):
+            object.__setattr__(mesh, key, value)
+        return mesh
+
     def to_meshio(self):
         import meshio
 

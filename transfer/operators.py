@@ -28,99 +28,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from . import _kernels
+from .assembly import (COVERED_RTOL, METHODS, assemble_rows, boxes_overlap, default_search_distance,
+                       integration_rule, no_overlap_message, overlap_warnings, pairing)
 from .errors import FieldError, NoOverlapError, OverlapWarning, TransferError
-from .grid import StructuredGrid
-from .quadrature import check_degree, simplex_rule
 from .spaces import FunctionSpace
-
-METHODS = ("l2", "pseudo_l2")
-
-#: a target dof counts as covered when the integral of its basis function over the
-#: overlap exceeds this fraction of its integral
-COVERED_RTOL = 1e-10
-
-_KIND = {"tetra": _kernels.TET, "hexahedron": _kernels.HEX, "triangle": _kernels.TRI, "quad": _kernels.QUAD}
-
-
-def _poly_degree(space: FunctionSpace) -> int:
-    """Polynomial degree of the basis in physical coordinates (Q1 on a box is
-    multilinear: degree tdim; on a general hexahedron it is not a polynomial)."""
-    if space.family == "Q1":
-        return space.mesh.tdim + (0 if isinstance(space.mesh, StructuredGrid) else 1)
-    return space.degree
-
-
-def _is_affine(space: FunctionSpace) -> bool:
-    return space.degree == 0 or space.mesh.cell_type == "tetra"
-
-
-def default_quadrature_degree(source: FunctionSpace, target: FunctionSpace) -> int:
-    """Exact, on affine simplices and boxes, for both products assembled: source
-    x target (B) and target x target (D, and the dual basis built from it)."""
-    pt = _poly_degree(target)
-    return max(1, _poly_degree(source) + pt, 2 * pt)
-
-
-def _kind(mesh) -> int:
-    return _kernels.BOX if isinstance(mesh, StructuredGrid) else _KIND[mesh.cell_type]
-
-
-def _bounding_boxes_overlap(a, b, rtol=1e-9) -> bool:
-    (alo, ahi), (blo, bhi) = a.bounding_box(), b.bounding_box()
-    tol = rtol * max(np.linalg.norm(ahi - alo), np.linalg.norm(bhi - blo))
-    return bool(np.all(alo <= bhi + tol) and np.all(blo <= ahi + tol))
-
-
-#: warn when the bounding-box diameters of source and target differ by more than this
-#: factor: mm against m is 1000, while a body immersed in a grid is rarely 10 times smaller
-SCALE_FACTOR = 100.0
-
-#: warn when the bounding boxes overlap in less than this fraction of each box: a body
-#: inside a larger grid covers little of the grid's box but lies wholly in it, whereas
-#: meshes that are misplaced (a shifted origin, another frame) overlap little of both
-OVERLAP_FRACTION = 0.1
-
-
-def _box(mesh) -> str:
-    lo, hi = mesh.bounding_box()
-    return f"[{', '.join(f'{v:.6g}' for v in lo)}]..[{', '.join(f'{v:.6g}' for v in hi)}]"
-
-
-def overlap_warnings(smesh, tmesh, proximity: bool = False) -> list[str]:
-    """Signs that `smesh` and `tmesh` are in different length units or places.
-
-    With diameters d = |hi - lo| of the bounding boxes: max(d_s, d_t) / min(d_s, d_t)
-    > :data:`SCALE_FACTOR`. With the overlap box O of the two boxes: |O| / |box| <
-    :data:`OVERLAP_FRACTION` for both boxes, measured per axis (the product of the
-    overlapping fractions of the extents, so flat surface boxes count too). Surfaces
-    paired by `proximity` (surface to surface) need not overlap: only their size is compared.
-    """
-    (alo, ahi), (blo, bhi) = smesh.bounding_box(), tmesh.bounding_box()
-    ds, dt = np.linalg.norm(ahi - alo), np.linalg.norm(bhi - blo)
-    found = []
-    factor = max(ds, dt) / min(ds, dt)
-    if factor > SCALE_FACTOR:
-        found.append(f"{smesh.name} and {tmesh.name} differ in size by a factor {factor:.4g}: bounding boxes "
-                     f"{_box(smesh)} (diameter {ds:.4g}) and {_box(tmesh)} (diameter {dt:.4g}); "
-                     f"different length units (mm and m differ by 1000)?")
-    if not proximity:
-        common = np.clip(np.minimum(ahi, bhi) - np.maximum(alo, blo), 0.0, None)
-        flat = 1e-9 * max(ds, dt)
-        fractions = [np.prod(np.where(hi - lo > flat, common / np.maximum(hi - lo, flat), 1.0))
-                     for lo, hi in ((alo, ahi), (blo, bhi))]
-        if max(fractions) < OVERLAP_FRACTION:
-            found.append(f"{smesh.name} and {tmesh.name} overlap in only {100 * fractions[0]:.2g}% and "
-                         f"{100 * fractions[1]:.2g}% of their bounding boxes {_box(smesh)} and {_box(tmesh)}: "
-                         f"misplaced, or in different length units?")
-    return found
-
-
-def _mean_edge(mesh) -> float:
-    if isinstance(mesh, StructuredGrid):
-        return float(np.linalg.norm(mesh.spacing))
-    return float(mesh.longest_edges().mean())
-
 
 @dataclass
 class Coupling:
@@ -154,56 +65,29 @@ def coupling_operator(source: FunctionSpace, target: FunctionSpace, method: str 
     """
     if method not in METHODS:
         raise TransferError(f"unknown method {method!r}; use one of {METHODS}")
-    if quadrature_degree is not None:
-        check_degree(quadrature_degree)
+    rule = integration_rule(source, target, quadrature_degree)
     smesh, tmesh = source.mesh, target.mesh
-    if smesh.tdim < tmesh.tdim:
-        raise TransferError(f"{smesh.name} ({smesh.cell_type}) -> {tmesh.name} ({tmesh.cell_type}): a surface "
-                            f"field cannot be projected onto a volume; transfer is volume-volume, "
-                            f"surface-surface or volume-surface")
-    surface = smesh.tdim == 2
-    trace = smesh.tdim == 3 and tmesh.tdim == 2
+    surface = pairing(smesh, tmesh) == "surface"
     if search_distance is None:
-        search_distance = 0.5 * _mean_edge(tmesh) if surface else 0.0
-    if not _bounding_boxes_overlap(smesh, tmesh) and not surface:
-        raise NoOverlapError(_no_overlap_message(smesh, tmesh))
-    if quadrature_degree is None and smesh.tdim == tmesh.tdim == 3 and _is_affine(source) and _is_affine(target):
-        qdeg = "exact"  # products of affine bases integrated from moments of the intersection
-        bary, weights = np.empty((0, 4)), np.empty(0)
-    else:
-        qdeg = quadrature_degree or default_quadrature_degree(source, target)
-        bary, weights = simplex_rule(tmesh.tdim, qdeg)
-    dual = method == "pseudo_l2" and target.degree > 0  # the dual of P0/Q0 is itself
-    args = (smesh.points, smesh.cells, _kind(smesh), source.degree,
-            tmesh.points, tmesh.cells, _kind(tmesh), target.degree,
-            bary, weights, dual, method == "pseudo_l2", source.num_dofs, target.num_dofs)
+        search_distance = default_search_distance(tmesh) if surface else 0.0
+    if not boxes_overlap(smesh, tmesh) and not surface:
+        raise NoOverlapError(no_overlap_message(smesh, tmesh))
     start = time.perf_counter()
-    if surface:
-        raw = _kernels.assemble_surface(*args, float(search_distance),
-                                        float(np.cos(np.radians(max_normal_angle))), nthreads)
-    else:
-        grid = None
-        if isinstance(smesh, StructuredGrid):
-            grid = (tuple(smesh.origin), tuple(smesh.spacing), tuple(smesh.shape))
-        assemble = _kernels.assemble_trace if trace else _kernels.assemble_volume
-        raw = assemble(*args, grid, nthreads)
+    raw = assemble_rows(source, target, method, rule, search_distance=search_distance,
+                        max_normal_angle=max_normal_angle, nthreads=nthreads)
     seconds = time.perf_counter() - start
     shape_b = (target.num_dofs, source.num_dofs)
     B = sp.csr_matrix((raw["B"][2], raw["B"][1], raw["B"][0]), shape=shape_b)
     D = sp.csr_matrix((raw["D"][2], raw["D"][1], raw["D"][0]), shape=(target.num_dofs,) * 2)
     if not np.any(raw["overlap"] > 0):
-        raise NoOverlapError(_no_overlap_message(smesh, tmesh))
+        raise NoOverlapError(no_overlap_message(smesh, tmesh))
     found = overlap_warnings(smesh, tmesh, proximity=surface)
     for text in found:
         warnings.warn(text, OverlapWarning, stacklevel=3)
     stats = {"pairs_tested": int(raw["pairs_tested"]), "pairs_intersected": int(raw["pairs_intersected"]),
-             "assembly_seconds": seconds, "quadrature_degree": qdeg, "quadrature_points": len(weights),
+             "assembly_seconds": seconds, "quadrature_degree": rule.degree, "quadrature_points": len(rule.weights),
              "nthreads": nthreads, "warnings": found}
     return Coupling(B, D, raw["overlap"], raw["measure"], stats)
-
-
-def _no_overlap_message(smesh, tmesh) -> str:
-    return f"{smesh.name} and {tmesh.name} do not overlap: bounding boxes {_box(smesh)} and {_box(tmesh)}"
 
 
 class Transfer:
@@ -231,8 +115,17 @@ class Transfer:
         self._solve = _DiagonalSolve(Dc.diagonal()) if method == "pseudo_l2" else _MassSolve(Dc)
 
     @classmethod
-    def assemble(cls, source: FunctionSpace, target: FunctionSpace, method: str = "l2", **kwargs) -> "Transfer":
-        """Assemble the transfer; keyword arguments go to :func:`coupling_operator`."""
+    def assemble(cls, source, target, method: str = "l2", comm=None, **kwargs):
+        """Assemble the transfer; keyword arguments go to :func:`coupling_operator`.
+
+        With an MPI communicator `comm`, `source` and `target` are this rank's
+        :class:`transfer.distributed.Part` of each space (any partition) and the
+        result is a :class:`transfer.petsc.DistributedTransfer` (distributed PETSc
+        matrices, equal to the serial operator)."""
+        if comm is not None:
+            from .distributed import assemble
+
+            return assemble(source, target, method, comm, **kwargs)
         return cls(source, target, method, coupling_operator(source, target, method, **kwargs))
 
     @property

@@ -1,0 +1,118 @@
+"""Distributed transfer (issue: parallel information transfer): B, D, T and the transferred
+field assembled on 1 to 4 MPI ranks, with source and target partitioned independently and
+not aligned, equal the serial ones to 1e-12 (mpi_transfer_cases.py under mpirun, 3 and 4
+ranks oversubscribed); the serial path loads no MPI; parts and partitions."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from transfer import FunctionSpace, StructuredGrid, Transfer, TransferError
+from transfer.generate import box_tetrahedra
+from vc_helpers import ROOT
+
+HERE = Path(__file__).resolve().parent
+EQUAL = 1e-12
+needs_mpirun = pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
+
+
+def mpi_env() -> dict:
+    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1",
+                PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+@pytest.fixture(scope="module", params=[1, 2, 3, 4])
+def distributed(request):
+    ranks = request.param
+    cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, str(HERE / "mpi_transfer_cases.py")]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=mpi_env(), timeout=300, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["ranks"] == ranks
+    return result["cases"]
+
+
+CASES = ["tets P1 -> tets P1", "tets P0 -> tets P0", "hexes Q1 -> tets P1", "grid Q1 -> tets P1",
+         "tets P1 -> grid Q0 (partial)", "tets P1 -> triangles P1 (trace)", "triangles P1 -> quads Q1 (mortar)",
+         "tets P1 -> tets P1 (empty ranks)"]
+
+
+@needs_mpirun
+@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize("method", ["l2", "pseudo_l2"])
+def test_distributed_equals_serial(distributed, case, method):
+    r = distributed[case][method]
+    assert r["B"] <= EQUAL and r["D"] <= EQUAL and r["T"] <= EQUAL
+    assert r["v"] <= EQUAL
+    assert r["nan_same"] and r["covered_same"]
+    assert r["pairs"][0] == r["pairs"][1]  # every intersecting pair found once, by its target's rank
+    assert r["conservation"] < 1e-13
+
+
+@needs_mpirun
+def test_partial_overlap_leaves_the_same_dofs_uncovered(distributed):
+    r = distributed["tets P1 -> grid Q0 (partial)"]["l2"]
+    assert 0.1 < r["covered_fraction"] < 0.5 and r["nan_same"]
+
+
+def test_serial_path_loads_no_mpi():
+    code = ("import sys, numpy as np\n"
+            "from transfer import FunctionSpace, Transfer\n"
+            "from transfer.generate import box_tetrahedra\n"
+            "S = FunctionSpace(box_tetrahedra((2, 2, 2)), 'P1')\n"
+            "T = Transfer.assemble(S, S, 'l2'); T(np.ones(S.num_dofs))\n"
+            "print(sorted(m for m in ('mpi4py', 'petsc4py') if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+def test_with_comm_the_spaces_must_be_parts():
+    from mpi4py import MPI
+
+    S = FunctionSpace(box_tetrahedra((2, 2, 2)), "P1")
+    with pytest.raises(TransferError, match="transfer.distributed.Part"):
+        Transfer.assemble(S, S, "l2", comm=MPI.COMM_SELF)
+
+
+def test_a_part_needs_one_global_id_per_dof():
+    from transfer.distributed import Part
+
+    mesh = box_tetrahedra((2, 2, 2), name="box")
+    with pytest.raises(TransferError, match="box: 3 global dof ids for 27 local P1 dofs"):
+        Part(mesh, "P1", [0, 1, 2])
+
+
+def test_grid_blocks_number_dofs_as_the_whole_grid():
+    from transfer.distributed import Part
+
+    grid = StructuredGrid.from_bounds((0, 0, 0), (1, 2, 3), (4, 5, 6))
+    for family, whole in (("Q1", grid.points), ("Q0", grid.cell_centers())):
+        part = Part.grid_block(grid, (1, 2, 3), (3, 5, 4), family)
+        assert part.mesh.shape == (2, 3, 1)
+        local = part.mesh.points if family == "Q1" else part.mesh.cell_centers()
+        np.testing.assert_allclose(local, whole[part.global_dofs], rtol=0, atol=1e-14)
+    assert Part.grid_block(grid, (0, 0, 4), (4, 5, 4), "Q1").num_cells == 0
+
+
+def test_partitions_balance_the_cells():
+    from transfer.distributed import Part
+    from transfer.partition import bisection, slabs
+
+    mesh = box_tetrahedra((5, 4, 3), jitter=0.2, seed=1)
+    for owner in (slabs(mesh, 3, axis=0), bisection(mesh, 3)):
+        counts = np.bincount(owner, minlength=3)
+        assert counts.sum() == mesh.num_cells and counts.max() - counts.min() <= 1
+    centres = mesh.points[mesh.cells].mean(axis=1)
+    owner = slabs(mesh, 3, axis=2)
+    assert centres[owner == 0, 2].max() <= centres[owner == 1, 2].min()
+    part = Part.of_cells(mesh, np.flatnonzero(owner == 1), "P1")
+    np.testing.assert_array_equal(part.mesh.points, mesh.points[part.global_dofs])
