@@ -60,8 +60,35 @@ def _transfer_args(parser: argparse.ArgumentParser) -> None:
                         help="threads of the assembly kernel (default: 1)")
 
 
+def _mpi_job() -> tuple[int, int]:
+    """(rank, ranks) of the MPI job mpirun started this process in; (0, 1) outside one."""
+    import os
+
+    for rank, size in (("OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_SIZE"), ("PMI_RANK", "PMI_SIZE")):
+        if size in os.environ:
+            return int(os.environ.get(rank, 0)), int(os.environ[size])
+    return 0, 1
+
+
 def transfer(args: argparse.Namespace) -> int:
-    """Transfer one field from SRC to DST and write DST with it to OUT."""
+    """Transfer one field from SRC to DST and write DST with it to OUT. Under
+    ``mpirun -n N`` every rank reads both files and takes its part of each mesh (coordinate
+    bisection, the two meshes cut independently); the operator is assembled and applied on
+    the N ranks and rank 0 writes the same file as a serial run."""
+    from transfer import TransferError
+
+    from coupler.errors import CouplerError
+
+    rank, ranks = _mpi_job()
+    try:
+        return _transfer(args, rank, ranks)
+    except (CouplerError, TransferError, OSError):
+        if rank == 0:
+            raise
+        raise SystemExit(2) from None  # every rank finds the same error: rank 0 says it
+
+
+def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
     import numpy as np
 
     from transfer import QuadratureError
@@ -69,8 +96,8 @@ def transfer(args: argparse.Namespace) -> int:
 
     from coupler.errors import CouplerError
     from transfer.meshfile import MeshFile, check_writable
-    from coupler.run.projection import project
 
+    say = print if rank == 0 else (lambda *a, **k: None)
     if args.quadrature_degree is not None:
         try:
             check_degree(args.quadrature_degree)
@@ -83,19 +110,27 @@ def transfer(args: argparse.Namespace) -> int:
     target.check_keeps(args.output, {field.name: (field.kind, field.values),
                                      "covered": (field.kind, np.zeros(0, np.uint8))})
     if field.kind == "point" and args.field in source.raw.cell_data:
-        print(f"note: {args.field!r} is both point and cell data in {source.path}; using the point data")
+        say(f"note: {args.field!r} is both point and cell data in {source.path}; using the point data")
     if args.field == "covered":
         raise CouplerError(f"{source.path}: field name 'covered' is reserved for the coverage mask of the "
                            f"output; rename the field")
     src_space, dst_space = source.space(field.kind), target.space(field.kind)
-    print(f"source  {source.path}: {source.describe()}; {field.describe()} -> {src_space.family}")
-    print(f"target  {target.path}: {target.describe()} -> {dst_space.family}")
-    p = project(field, src_space, dst_space, args.method, quadrature_degree=args.quadrature_degree,
-                threads=args.threads)
+    say(f"source  {source.path}: {source.describe()}; {field.describe()} -> {src_space.family}")
+    say(f"target  {target.path}: {target.describe()} -> {dst_space.family}")
+    if ranks > 1:
+        p = _project_distributed(field, source.mesh, target.mesh, src_space.family, dst_space.family, args)
+        if p is None:
+            return 0
+    else:
+        from coupler.run.projection import project
+
+        p = project(field, src_space, dst_space, args.method, quadrature_degree=args.quadrature_degree,
+                    threads=args.threads)
     stats = p.operator.stats
     quadrature = stats.get("quadrature_degree")
     quadrature = "exact moments" if quadrature == "exact" else f"degree {quadrature}"
-    print(f"method  {args.method} (quadrature: {quadrature}; {args.threads} thread{'s' * (args.threads > 1)})")
+    where = f" x {ranks} MPI ranks" if ranks > 1 else ""
+    print(f"method  {args.method} (quadrature: {quadrature}; {args.threads} thread{'s' * (args.threads > 1)}{where})")
     print(f"assembly {p.assembly_seconds:.3f} s (intersection kernel {p.kernel_seconds:.3f} s; "
           f"{stats.get('pairs_intersected', '?')} of {stats.get('pairs_tested', '?')} cell pairs intersect); "
           f"apply {1e3 * p.apply_seconds:.1f} ms")
@@ -108,6 +143,55 @@ def transfer(args: argparse.Namespace) -> int:
                                "covered": (field.kind, p.covered.astype(np.uint8))})
     print(f"wrote   {args.output}: {field.kind} data {field.name!r}, 'covered'")
     return 0
+
+
+def _project_distributed(field, smesh, tmesh, source_family: str, target_family: str, args):
+    """The field carried on all ranks of MPI.COMM_WORLD, each holding its part of both
+    meshes; on rank 0 the whole result (as :func:`coupler.run.projection.project` gives it),
+    None on the others."""
+    import warnings
+
+    import numpy as np
+    from mpi4py import MPI
+
+    import transfer.petsc  # noqa: F401 - PETSc starts before the clock: its initialisation is not assembly
+    from transfer import OverlapWarning, Transfer
+    from transfer.distributed import Part, gather
+    from transfer.partition import bisection
+
+    from coupler.run.projection import Projection
+
+    comm = MPI.COMM_WORLD
+    ps, pt = (Part.of_cells(mesh, np.flatnonzero(bisection(mesh, comm.size) == comm.rank), family)
+              for mesh, family in ((smesh, source_family), (tmesh, target_family)))
+    u = field.flat[ps.global_dofs]
+    start = time.perf_counter()
+    with warnings.catch_warnings(action="ignore", category=OverlapWarning):
+        operator = Transfer.assemble(ps, pt, args.method, comm=comm, quadrature_degree=args.quadrature_degree,
+                                     nthreads=args.threads)
+    assembly = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    start = time.perf_counter()
+    v = operator(u)
+    apply = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    conservation = operator.conservation_error(u)
+    values, covered = gather(pt, v, comm), gather(pt, operator.covered, comm)
+    if comm.rank:
+        return None
+    whole = _Gathered(operator.stats, operator.warnings, covered)
+    return Projection(args.method, whole, values.reshape((len(values),) + field.values.shape[1:]), assembly, apply,
+                      conservation)
+
+
+class _Gathered:
+    """What a :class:`coupler.run.projection.Projection` reads of its operator, for the
+    distributed operator gathered on rank 0."""
+
+    def __init__(self, stats: dict, warnings: list, covered):
+        self.stats, self.warnings, self.covered = stats, warnings, covered
+
+    @property
+    def covered_fraction(self) -> float:
+        return float(self.covered.mean())
 
 
 # -- varcouple check -------------------------------------------------------------

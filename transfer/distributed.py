@@ -320,6 +320,7 @@ def assemble(source: Part, target: Part, method: str, comm, *, quadrature_degree
     stats = {"pairs_tested": int(tested), "pairs_intersected": int(intersected),
              "quadrature_degree": rule.degree, "quadrature_points": len(rule.weights), "nthreads": nthreads,
              "warnings": found, "ranks": comm.size,
+             "assembly_seconds": comm.allreduce(kernel_seconds, op=MPI.MAX),
              "exchange_seconds": exchange_seconds, "kernel_seconds": kernel_seconds,
              "source_cells_held": held.num_cells, "target_cells": target.num_cells,
              "exchange": exchange}

@@ -1,0 +1,71 @@
+"""``mpirun -n 2 varcouple transfer``: the meshes read and partitioned on every rank, the
+operator assembled and applied on both, and rank 0 writes the file the serial run writes
+(fields equal to 1e-12, the same uncovered dofs); an input error is said once."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import meshio
+import numpy as np
+import pytest
+
+from transfer.generate import box_tetrahedra
+from vc_helpers import ROOT
+
+pytestmark = pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
+
+
+def varcouple(*argv, ranks=1):
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1",
+               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    cmd = [sys.executable, "-m", "coupler.cli", "transfer", *map(str, argv)]
+    if ranks > 1:
+        cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", *cmd]
+    return subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=180)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A source with a vector point field and a cell field; a target sticking out of it."""
+    d = tmp_path_factory.mktemp("mpi_cli")
+    src = box_tetrahedra((5, 5, 5), jitter=0.2, seed=4)
+    dst = box_tetrahedra((4, 5, 6), lower=(0.3, -0.2, 0.1), upper=(1.3, 0.9, 0.8), jitter=0.2, seed=5)
+    f = np.sin(3 * src.points[:, 0]) + src.points[:, 1] * src.points[:, 2]
+    meshio.write(d / "src.vtu", meshio.Mesh(src.points, [("tetra", src.cells)],
+                                            point_data={"u": np.column_stack([f, -2 * f, f**2])},
+                                            cell_data={"k": [np.arange(src.num_cells, dtype=float)]}))
+    meshio.write(d / "dst.vtu", meshio.Mesh(dst.points, [("tetra", dst.cells)]))
+    return d
+
+
+@pytest.mark.parametrize("name, kind, method", [("u", "point", "l2"), ("k", "cell", "pseudo_l2")])
+def test_two_ranks_write_the_serial_file(files, name, kind, method):
+    outputs = {}
+    for ranks in (1, 2):
+        out = files / f"{name}_{ranks}.vtu"
+        proc = varcouple(files / "src.vtu", files / "dst.vtu", "--field", name, "-o", out, "--method", method,
+                         ranks=ranks)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert proc.stdout.count("wrote ") == 1  # rank 0 alone reports and writes
+        assert ("x 2 MPI ranks" in proc.stdout) == (ranks == 2)
+        outputs[ranks] = meshio.read(out)
+    serial, mpi = outputs[1], outputs[2]
+    np.testing.assert_array_equal(serial.points, mpi.points)
+    np.testing.assert_array_equal(serial.cells[0].data, mpi.cells[0].data)
+    data = (lambda m: m.point_data) if kind == "point" else (lambda m: {k: v[0] for k, v in m.cell_data.items()})
+    a, b = data(serial), data(mpi)
+    np.testing.assert_array_equal(a["covered"], b["covered"])
+    assert 0 < a["covered"].sum() < len(a["covered"])  # the target sticks out: NaN there, in both
+    np.testing.assert_array_equal(np.isnan(a[name]), np.isnan(b[name]))
+    assert np.nanmax(np.abs(a[name] - b[name])) <= 1e-12 * np.nanmax(np.abs(a[name]))
+
+
+def test_an_input_error_is_said_once(files):
+    proc = varcouple(files / "src.vtu", files / "dst.vtu", "--field", "nope", "-o", files / "x.vtu", ranks=2)
+    assert proc.returncode == 2
+    assert proc.stderr.count("varcouple: error:") == 1
+    assert "src.vtu: no field 'nope'" in proc.stderr and "Traceback" not in proc.stderr
