@@ -95,57 +95,145 @@ double shape(const Vec3* g, int n, double h) {
   return gmax * h;
 }
 
-// Clip a union of tets by one half-space; `eps` is the distance below which a
-// vertex counts as lying on the plane (kept), so coplanar faces give no slivers.
-void clip_plane(const std::vector<Tet>& in, const Plane& pl, double eps, std::vector<Tet>& out) {
-  out.clear();
-  for (const Tet& t : in) {
-    double s[4];
-    int inside[4], outside[4], ni = 0, no = 0;
-    for (int k = 0; k < 4; ++k) {
-      s[k] = dot(pl.n, t.v[k]) - pl.d;
-      if (s[k] > eps)
-        outside[no++] = k;
-      else
-        inside[ni++] = k;
-    }
-    if (no == 0) {
-      out.push_back(t);
-      continue;
-    }
-    if (ni == 0) continue;
-    auto cut = [&](int i, int o) {
-      const double si = std::min(s[i], 0.0);
-      return lerp(t.v[i], t.v[o], si / (si - s[o]));
-    };
-    if (ni == 1) {
-      const int i = inside[0];
-      out.push_back(Tet{{t.v[i], cut(i, outside[0]), cut(i, outside[1]), cut(i, outside[2])}});
-    } else {
-      // A prism (a, b, c | a', b', c') with planar faces; three tets.
-      Vec3 a, b, c, a2, b2, c2;
-      if (ni == 3) {
-        const int o = outside[0];
-        a = t.v[inside[0]]; b = t.v[inside[1]]; c = t.v[inside[2]];
-        a2 = cut(inside[0], o); b2 = cut(inside[1], o); c2 = cut(inside[2], o);
-      } else {
-        const int i = inside[0], j = inside[1], o1 = outside[0], o2 = outside[1];
-        a = t.v[i]; b = cut(i, o1); c = cut(i, o2);
-        a2 = t.v[j]; b2 = cut(j, o1); c2 = cut(j, o2);
-      }
-      out.push_back(Tet{{a, b, c, a2}});
-      out.push_back(Tet{{b, c, a2, b2}});
-      out.push_back(Tet{{c, a2, b2, c2}});
-    }
-  }
-}
+// A convex polyhedron clipped in place by half-spaces (after Powell and Abel's r3d,
+// J. Comput. Phys. 2015): every vertex has three neighbours, ordered so that walking
+// from vertex v to its neighbour k and on to that vertex's neighbour after v goes around
+// a face. A plane cut removes the vertices outside, puts a new vertex on every cut edge
+// and links the new vertices around the new face: no vertex is duplicated, and a piece
+// is handed on as the tets fanned from vertex 0 over the faces (pieces of the same
+// union as the tet-by-tet clipping gave, in fewer and larger tets).
+class Polyhedron {
+ public:
+  // Up to 4 + 6 faces (a tet cut by a box) give 16 vertices; twice that while cutting.
+  static constexpr int kMax = 40;
 
-struct ClipBuffers {
-  std::vector<Tet> a, b, pieces;
+  void assign(const Tet& t) {
+    n_ = 4;
+    const bool positive = dot(sub(t.v[1], t.v[0]), cross(sub(t.v[2], t.v[0]), sub(t.v[3], t.v[0]))) > 0;
+    for (int k = 0; k < 4; ++k) x_[k] = t.v[k];
+    if (!positive) std::swap(x_[1], x_[2]);
+    static constexpr int nb[4][3] = {{1, 3, 2}, {2, 3, 0}, {0, 3, 1}, {1, 2, 0}};
+    for (int k = 0; k < 4; ++k)
+      for (int j = 0; j < 3; ++j) nb_[k][j] = nb[k][j];
+  }
+
+  bool empty() const { return n_ == 0; }
+
+  // Keep the part with n.x - d <= eps; false when nothing is left.
+  bool clip(const Plane& pl, double eps) {
+    double s[kMax];
+    int out = 0;
+    for (int v = 0; v < n_; ++v) {
+      s[v] = dot(pl.n, x_[v]) - pl.d;
+      out += s[v] > eps;
+    }
+    if (out == 0) return true;
+    if (out == n_) {
+      n_ = 0;
+      return false;
+    }
+    const int old = n_;
+    for (int v = 0; v < old; ++v) {
+      if (s[v] > eps) continue;
+      for (int k = 0; k < 3; ++k) {
+        const int w = nb_[v][k];
+        if (!(s[w] > eps)) continue;
+        const double sv = s[v] >= -eps ? 0.0 : s[v];  // a vertex within eps lies on the plane
+        x_[n_] = lerp(x_[v], x_[w], sv / (sv - s[w]));
+        nb_[n_][0] = v;
+        nb_[v][k] = n_;
+        ++n_;
+      }
+    }
+    for (int start = old; start < n_; ++start) {  // walk the face of each new edge
+      int cur = start, next = nb_[cur][0];
+      do {
+        const int k = slot(next, cur);
+        cur = next;
+        next = nb_[cur][(k + 1) % 3];
+      } while (cur < old);
+      nb_[start][2] = cur;
+      nb_[cur][1] = start;
+    }
+    int index[kMax], kept = 0;
+    for (int v = 0; v < n_; ++v) {
+      index[v] = (v < old && s[v] > eps) ? -1 : kept;
+      if (index[v] >= 0) {
+        x_[kept] = x_[v];
+        for (int k = 0; k < 3; ++k) nb_[kept][k] = nb_[v][k];
+        ++kept;
+      }
+    }
+    n_ = kept;
+    for (int v = 0; v < n_; ++v)
+      for (int k = 0; k < 3; ++k) nb_[v][k] = index[nb_[v][k]];
+    return true;
+  }
+
+  // The tets from vertex 0 to the fan triangles of every face not holding vertex 0.
+  template <class F>
+  void for_each_tet(F&& f) const {
+    bool seen[kMax][3] = {};
+    for (int start = 0; start < n_; ++start)
+      for (int k0 = 0; k0 < 3; ++k0) {
+        if (seen[start][k0]) continue;
+        // the face to the left of edge start -> nb[start][k0]
+        int cur = start, k = k0, next = nb_[cur][k];
+        seen[cur][k] = true;
+        bool apex = start == 0;
+        int face[kMax], m = 0;
+        face[m++] = start;
+        while (next != start) {
+          const int j = slot(next, cur);
+          cur = next;
+          k = (j + 1) % 3;
+          seen[cur][k] = true;
+          apex = apex || cur == 0;
+          face[m++] = cur;
+          next = nb_[cur][k];
+        }
+        if (apex) continue;
+        for (int i = 1; i + 1 < m; ++i) f(Tet{{x_[0], x_[face[0]], x_[face[i]], x_[face[i + 1]]}});
+      }
+  }
+
+ private:
+  int slot(int v, int w) const { return nb_[v][0] == w ? 0 : (nb_[v][1] == w ? 1 : 2); }
+
+  int n_ = 0;
+  Vec3 x_[kMax];
+  int nb_[kMax][3];
 };
 
-// Pieces of (union of `subject` tets) inside convex `c`, appended to buf.pieces.
-void clip_convex(const Tet* subject, int nsubject, const Convex& c, double eps, ClipBuffers& buf) {
+struct ClipBuffers {
+  Polyhedron poly;
+  std::vector<Tet> pieces;
+};
+
+// True when a face plane of tet `t` has all four vertices of tet `u` outside it (by
+// more than eps): the tets are disjoint. With the test of the faces of `u`
+// (clip_convex) these are eight of the separating axes of two tets.
+bool separated_by_faces(const Tet& t, const Tet& u, double eps) {
+  static constexpr int opp[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+  for (int i = 0; i < 4; ++i) {
+    const Vec3& a = t.v[opp[i][0]];
+    Vec3 n = cross(sub(t.v[opp[i][1]], a), sub(t.v[opp[i][2]], a));
+    const double side = dot(n, sub(t.v[i], a));  // the tet's own vertex is inside
+    const double tol = eps * norm(n);
+    bool all_out = true;
+    for (int k = 0; k < 4 && all_out; ++k) {
+      const double s = dot(n, sub(u.v[k], a));
+      all_out = side > 0 ? s < -tol : s > tol;
+    }
+    if (all_out) return true;
+  }
+  return false;
+}
+
+// Pieces of (union of `subject` tets) inside convex `c`, appended to buf.pieces; `c`
+// is the tet `other` when not null (then a subject tet its faces separate is skipped).
+void clip_convex(const Tet* subject, int nsubject, const Convex& c, const Tet* other, double eps,
+                 ClipBuffers& buf) {
   // Quick rejection (all subject vertices outside one plane) and acceptance
   // (all inside every plane: the subject lies in the convex piece).
   bool inside_all = true;
@@ -163,12 +251,13 @@ void clip_convex(const Tet* subject, int nsubject, const Convex& c, double eps, 
     buf.pieces.insert(buf.pieces.end(), subject, subject + nsubject);
     return;
   }
-  buf.a.assign(subject, subject + nsubject);
-  for (int p = 0; p < c.nplanes && !buf.a.empty(); ++p) {
-    clip_plane(buf.a, c.p[p], eps, buf.b);
-    std::swap(buf.a, buf.b);
+  for (int t = 0; t < nsubject; ++t) {
+    if (other && separated_by_faces(subject[t], *other, eps)) continue;
+    buf.poly.assign(subject[t]);
+    for (int p = 0; p < c.nplanes && buf.poly.clip(c.p[p], eps); ++p) {
+    }
+    buf.poly.for_each_tet([&](const Tet& piece) { buf.pieces.push_back(piece); });
   }
-  buf.pieces.insert(buf.pieces.end(), buf.a.begin(), buf.a.end());
 }
 
 }  // namespace
@@ -231,7 +320,8 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
         clipper.build_planes();
         const double eps = 1e-12 * std::min(h, sg.box.diagonal()) + 4 * DBL_EPSILON * h;
         buf.pieces.clear();
-        for (int c = 0; c < clipper.nconvex; ++c) clip_convex(subj.tets, subj.ntets, clipper.convex[c], eps, buf);
+        const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
+        for (int c = 0; c < clipper.nconvex; ++c) clip_convex(subj.tets, subj.ntets, clipper.convex[c], other, eps, buf);
         bool any = false, moments = false;
         const SimplexRule* q_rule = &rule;
         pair = Moments{};
