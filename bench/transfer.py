@@ -6,6 +6,11 @@ quadrature, and threads. Prints a table and writes every figure to JSON.
     .venv/bin/python bench/transfer.py --sizes all --threads 1 2
     .venv/bin/python bench/transfer.py --quick -o t.json        # smoke run (seconds)
 
+Section 0 is the goal of the parallel transfer issue: the serial CLI end to end (`varcouple
+transfer` in this process: read, assemble, apply, write) against libsupermesh's own parallel
+driver, parallel_supermesh plus the assembly of B, on one rank (bench/supermesh_parallel.py),
+with the kernel split into search, clipping and integration (the kernel's `stages`).
+
 Every figure is measured in the same run, on the same machine: the baselines (a P1 mass
 matrix on the target mesh, with our vectorised assembly and with dolfinx) and, when the
 PyPI package ``libsupermesh`` is importable, libsupermesh itself (its R-tree search and
@@ -44,6 +49,10 @@ from transfer import FunctionSpace, StructuredGrid, Transfer, coupling_operator 
 from transfer.generate import box_tetrahedra  # noqa: E402
 
 DEFAULT_OUTPUT = ROOT / "bench" / "results" / "transfer.json"
+
+#: goal of the parallel transfer issue: the serial CLI end to end this many times faster than
+#: libsupermesh's parallel_supermesh + B on one rank
+GOAL_END_TO_END_RATIO = 5.0
 
 #: goals of issue #2
 GOAL_TETS_PER_SECOND = 50_000
@@ -371,6 +380,106 @@ def _dist_version(name):
         return version(name)
     except Exception:  # noqa: BLE001
         return None
+
+
+# -- 0. end to end against libsupermesh's parallel driver ---------------------------------
+def _parallel_supermesh():
+    """bench/supermesh_parallel.py, loaded by path (this folder is not on sys.path)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("supermesh_parallel", ROOT / "bench" / "supermesh_parallel.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _kernel_stages(S, T, repeat) -> dict:
+    """Kernel CPU seconds up to the search, the clipping and the whole (stages 1, 2, 3)."""
+    from transfer import _kernels
+
+    src, dst = S.mesh, T.mesh
+    out = {}
+    for stage in (1, 2, 3):
+        times = []
+        for _ in range(max(1, repeat)):
+            start = time.process_time()  # CPU time: on a shared machine less disturbed than wall time
+            _kernels.assemble_volume(src.points, src.cells, _kernels.TET, 1, dst.points, dst.cells, _kernels.TET, 1,
+                                     np.empty((0, 4)), np.empty(0), False, False, S.num_dofs, T.num_dofs, None, 1,
+                                     stages=stage)
+            times.append(time.process_time() - start)
+        out[stage] = min(times)
+    return {"search": out[1], "clip": out[2] - out[1], "integrate_and_rows": out[3] - out[2], "kernel": out[3]}
+
+
+def bench_end_to_end(label, n_source, n_target, repeat) -> dict:
+    """`varcouple transfer` on the pair (files written here), phase by phase, against
+    parallel_supermesh + B on one rank, both measured now."""
+    import meshio
+
+    from coupler.cli import main as cli
+    from transfer.meshfile import MeshFile
+
+    src, dst = _meshes(n_source, n_target)
+    S, T = FunctionSpace(src, "P1"), FunctionSpace(dst, "P1")
+    res = {"size": label, "source_tets": src.num_cells, "target_tets": dst.num_cells}
+    with tempfile.TemporaryDirectory(prefix="transfer_bench_") as tmp:
+        tmp = Path(tmp)
+        meshio.write(tmp / "src.vtu", meshio.Mesh(src.points, [("tetra", src.cells)],
+                                                  point_data={"f": S.interpolate(field)}))
+        meshio.write(tmp / "dst.vtu", meshio.Mesh(dst.points, [("tetra", dst.cells)]))
+        argv = ["transfer", str(tmp / "src.vtu"), str(tmp / "dst.vtu"), "--field", "f", "-o", str(tmp / "out.vtu")]
+        with open(os.devnull, "w") as quiet:
+            def run_cli():
+                saved, sys.stdout = sys.stdout, quiet
+                try:
+                    assert cli(argv) == 0
+                finally:
+                    sys.stdout = saved
+            res["cli_seconds"], res["cli_seconds_all"], _ = _best(run_cli, repeat)
+        read, _, (source, target) = _best(lambda: (MeshFile.read(tmp / "src.vtu"), MeshFile.read(tmp / "dst.vtu")),
+                                          repeat)
+        u = source.field("f").flat
+        assemble, _, operator = _best(lambda: Transfer.assemble(source.space("point"), target.space("point"), "l2"),
+                                      repeat)
+        solve, _, v = _best(lambda: operator(u), repeat)
+        fields = {"f": ("point", v), "covered": ("point", operator.covered.astype(np.uint8))}
+        write, _, _ = _best(lambda: target.write(tmp / "again.vtu", fields), repeat)
+    stages = _kernel_stages(S, T, repeat)
+    res["phases"] = {"read": read, **{k: stages[k] for k in ("search", "clip", "integrate_and_rows")},
+                     "assembly_rest": assemble - operator.stats["assembly_seconds"], "solve": solve, "write": write,
+                     "what": ("read/write: MeshFile (meshio); search, clip, integrate_and_rows: kernel CPU seconds "
+                              "by stage; assembly_rest: Transfer.assemble beyond the kernel (CSR, coverage, solver "
+                              "set-up); solve: T u (CG on D)")}
+    res["kernel_seconds"] = operator.stats["assembly_seconds"]
+    res["pairs_tested"], res["pairs_intersected"] = operator.stats["pairs_tested"], operator.stats["pairs_intersected"]
+    lsm = _parallel_supermesh().ParallelSupermesh()
+    one = np.zeros(src.num_cells, np.int64), np.zeros(dst.num_cells, np.int64)
+    res["libsupermesh_parallel"] = lsm.measure(src, dst, *one, ranks=1, repeat=repeat)
+    base = res["libsupermesh_parallel"]
+    ratio = base["seconds"] / res["cli_seconds"] if base["available"] else None
+    res["goal"] = {"goal": GOAL_END_TO_END_RATIO, "value": ratio,
+                   "pass": None if ratio is None else ratio >= GOAL_END_TO_END_RATIO,
+                   "what": "libsupermesh parallel_supermesh + B on 1 rank / varcouple transfer end to end (1 thread)"}
+    return res
+
+
+def print_end_to_end(res):
+    _say(f"\n== 0. end to end, P1 -> P1, {res['size']}: {res['source_tets']:,} x {res['target_tets']:,} tets, "
+         f"1 thread, 1 rank ==")
+    ph = res["phases"]
+    rows = [[name, _s(ph[name])] for name in ("read", "search", "clip", "integrate_and_rows", "assembly_rest",
+                                                "solve", "write")]
+    rows.append(["varcouple transfer (end to end)", _s(res["cli_seconds"])])
+    base = res["libsupermesh_parallel"]
+    rows.append(["libsupermesh parallel_supermesh + B", _s(base["seconds"]) if base["available"] else "not available"])
+    _say(_table(["phase", "time (min)"], rows))
+    _say(f"pairs tested / intersected: {res['pairs_tested']:,} / {res['pairs_intersected']:,}")
+    goal = res["goal"]
+    if goal["value"] is None:
+        _say(f"libsupermesh: {base['reason']}")
+    else:
+        _say(f"end to end: ours {goal['value']:.2f}x faster than libsupermesh's parallel driver on one rank "
+             f"(goal {goal['goal']:.0f}x): {'PASS' if goal['pass'] else 'MISS'}")
 
 
 # -- 1. P1-P1 tet-tet ------------------------------------------------------------------
@@ -714,6 +823,12 @@ def main(argv=None) -> dict:
     supermesh = Supermesh()
     result["meta"]["dolfinx"] = dolfinx_mass.version if dolfinx_mass.available else f"unavailable: {dolfinx_mass.error}"
     result["meta"]["libsupermesh"] = supermesh.version if supermesh.available else supermesh.error
+
+    result["end_to_end"] = []
+    for label, (ns, nt) in sizes.items():
+        res = bench_end_to_end(label, ns, nt, repeat)
+        result["end_to_end"].append(res)
+        print_end_to_end(res)
 
     result["p1p1"] = []
     for label, (ns, nt) in sizes.items():

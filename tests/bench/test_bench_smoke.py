@@ -31,8 +31,13 @@ def test_quick_run_writes_every_figure(bench, tmp_path, capsys):
     data = json.loads(out.read_text())
     assert data["p1p1"][0]["size"] == returned["p1p1"][0]["size"] == "quick"
 
-    for key in ("meta", "args", "reference", "goals", "p1p1", "grid", "accuracy", "threads"):
+    for key in ("meta", "args", "reference", "goals", "end_to_end", "p1p1", "grid", "accuracy", "threads"):
         assert key in data, key
+    e2e = data["end_to_end"][0]
+    for phase in ("read", "search", "clip", "integrate_and_rows", "solve", "write"):
+        _positive(e2e["phases"][phase], f"end_to_end phase {phase}")
+    _positive(e2e["cli_seconds"], "end_to_end cli_seconds")
+    assert e2e["goal"]["goal"] == 5.0 and (e2e["goal"]["pass"] is None) == (not e2e["libsupermesh_parallel"]["available"])
     for key in ("date", "platform", "cpu_count", "numpy", "dolfinx", "libsupermesh"):
         assert key in data["meta"], key
     assert data["reference"]["libsupermesh_48k_x_83k_seconds"] == 4.9

@@ -8,6 +8,7 @@
 #include <nanobind/stl/array.h>
 
 #include <climits>
+#include <tuple>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -77,38 +78,46 @@ nb::dict to_dict(vc::AssemblyResult&& r) {
 
 NB_MODULE(_kernels, m) {
   m.doc() = "Compiled kernels of varcouple.transfer: search, clipping, quadrature, sparse assembly";
-  for (auto [name, kernel, nbary] : {std::tuple{"assemble_volume", &vc::assemble_volume, 4},
-                                     std::tuple{"assemble_trace", &vc::assemble_trace, 3}}) {
-    m.def(
-        name,
-        [kernel = kernel, nbary = nbary, name = name](
-            const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,
-            int tdeg, const Points& bary, const Vector& w, bool dual, bool lump, int64_t nsd, int64_t ntd,
-            std::optional<Grid> grid, int nthreads) {
-          check_dofs(nsd, ntd);
-          auto src = element_set(sp, sc, skind, sdeg);
-          auto tgt = element_set(tp, tc, tkind, tdeg);
-          auto rule = simplex_rule(bary, w);
-          if (rule.nbary != nbary)
-            throw std::invalid_argument(std::string(name) + ": the rule needs " + std::to_string(nbary) +
-                                        " barycentric coordinates");
-          vc::GridInfo g;
-          if (grid) {
-            g.origin = std::get<0>(*grid);
-            g.spacing = std::get<1>(*grid);
-            g.shape = std::get<2>(*grid);
-          }
-          vc::AssemblyResult r;
-          {
-            nb::gil_scoped_release release;
-            r = kernel(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads);
-          }
-          return to_dict(std::move(r));
-        },
-        "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
-        "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
-        "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1);
-  }
+  // Volume-like kernels: a volume source (mesh or grid); `stages` < 3 stops the volume
+  // kernel after the search (1) or the clipping (2), so that benchmarks see where the time goes.
+  auto volume_like = [](auto kernel, int nbary, const char* name) {
+    return [kernel, nbary, name](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp,
+                                 const Cells& tc, int tkind, int tdeg, const Points& bary, const Vector& w, bool dual,
+                                 bool lump, int64_t nsd, int64_t ntd, std::optional<Grid> grid, int nthreads,
+                                 int stages) {
+      check_dofs(nsd, ntd);
+      auto src = element_set(sp, sc, skind, sdeg);
+      auto tgt = element_set(tp, tc, tkind, tdeg);
+      auto rule = simplex_rule(bary, w);
+      if (rule.nbary != nbary)
+        throw std::invalid_argument(std::string(name) + ": the rule needs " + std::to_string(nbary) +
+                                    " barycentric coordinates");
+      vc::GridInfo g;
+      if (grid) {
+        g.origin = std::get<0>(*grid);
+        g.spacing = std::get<1>(*grid);
+        g.shape = std::get<2>(*grid);
+      }
+      vc::AssemblyResult r;
+      {
+        nb::gil_scoped_release release;
+        r = kernel(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads, stages);
+      }
+      return to_dict(std::move(r));
+    };
+  };
+  auto trace = [](const vc::ElementSet& src, const vc::ElementSet& tgt, const vc::SimplexRule& rule, bool dual,
+                  bool lump, int64_t nsd, int64_t ntd, const vc::GridInfo* grid, int nthreads, int stages) {
+    if (stages != 3) throw std::invalid_argument("assemble_trace: stages must be 3");
+    return vc::assemble_trace(src, tgt, rule, dual, lump, nsd, ntd, grid, nthreads);
+  };
+  auto args = std::make_tuple("src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a,
+                              "tgt_cells"_a, "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a,
+                              "dual"_a, "lump"_a, "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1,
+                              "stages"_a = 3);
+  std::apply([&](auto... a) { m.def("assemble_volume", volume_like(&vc::assemble_volume, 4, "assemble_volume"), a...); },
+             args);
+  std::apply([&](auto... a) { m.def("assemble_trace", volume_like(trace, 3, "assemble_trace"), a...); }, args);
   m.def(
       "assemble_surface",
       [](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp, const Cells& tc, int tkind,

@@ -232,6 +232,8 @@ class SourceSearch {
     }
   }
 
+  const BBox& box(int64_t e) const { return boxes_[e]; }
+
   // Calls f(e) once for every source element whose box may overlap `b`.
   template <class F>
   void for_each(const BBox& b, double tol, std::vector<int64_t>& stamp, int64_t tag, F&& f) const {

@@ -280,10 +280,23 @@ struct ElementSet {
   int nverts = 0;
   int kind = TET;
   int degree = 1;
+  // Optional: the vertex coordinates cell by cell (ncells x nverts x 3), read in place of
+  // points[cells]: one contiguous read per cell where the search visits cells in no order.
+  const double* cell_coords = nullptr;
   int nbasis() const { return degree == 0 ? 1 : nverts; }
   Vec3 vertex(int64_t c, int k) const {
-    const double* p = points + 3 * cells[c * nverts + k];
+    const double* p = cell_coords ? cell_coords + 3 * (c * nverts + k) : points + 3 * cells[c * nverts + k];
     return {p[0], p[1], p[2]};
+  }
+  // The coordinates cell by cell, for cell_coords.
+  std::vector<double> packed_coords() const {
+    std::vector<double> out(static_cast<size_t>(ncells) * nverts * 3);
+    for (int64_t c = 0; c < ncells; ++c)
+      for (int k = 0; k < nverts; ++k) {
+        const double* p = points + 3 * cells[c * nverts + k];
+        for (int d = 0; d < 3; ++d) out[3 * (c * nverts + k) + d] = p[d];
+      }
+    return out;
   }
   void dofs(int64_t c, int64_t* out) const {
     if (degree == 0)
@@ -304,9 +317,10 @@ struct GridInfo {
 // Volume-volume (TET, HEX, BOX) by exact polyhedron clipping.
 // `rule` is a rule on the reference tetrahedron (4 barycentric coordinates).
 // `dual`: use the dual basis of eq. 4 on the target (fully covered elements).
+// `stages` < 3 stops after the search (1) or the clipping (2): for benchmarks only.
 AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
-                               const GridInfo* src_grid, int nthreads);
+                               const GridInfo* src_grid, int nthreads, int stages = 3);
 
 // Volume-surface: source TET/HEX/BOX cells, target TRI/QUAD surface elements
 // inside the volume (the trace of the source on the surface). `rule` is on the

@@ -210,6 +210,18 @@ struct ClipBuffers {
   std::vector<Tet> pieces;
 };
 
+// True when the box [lo, hi] lies outside one plane of convex `c` by more than eps
+// (its corner farthest along -n is outside): nothing in the box meets `c`.
+bool box_outside(const Vec3& lo, const Vec3& hi, const Convex& c, double eps) {
+  for (int p = 0; p < c.nplanes; ++p) {
+    const Vec3& n = c.p[p].n;
+    double nearest = 0.0;
+    for (int d = 0; d < 3; ++d) nearest += n[d] * (n[d] > 0 ? lo[d] : hi[d]);
+    if (nearest - c.p[p].d > eps) return true;
+  }
+  return false;
+}
+
 // True when a face plane of tet `t` has all four vertices of tet `u` outside it (by
 // more than eps): the tets are disjoint. With the test of the faces of `u`
 // (clip_convex) these are eight of the separating axes of two tets.
@@ -218,12 +230,12 @@ bool separated_by_faces(const Tet& t, const Tet& u, double eps) {
   for (int i = 0; i < 4; ++i) {
     const Vec3& a = t.v[opp[i][0]];
     Vec3 n = cross(sub(t.v[opp[i][1]], a), sub(t.v[opp[i][2]], a));
-    const double side = dot(n, sub(t.v[i], a));  // the tet's own vertex is inside
-    const double tol = eps * norm(n);
+    if (dot(n, sub(t.v[i], a)) > 0) n = scale(n, -1.0);  // outward: the tet's own vertex is inside
+    const double tol2 = eps * eps * dot(n, n);  // |s| > eps |n|, compared squared
     bool all_out = true;
     for (int k = 0; k < 4 && all_out; ++k) {
       const double s = dot(n, sub(u.v[k], a));
-      all_out = side > 0 ? s < -tol : s > tol;
+      all_out = s > 0 && s * s > tol2;
     }
     if (all_out) return true;
   }
@@ -262,10 +274,13 @@ void clip_convex(const Tet* subject, int nsubject, const Convex& c, const Tet* o
 
 }  // namespace
 
-AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
+AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, const SimplexRule& rule,
                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
-                               const GridInfo* src_grid, int nthreads) {
+                               const GridInfo* src_grid, int nthreads, int stages) {
   AssemblyResult result(tgt.ncells);
+  ElementSet src = src_in;
+  const std::vector<double> coords = src.packed_coords();
+  src.cell_coords = coords.data();
   const SourceSearch search(src, src_grid);
 
   const int nth = thread_count(nthreads);
@@ -309,8 +324,16 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
       if (exact) tev.affine(ct, gt);
       const bool moments_t = exact && shape(gt, nt, h) <= kSliverShape;
       const BBox search_box{add(tg.box.lo, origin), add(tg.box.hi, origin)};
+      tg.build_planes();
+      // A source box outside a plane of a convex target (a tet, a box) needs no clipping.
+      const double eps_box = 1e-12 * h + 4 * DBL_EPSILON * h;
       search.for_each(search_box, 1e-10 * h, stamp, t, [&](int64_t s) {
         ++tested;
+        if (stages < 2) return;
+        if (tg.nconvex == 1) {
+          const BBox& b = search.box(s);
+          if (box_outside(sub(b.lo, origin), sub(b.hi, origin), tg.convex[0], eps_box)) return;
+        }
         sg.build(src, s, origin, false);
         // Clip the tets of the element with fewer of them by the convex pieces
         // of the other (fewest tet-piece pairs).
@@ -322,6 +345,7 @@ AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, con
         buf.pieces.clear();
         const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
         for (int c = 0; c < clipper.nconvex; ++c) clip_convex(subj.tets, subj.ntets, clipper.convex[c], other, eps, buf);
+        if (stages < 3) return;
         bool any = false, moments = false;
         const SimplexRule* q_rule = &rule;
         pair = Moments{};
