@@ -197,10 +197,11 @@ class Mesh:
         return self._cache[key]
 
     def longest_edges(self) -> np.ndarray:
+        """The longest distance between two vertices of each cell."""
         p = self.cell_vertices()
-        k = p.shape[1]
-        d = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1).reshape(len(p), k * k)
-        return d.max(axis=1)
+        i, j = np.triu_indices(p.shape[1], 1)
+        d = p[:, i] - p[:, j]
+        return np.sqrt(np.einsum("mpd,mpd->mp", d, d).max(axis=1))
 
     # -- validation -------------------------------------------------------
     def _validate(self, reorient: bool):

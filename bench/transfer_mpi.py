@@ -1,0 +1,181 @@
+"""Distributed transfer benchmark: the P1-P1 coupling operator on 1 and 2 MPI ranks
+(Transfer.assemble(..., comm=)), side by side with libsupermesh's own parallel driver on 1
+and 2 ranks measured in the same run; parallel efficiency T(1) / (N T(N)) against the goal
+of 90 %, where the time goes per rank (exchange, kernel, PETSc matrices, apply), what
+travels (cells and bytes per rank) and the memory per element, for docs/scaling.md.
+
+    .venv/bin/python bench/transfer_mpi.py                 # 48k x 83k tets, 1 and 2 ranks
+    .venv/bin/python bench/transfer_mpi.py --quick -o t.json
+
+Both codes cut both meshes by the same coordinate bisection (bench/supermesh_parallel.py
+writes the same parts for libsupermesh). Times are the slowest rank's, the minimum over
+--repeat runs; the machine's 2 cores are shared, so the load average is recorded with every
+figure: MPI timings under load are not speed-ups.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+# as in bench/transfer.py: the `transfer` package, not this folder's transfer.py
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+DEFAULT_OUTPUT = ROOT / "bench" / "results" / "transfer_mpi.json"
+GOAL_EFFICIENCY = 0.90
+#: lattice cells per axis (6 tets per cube) of the source and the target
+SIZES = {"small": (20, 24), "quick": (5, 6)}
+RANKS = (1, 2)
+
+
+def meshes(size: str):
+    from transfer.generate import box_tetrahedra
+
+    ns, nt = SIZES[size]
+    return (box_tetrahedra((ns,) * 3, jitter=0.2, seed=1, name="source"),
+            box_tetrahedra((nt,) * 3, jitter=0.2, seed=2, name="target"))
+
+
+# -- the worker: one rank of `mpirun -n N python bench/transfer_mpi.py --worker SIZE` ----------
+def worker(size: str, repeat: int) -> None:
+    from mpi4py import MPI
+
+    import transfer.petsc  # noqa: F401 - PETSc's initialisation is not assembly
+    from transfer import Transfer
+    from transfer.distributed import Part
+    from transfer.partition import bisection
+
+    comm = MPI.COMM_WORLD
+    src, dst = meshes(size)
+    ps, pt = (Part.of_cells(m, np.flatnonzero(bisection(m, comm.size) == comm.rank), "P1") for m in (src, dst))
+    u = np.sin(3 * ps.mesh.points[:, 0]) + ps.mesh.points[:, 1]
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    runs = []
+    for _ in range(max(1, repeat)):
+        comm.Barrier()
+        start = time.perf_counter()
+        operator = Transfer.assemble(ps, pt, "l2", comm=comm)
+        assemble = time.perf_counter() - start
+        start = time.perf_counter()
+        operator(u)
+        apply = time.perf_counter() - start
+        s = operator.stats
+        mine = {"assemble": assemble, "apply": apply, "exchange": s["exchange_seconds"], "kernel": s["kernel_seconds"],
+                "matrices": s["matrix_seconds"]}
+        runs.append({k: comm.allreduce(v, op=MPI.MAX) for k, v in mine.items()})
+    best = min(runs, key=lambda r: r["assemble"])
+    x = s["exchange"]
+    per_rank = comm.gather({"target_cells": pt.num_cells, "source_cells_own": ps.num_cells,
+                            "source_cells_held": s["source_cells_held"], "cells_sent": x.cells_sent,
+                            "cells_received": x.cells_received, "bytes_sent": x.bytes_sent,
+                            "bytes_received": x.bytes_received, "neighbours": len(x.sent_to),
+                            "peak_rss_increase_bytes": 1024 * (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+                                                               - rss_before),
+                            "B_nnz_owned": operator.B.getInfo()["nz_used"]})
+    if comm.rank == 0:
+        print(json.dumps({"ranks": comm.size, "seconds": best, "seconds_all": [r["assemble"] for r in runs],
+                          "pairs_tested": s["pairs_tested"], "pairs_intersected": s["pairs_intersected"],
+                          "per_rank": per_rank}))
+
+
+# -- the driver ---------------------------------------------------------------------------------
+def _mpirun(ranks: int, *args) -> dict:
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", "--bind-to", "none", sys.executable, __file__, *args]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=3600)
+    if proc.returncode:
+        raise RuntimeError(f"{' '.join(cmd)} failed: {proc.stderr[-2000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _supermesh():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("supermesh_parallel", ROOT / "bench" / "supermesh_parallel.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.ParallelSupermesh()
+
+
+def _efficiency(seconds: dict) -> float | None:
+    """T(1) / (2 T(2)), None without both times."""
+    if not all(seconds.values()):
+        return None
+    return seconds[1] / (2 * seconds[2])
+
+
+def main(argv=None) -> dict:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true", help="tiny meshes, 1 repeat: a smoke run")
+    p.add_argument("--repeat", type=int, default=3, help="runs per figure, the minimum is reported (default: 3)")
+    p.add_argument("-o", "--output", type=Path, default=DEFAULT_OUTPUT)
+    p.add_argument("--worker", metavar="SIZE", help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.worker:
+        worker(args.worker, args.repeat)
+        return {}
+    size, repeat = ("quick", 1) if args.quick else ("small", args.repeat)
+    src, dst = meshes(size)
+    print(f"distributed transfer: P1 -> P1, {src.num_cells:,} x {dst.num_cells:,} tets, ranks {list(RANKS)}, "
+          f"repeat {repeat}; load average {os.getloadavg()}", flush=True)
+    from transfer.partition import bisection
+
+    lsm = _supermesh()
+    result = {"benchmark": "transfer_mpi", "size": size, "source_tets": src.num_cells, "target_tets": dst.num_cells,
+              "load_average_at_start": list(os.getloadavg()), "goal_efficiency": GOAL_EFFICIENCY,
+              "ours": {}, "libsupermesh": {}}
+    for ranks in RANKS:
+        result["ours"][ranks] = _mpirun(ranks, "--worker", size, "--repeat", str(repeat))
+        result["ours"][ranks]["load_average"] = list(os.getloadavg())
+        result["libsupermesh"][ranks] = lsm.measure(src, dst, bisection(src, ranks), bisection(dst, ranks), ranks,
+                                                    repeat)
+        result["libsupermesh"][ranks]["load_average"] = list(os.getloadavg())
+    ours = {n: r["seconds"]["assemble"] for n, r in result["ours"].items()}
+    theirs = {n: r.get("seconds") for n, r in result["libsupermesh"].items()}
+    result["efficiency"] = {"ours": _efficiency(ours), "libsupermesh": _efficiency(theirs)}
+    eff = result["efficiency"]["ours"]
+    result["pass"] = eff is not None and eff >= GOAL_EFFICIENCY
+    result["load_average_at_end"] = list(os.getloadavg())
+    _print(result, ours, theirs)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(result, indent=2, default=str) + "\n")
+    print(f"wrote {args.output}")
+    return result
+
+
+def _print(result, ours, theirs):
+    rows = []
+    for n in RANKS:
+        o, lsm = result["ours"][n]["seconds"], result["libsupermesh"][n]
+        rows.append(f"{n:>5}  {ours[n]:9.3f} s  {o['exchange']:8.3f} s  {o['kernel']:8.3f} s  {o['matrices']:8.3f} s  "
+                    f"{o['apply'] * 1e3:7.1f} ms  "
+                    + (f"{lsm['seconds']:9.3f} s  {lsm['seconds'] / ours[n]:5.2f}x" if lsm.get("available") else
+                       "libsupermesh not available"))
+    print("ranks  assemble    exchange    kernel      matrices    apply       libsupermesh  ratio")
+    print("\n".join(rows))
+    for n in RANKS:
+        for r, part in enumerate(result["ours"][n]["per_rank"]):
+            print(f"  {n} ranks, rank {r}: {part['target_cells']:,} target cells, source {part['source_cells_own']:,} own "
+                  f"+ {part['cells_received']:,} received ({part['bytes_received'] / 1e6:.2f} MB), sent "
+                  f"{part['cells_sent']:,} ({part['bytes_sent'] / 1e6:.2f} MB), peak memory +"
+                  f"{part['peak_rss_increase_bytes'] / 1e6:.0f} MB")
+    eff = result["efficiency"]
+    fmt = lambda e: "-" if e is None else f"{100 * e:.0f} %"  # noqa: E731
+    print(f"efficiency 1 -> 2 ranks: ours {fmt(eff['ours'])}, libsupermesh {fmt(eff['libsupermesh'])} "
+          f"(goal {100 * GOAL_EFFICIENCY:.0f} %): {'PASS' if result['pass'] else 'MISS'}; load average "
+          f"{result['load_average_at_end']}")
+
+
+if __name__ == "__main__":
+    main()
