@@ -82,9 +82,9 @@ struct CSR {
   std::vector<double> data;
 };
 
-// Sum the triplets of all threads into a CSR matrix with nrows rows
+// Sum the triplets of all threads into a CSR matrix with nrows rows and ncols columns
 // (duplicates added, columns sorted within each row).
-CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int nthreads = 1);
+CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int64_t ncols, int nthreads = 1);
 
 // How a target element enters D (paper eqs. 3-4):
 // - covered entirely by the source (relative tolerance kFullCoverage on the
@@ -262,9 +262,10 @@ struct AssemblyResult {
   int64_t pairs_intersected = 0;
 
   // Merge the per-thread triplets into B and D.
-  void collect(const std::vector<Triplets>& b, const std::vector<Triplets>& d, int64_t n_tgt_dofs, int nthreads) {
-    B = to_csr(b, n_tgt_dofs, nthreads);
-    D = to_csr(d, n_tgt_dofs, nthreads);
+  void collect(const std::vector<Triplets>& b, const std::vector<Triplets>& d, int64_t n_src_dofs,
+               int64_t n_tgt_dofs, int nthreads) {
+    B = to_csr(b, n_tgt_dofs, n_src_dofs, nthreads);
+    D = to_csr(d, n_tgt_dofs, n_tgt_dofs, nthreads);
   }
 };
 

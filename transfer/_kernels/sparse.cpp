@@ -1,5 +1,5 @@
 // Triplets -> CSR with duplicate summation: a counting sort by row, then each
-// row sorted by column and compacted (rows in parallel).
+// row compacted through a marker per column and sorted (rows in parallel).
 #include <algorithm>
 #include <numeric>
 
@@ -27,7 +27,7 @@ struct Entry {
 };
 }  // namespace
 
-CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int nthreads) {
+CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int64_t ncols, int nthreads) {
   nthreads = std::max(1, nthreads);
   std::vector<int64_t> start(nrows + 1, 0);
   for (const auto& p : parts)
@@ -39,20 +39,30 @@ CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int nthreads) {
     for (const auto& p : parts)
       for (size_t k = 0; k < p.rows.size(); ++k) entries[next[p.rows[k]]++] = {p.vals[k], p.cols[k]};
   }
+  // Each row: duplicates summed in place through a marker per column (linear in the
+  // entries), then the distinct columns sorted.
   std::vector<int64_t> unique(nrows + 1, 0);
-#pragma omp parallel for schedule(dynamic, 1024) num_threads(nthreads)
-  for (int64_t r = 0; r < nrows; ++r) {
-    Entry* a = entries.data() + start[r];
-    Entry* b = entries.data() + start[r + 1];
-    std::sort(a, b, [](const Entry& x, const Entry& y) { return x.col < y.col; });
-    Entry* out = a;
-    for (Entry* e = a; e < b; ++e) {
-      if (out > a && (out - 1)->col == e->col)
-        (out - 1)->val += e->val;
-      else
-        *out++ = *e;
+#pragma omp parallel num_threads(nthreads)
+  {
+    std::vector<int64_t> marker(ncols, -1);
+#pragma omp for schedule(dynamic, 1024)
+    for (int64_t r = 0; r < nrows; ++r) {
+      Entry* a = entries.data() + start[r];
+      Entry* b = entries.data() + start[r + 1];
+      Entry* out = a;
+      for (Entry* e = a; e < b; ++e) {
+        int64_t& m = marker[e->col];  // where in this row the column is, -1 if not yet
+        if (m >= 0) {
+          a[m].val += e->val;
+        } else {
+          m = out - a;
+          *out++ = *e;
+        }
+      }
+      std::sort(a, out, [](const Entry& x, const Entry& y) { return x.col < y.col; });
+      for (Entry* e = a; e < out; ++e) marker[e->col] = -1;
+      unique[r + 1] = out - a;
     }
-    unique[r + 1] = out - a;
   }
   CSR csr;
   csr.indptr.resize(nrows + 1);

@@ -405,7 +405,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
 
   result.pairs_tested = tested;
   result.pairs_intersected = intersected;
-  result.collect(Bparts, Dparts, n_tgt_dofs, nth);
+  result.collect(Bparts, Dparts, n_src_dofs, n_tgt_dofs, nth);
   return result;
 }
 

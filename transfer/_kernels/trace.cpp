@@ -205,7 +205,7 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
   }
   result.pairs_tested = tested;
   result.pairs_intersected = intersected;
-  result.collect(Bparts, Dparts, n_tgt_dofs, nth);
+  result.collect(Bparts, Dparts, n_src_dofs, n_tgt_dofs, nth);
   return result;
 }
 

@@ -397,7 +397,7 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
   }
   result.pairs_tested = tested;
   result.pairs_intersected = intersected;
-  result.collect(Bparts, Dparts, n_tgt_dofs, nth);
+  result.collect(Bparts, Dparts, n_src_dofs, n_tgt_dofs, nth);
   return result;
 }
 
