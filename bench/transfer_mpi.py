@@ -147,11 +147,56 @@ def main(argv=None) -> dict:
     eff = result["efficiency"]["ours"]
     result["pass"] = eff is not None and eff >= GOAL_EFFICIENCY
     result["load_average_at_end"] = list(os.getloadavg())
+    result["prediction"] = predict(result)
     _print(result, ours, theirs)
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(result, indent=2, default=str) + "\n")
     print(f"wrote {args.output}")
     return result
+
+
+#: weak-scaling model inputs that this machine cannot measure (2 cores, one host): a cluster
+#: interconnect's bandwidth and latency, assumed
+BANDWIDTH, LATENCY = 5e9, 2e-6
+#: total elements (source + target, in the proportions of the measured pair) and ranks
+PREDICT_ELEMENTS, PREDICT_RANKS = (1e6, 1e8, 2e9), (1, 64, 12_288)
+#: memory of one rank of the machine here
+RANK_MEMORY = 24e9
+
+
+def predict(result) -> dict:
+    """Weak-scaling prediction from the per-element costs measured on 1 rank and the halo
+    measured on 2 (docs/scaling.md): per rank, time = target cells x (kernel + matrices +
+    exchange bookkeeping per target cell) + halo bytes / bandwidth + messages x latency +
+    the O(P) collectives (box allgather, counts alltoall)."""
+    one, two = result["ours"][1], result["ours"][2]
+    n_t, n_s = result["target_tets"], result["source_tets"]
+    part = one["per_rank"][0]
+    per_target = {k: one["seconds"][k] / n_t for k in ("kernel", "matrices", "exchange")}
+    memory = part["peak_rss_increase_bytes"] / (n_t + n_s)
+    received = np.mean([p["cells_received"] for p in two["per_rank"]])
+    bytes_per_cell = sum(p["bytes_received"] for p in two["per_rank"]) / max(
+        sum(p["cells_received"] for p in two["per_rank"]), 1)
+    halo = received / n_s ** (2 / 3)  # one cut through the whole box: halo cells per (source cells)^(2/3)
+    share_t = n_t / (n_t + n_s)
+    rows = []
+    for total in PREDICT_ELEMENTS:
+        for ranks in PREDICT_RANKS:
+            t_cells, s_cells = share_t * total / ranks, (1 - share_t) * total / ranks
+            compute = t_cells * sum(per_target.values())
+            halo_cells = 0.0 if ranks == 1 else 6 * halo * s_cells ** (2 / 3)  # a cube's six faces
+            neighbours = 0 if ranks == 1 else min(ranks - 1, 26)
+            comm = (halo_cells * bytes_per_cell / BANDWIDTH + 2 * neighbours * LATENCY
+                    + (0 if ranks == 1 else ranks * 96 / BANDWIDTH + 16 * ranks / BANDWIDTH
+                       + 4 * np.log2(ranks) * LATENCY))
+            rank_memory = memory * (t_cells + s_cells) + halo_cells * bytes_per_cell
+            rows.append({"elements": total, "ranks": ranks, "elements_per_rank": total / ranks,
+                         "compute_seconds": compute, "communication_seconds": comm, "seconds": compute + comm,
+                         "halo_cells_per_rank": halo_cells, "halo_bytes_per_rank": halo_cells * bytes_per_cell,
+                         "memory_per_rank_bytes": rank_memory, "fits": rank_memory < RANK_MEMORY})
+    return {"per_target_cell_seconds": per_target, "memory_bytes_per_element": memory,
+            "halo_cells_per_source_cells_two_thirds": halo, "bytes_per_halo_cell": bytes_per_cell,
+            "bandwidth_assumed": BANDWIDTH, "latency_assumed": LATENCY, "rows": rows}
 
 
 def _print(result, ours, theirs):
@@ -170,6 +215,15 @@ def _print(result, ours, theirs):
                   f"+ {part['cells_received']:,} received ({part['bytes_received'] / 1e6:.2f} MB), sent "
                   f"{part['cells_sent']:,} ({part['bytes_sent'] / 1e6:.2f} MB), peak memory +"
                   f"{part['peak_rss_increase_bytes'] / 1e6:.0f} MB")
+    pred = result["prediction"]
+    print(f"per target cell: " + ", ".join(f"{k} {v * 1e6:.2f} us" for k, v in pred["per_target_cell_seconds"].items())
+          + f"; memory {pred['memory_bytes_per_element']:.0f} B per element; halo "
+          f"{pred['halo_cells_per_source_cells_two_thirds']:.2f} x n^(2/3) cells of {pred['bytes_per_halo_cell']:.0f} B")
+    print("predicted (weak scaling): elements  ranks  per rank    time      of which communication  memory per rank")
+    for r in pred["rows"]:
+        print(f"  {r['elements']:10.0e}  {r['ranks']:6d}  {r['elements_per_rank']:9.3g}  {r['seconds']:8.3g} s  "
+              f"{r['communication_seconds']:8.2g} s  {r['memory_per_rank_bytes'] / 1e9:8.3g} GB"
+              f"{'' if r['fits'] else ' (does not fit 24 GB)'}")
     eff = result["efficiency"]
     fmt = lambda e: "-" if e is None else f"{100 * e:.0f} %"  # noqa: E731
     print(f"efficiency 1 -> 2 ranks: ours {fmt(eff['ours'])}, libsupermesh {fmt(eff['libsupermesh'])} "
