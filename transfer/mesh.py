@@ -136,16 +136,23 @@ class Mesh:
         return cls(mesh.points, np.concatenate(blocks), cell_type, name=name, reorient=reorient)
 
     @classmethod
-    def empty(cls, cell_type: str, name: str = "mesh") -> "Mesh":
-        """A mesh without cells: the part of a distributed mesh on a rank that holds none
-        (the constructor, which every input goes through, rejects empty meshes)."""
+    def trusted(cls, points, cells, cell_type: str, name: str = "mesh") -> "Mesh":
+        """A mesh made of cells of meshes already validated, not checked again (the source
+        cells a rank gathers from the others'), or without cells (the part of a distributed
+        mesh on a rank that holds none; the constructor rejects empty meshes)."""
         if cell_type not in CELL_TYPES:
             raise MeshError(f"{name}: unsupported cell type {cell_type!r}; use one of {sorted(CELL_TYPES)}")
         mesh = object.__new__(cls)
-        for key, value in (("points", np.zeros((0, 3))), ("cells", np.zeros((0, CELL_TYPES[cell_type][1]), np.int64)),
+        for key, value in (("points", np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)),
+                           ("cells", np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, CELL_TYPES[cell_type][1])),
                            ("cell_type", cell_type), ("name", name), ("_cache", {}), ("reoriented", 0)):
             object.__setattr__(mesh, key, value)
         return mesh
+
+    @classmethod
+    def empty(cls, cell_type: str, name: str = "mesh") -> "Mesh":
+        """A mesh without cells (see :meth:`trusted`)."""
+        return cls.trusted(np.zeros((0, 3)), np.zeros((0, CELL_TYPES.get(cell_type, (0, 1))[1])), cell_type, name)
 
     def to_meshio(self):
         import meshio
