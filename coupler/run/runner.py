@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coupler.checks.expression import check_displacement
+from coupler import checks
 from coupler.coupling.acceleration import make_accelerator
 from coupler.coupling.loop import run_coupled
 from coupler.errors import CouplerError, run_status
@@ -292,12 +292,14 @@ class Run:
         self.log(f"{steps} step{'s' * (steps > 1)} done; results in {self.out}")
         done = {"iterations": result.iterations, "converged": [r["converged"] for r in self.summary["steps"]]}
         if scene.check:
-            done["check"] = check_displacement(scene.check, self.meshes["solid"].points,
-                                               self.outputs["solid"]["displacement"])
-            c = done["check"]
-            self.log(f"check: displacement error {c['error']:.3e} relative on {c['vertices']} vertices "
-                     f"(tolerance {c['tolerance']:g}): {'PASS' if c['passed'] else 'FAIL'}")
+            done["check"] = checks.evaluate(scene, self.result())
+            self.log(checks.describe(done["check"]))
         return done
+
+    def result(self) -> checks.Result:
+        """The final fields (outputs and inputs) of every participant on its mesh, and its last figures."""
+        fields = {name: {**self.inputs.get(name, {}), **self.outputs.get(name, {})} for name in self.meshes}
+        return checks.Result(meshes=self.meshes, fields=fields, figures=dict(self.figures))
 
     # -- checkpoints of an implicit step (coupler.coupling.loop.Checkpoint) ------------
     def save(self, window) -> None:

@@ -13,6 +13,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from coupler import checks
 from coupler.errors import SceneError
 from coupler.protocol.transport import check_endpoint
 from coupler.scene.tables import _REQUIRED, Table, output_directory
@@ -80,7 +81,7 @@ class CoupledScene:
     messaging: dict
     output_dir: Path
     output: dict
-    check: dict | None = None  # expected displacement: {"x"|"y"|"z": expr, "where": expr, "tolerance": float}
+    check: dict | None = None  # [check]: {"kind": ..., **the kind's settings} (coupler/checks)
     resources: dict = field(default_factory=lambda: {"memory_limit": None, "check_memory": True})
     effect_settings: dict = field(default_factory=dict)  # effect -> what its rule read of its own tables
 
@@ -123,9 +124,7 @@ TABLES = {
                "every": "write fields every N steps (default 1)",
                "pictures": "render PNG pictures of what the scene simulated (default true; the environment "
                            "variable VARCOUPLE_PICTURES=0 makes false the default)"},
-    "check": {"x": "expected x displacement (expression in x, y, z)", "y": "expected y displacement",
-              "z": "expected z displacement", "where": "expression selecting the vertices compared (default all)",
-              "tolerance": "largest relative error accepted"},
+    "check": {"kind": "the known solution compared with the result (coupler/checks: one module per kind)"},
 }
 SOLID_KEYS = {"mesh": "mesh file (any format meshio reads), relative to the case",
               "lower": "box generator: lower corner", "upper": "box generator: upper corner",
@@ -247,16 +246,6 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
         raise messaging.error("connect", "client mode needs the zenoh router(s) to connect to, e.g. "
                                          "connect = [\"tcp/192.168.1.10:7447\"]")
 
-    check = None
-    if "check" in data:
-        t = Table(path, "check", data["check"], TABLES["check"])
-        check = {c: t.string(c, None) for c in ("x", "y", "z", "where") if c in t.data}
-        for key, expression in check.items():
-            check_expression(expression, t.where(key))
-        if not set(check) & {"x", "y", "z"}:
-            raise t.error("z", "give the expected displacement of at least one component (x, y or z)")
-        check["tolerance"] = t.number("tolerance", positive=True)
-
     res = Table(path, "resources", data.get("resources", {}), TABLES["resources"])
     resources = {"memory_limit": res.number("memory_limit", None, positive=True),
                  "check_memory": res.boolean("check_memory", True)}
@@ -269,13 +258,15 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                         coupling=coupling_cfg, messaging=messaging_cfg, output_dir=output_dir,
                         output={"every": out.integer("every", 1),
                                 "pictures": out.boolean("pictures", pictures_default())},
-                        check=check, resources=resources)
+                        resources=resources)
     for table, name in owned.items():
         if table in data and name not in effects:
             raise SceneError(f"{path}: [{table}]: needs the effect {name!r} in [physics] effects")
     for name in effects:
         if hasattr(RULES[name], "parse"):
             RULES[name].parse(scene, data)
+    if "check" in data:  # last: a check kind takes its parameters from the validated scene
+        scene.check = checks.parse(path, data["check"], scene)
     return scene
 
 
