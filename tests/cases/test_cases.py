@@ -55,9 +55,35 @@ def test_pressurized_fracture_opening_matches_sneddon(tmp_path):
 
 
 def test_a_wrong_expected_solution_fails_the_check(tmp_path, capsys):
-    code, out, s = run_case(tmp_path, "block_compression", {'z = "-1e6 * z / 1e10"': 'z = "-2e6 * z / 1e10"'})
-    assert code == 1 and not s["check"]["passed"]
+    code, out, s = run_case(tmp_path, "block_compression", {'kind = "uniaxial"': 'z = "-2e6 * z / 1e10"'})
+    assert code == 1 and not s["check"]["passed"] and s["check"]["kind"] == "expression"
+    assert s["check"]["error"] == pytest.approx(0.5)
     assert "FAIL" in capsys.readouterr().out
+
+
+def test_uniaxial_check_takes_its_parameters_from_the_scene(tmp_path, capsys):
+    """Another modulus, Poisson ratio, pressure and loaded face (x): the check follows the scene."""
+    code, out, s = run_case(tmp_path, "block_compression", {
+        "E = 1.0e10": "E = 3.0e9", "nu = 0.25": "nu = 0.1", 'boundary = "zmax"\nvalue = 1.0e6':
+        'boundary = "xmax"\nvalue = 2.0e6'})
+    assert code == 0 and s["check"]["passed"] and s["check"]["error"] < 1e-6
+    assert s["check"]["kind"] == "uniaxial" and s["check"]["stress"] == -2e6 and s["check"]["axis"] == "x"
+    m = meshio.read(out / "solid_0000.vtu")
+    x, u = m.points, m.point_data["displacement"]
+    exact = np.column_stack([-2e6 * x[:, 0], 0.2e6 * x[:, 1], 0.2e6 * x[:, 2]]) / 3e9
+    assert np.abs(u - exact).max() <= 1e-6 * np.abs(exact).max()
+    assert "check: uniaxial stress -2e+06 Pa along x: displacement error" in capsys.readouterr().out
+
+
+def test_sneddon_check_takes_its_parameters_from_the_scene(tmp_path):
+    code, out, s = run_case(tmp_path, "pressurized_fracture", {
+        "E = 1.0e10": "E = 2.0e10", "nu = 0.25": "nu = 0.2", "value = 1.0e6": "value = 2.0e6"})
+    assert code == 0 and s["check"]["passed"] and s["check"]["kind"] == "sneddon"
+    sneddon = 8 * (1 - 0.2**2) * 2e6 * 0.1 / (np.pi * 2e10)
+    assert s["check"]["opening_centre"] == pytest.approx(sneddon, rel=1e-12) and s["check"]["vertices"] == 25
+    m = meshio.read(out / "solid_0000.vtu")
+    centre = np.argmin(np.linalg.norm(m.points, axis=1))
+    assert abs(2 * m.point_data["displacement"][centre, 2] / sneddon - 1) < 0.05
 
 
 def test_nearly_incompressible_rock_warns(tmp_path, capsys):
