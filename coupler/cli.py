@@ -3,6 +3,7 @@
     varcouple transfer SRC DST --field NAME -o OUT [--method l2|pseudo_l2]
     varcouple check CASE
     varcouple run CASE [--output DIR]
+    varcouple study CASE --vary KEY=VALUES [--vary ...] [--output DIR]
 
 ``main(argv)`` returns the exit code: 0 on success, 2 on a usage or input error
 (bad option, missing file or field, invalid scene, meshes that do not overlap),
@@ -244,48 +245,40 @@ def run(args: argparse.Namespace) -> int:
     """Validate the scene of CASE, run it and write its outputs. Exit code by the final
     status (README, "When a run fails"): 0 completed, 1 the [check] failed, 2 invalid input,
     3 not converged, 4 failed, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
-    from transfer import TransferError
-
     from coupler import scene as scenes
-    from coupler.scene.transfer import TransferScene
-    from coupler.errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, SceneError
-    from coupler.protocol.transport import new_run_id
-    from coupler.run.outdir import OutputLock, prepare
+    from coupler.errors import EXIT_CODES
+    from coupler.run.execute import execute
 
     start = time.perf_counter()
     scene = scenes.load(args.case, output=args.output)
-    study = scenes.study_module(scene)
     origin = "--output" if args.output is not None else f"{scene.path}: [output] directory"
-    run_id = new_run_id()
-    lock = OutputLock(scene.output_dir, run_id)
-    out = prepare(scene.output_dir, origin)
-
-    def log(line):
-        print(line, flush=True)
-
-    with lock:
-        if lock.note:
-            log(f"note: {out}: {lock.note}")
-        try:
-            if isinstance(scene, TransferScene):
-                from coupler.run.studies.transfer import run as run_transfer
-
-                summary = run_transfer(scene, log=log)
-            elif study is not None:
-                summary = study.run(scene, log=log)
-            else:
-                from coupler.run.runner import run as run_coupled_case
-
-                summary = run_coupled_case(scene, log=log, run_id=run_id)
-        except (NotConverged, SceneError):  # not converged (3); a scene key found wrong while running (2)
-            raise
-        except (CouplerError, TransferError, OSError) as exc:  # the run started: a failure, not bad input
-            raise RunFailed(_one_line(exc)) from exc
+    summary = execute(scene, origin, log=_log)
     if not summary.get("check", {}).get("passed", True):
-        log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}; the [check] FAILED")
+        _log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}; the [check] FAILED")
         return EXIT_CODES["check_failed"]
-    log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}")
+    _log(f"done in {time.perf_counter() - start:.1f} s; results in {scene.output_dir}")
     return EXIT_CODES["completed"]
+
+
+def _log(line: str) -> None:
+    print(line, flush=True)
+
+
+# -- varcouple study -------------------------------------------------------------
+def study(args: argparse.Namespace) -> int:
+    """Run the scene of CASE over the product of the --vary values, each run in its own
+    directory under the study's (default: <[output] directory>/study), through the same path as
+    `varcouple run`; write study.json (per run: values, status, seconds per phase and total,
+    cost in cells, error against the scene's [check] or else against the most accurate run),
+    study.png (error against wall time and cost) and index.html. Exit code 0 when every run
+    completed (and passed its [check]), 1 when some did not (study.json says which), 2 for a
+    bad scene, key or value (nothing runs)."""
+    from coupler.errors import EXIT_CODES
+    from coupler.run.study import run_study
+
+    result = run_study(args.case, args.vary, args.output, args.field, log=_log)
+    ok = all(run["status"] == "completed" and (run["check"] or {}).get("passed", True) for run in result["runs"])
+    return EXIT_CODES["completed"] if ok else EXIT_CODES["check_failed"]
 
 
 # -- main ----------------------------------------------------------------------------
@@ -314,18 +307,23 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a case (cases/NAME with its scene.toml)", description=run.__doc__)
     _run_args(p)
     p.set_defaults(func=run)
+
+    p = sub.add_parser("study", help="run a case over the product of scene values; error against time and cost",
+                       description=study.__doc__)
+    p.add_argument("case", metavar="CASE", help="case directory holding scene.toml (or the scene file)")
+    p.add_argument("--vary", action="append", required=True, metavar="KEY=VALUES",
+                   help="a dotted scene key and a TOML array of its values, e.g. "
+                        "'coupling.acceleration=[\"aitken\", \"iqn-ils\"]' (repeatable: the product is run)")
+    p.add_argument("--output", "--out", "-o", metavar="DIR", default=None,
+                   help="the study's directory (default: the scene's [output] directory/study)")
+    p.add_argument("--field", default="solid.displacement", metavar="PARTICIPANT.FIELD",
+                   help="without a [check]: the field compared with the reference run (default solid.displacement)")
+    p.set_defaults(func=study)
     return parser
 
 
 def error(message: str) -> None:
     print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
-
-
-def _one_line(exc: BaseException) -> str:
-    """An error as one line; an OSError as ``<file>: <reason>``."""
-    if isinstance(exc, OSError) and exc.strerror:
-        return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def _terminate(signum, frame):
@@ -345,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from transfer import TransferError
 
-    from coupler.errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, Terminated
+    from coupler.errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, Terminated, one_line
 
     try:  # SIGTERM (timeout, batch schedulers) ends a run like Ctrl-C: participants stopped, results kept
         previous = signal.signal(signal.SIGTERM, _terminate)
@@ -367,7 +365,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_CODES["failed"]
     except (CouplerError, TransferError, OSError) as exc:
         sys.stdout.flush()
-        error(_one_line(exc))
+        error(one_line(exc))
         return EXIT_CODES["invalid"]
     finally:
         if previous is not None:

@@ -37,6 +37,13 @@ EXIT_CODES = {"completed": 0, "check_failed": 1, "invalid": 2, "not_converged": 
               "interrupted": 130, "terminated": 143}
 
 
+def one_line(exc: BaseException) -> str:
+    """An error as one line; an OSError as ``<file>: <reason>``."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 def run_status(exc: BaseException | None) -> str:
     """The status a run that ended with ``exc`` (None: no exception) records."""
     if exc is None:

@@ -34,7 +34,8 @@ class Series:
         return self.directory / file
 
 
-def write_summary(out: Path, summary: dict) -> None:
-    tmp = out / (SUMMARY + ".tmp")
+def write_summary(out: Path, summary: dict, name: str = SUMMARY) -> None:
+    """`summary` as JSON in ``out/name``, written atomically."""
+    tmp = out / (name + ".tmp")
     tmp.write_text(json.dumps(summary, indent=2, default=float))
-    tmp.replace(out / SUMMARY)
+    tmp.replace(out / name)

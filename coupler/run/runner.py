@@ -183,6 +183,7 @@ class Run:
             geometry[p.name] = _as_arrays(fields or {})
             self.log(f"{p.name}: {announced[p.name].get('kind')} on {meshes[p.name].num_cells} cells")
         self.summary["participants_announced"] = announced
+        self.summary["sizes"] = {name: {"cells": m.num_cells, "vertices": m.num_points} for name, m in meshes.items()}
         self.meshes = meshes
         self.context = OperatorContext(self.scene, meshes, geometry, self.phases, self.log)
         self.operators = [OPERATORS[e.operator](self.context, e) for e in self.plan.exchanges]

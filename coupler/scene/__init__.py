@@ -14,13 +14,15 @@ from pathlib import Path
 
 from coupler.errors import SceneError
 
+from .overrides import apply
 from .tables import STUDIES, scene_path
 
-def load(case, output: str | Path | None = None):
+def load(case, output: str | Path | None = None, overrides: dict | None = None):
     """Read and validate the scene of `case` (a case directory or its scene.toml):
     a :class:`~coupler.scene.coupled.CoupledScene`, a study's scene or a
     :class:`~coupler.scene.transfer.TransferScene`.
-    `output` overrides ``[output] directory`` (relative to the working directory)."""
+    `output` overrides ``[output] directory`` (relative to the working directory); `overrides`
+    (``{dotted key: value}``, :mod:`coupler.scene.overrides`) set keys before validation."""
     path, case_dir = scene_path(case)
     try:
         with open(path, "rb") as f:
@@ -29,6 +31,8 @@ def load(case, output: str | Path | None = None):
         raise SceneError(f"{path}: invalid TOML: {exc}") from None
     except OSError as exc:
         raise SceneError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    for key, value in (overrides or {}).items():
+        apply(data, key, value)
     if "physics" in data:
         from .coupled import parse
 
