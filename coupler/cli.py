@@ -221,6 +221,11 @@ def check(args: argparse.Namespace) -> int:
         plan = make_plan(scene)
         for line in plan.lines():
             print(line)
+        if scene.check:
+            from coupler.checks import KINDS
+
+            print(f"check         {scene.check['kind']}: {KINDS[scene.check['kind']].DESCRIPTION} "
+                  f"(tolerance {scene.check['tolerance']:g})")
         estimates = estimate(scene)
         print("size          " + "; ".join(f"{e.name} {e.cells:,} cells" for e in estimates if e.cells))
         print(f"memory        {check_memory(scene, estimates)}")

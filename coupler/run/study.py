@@ -138,6 +138,7 @@ def study_plot(path: Path, study: dict) -> None:
 
     runs = [run for run in study["runs"] if run.get("error") and run.get("cost")]
     reference = next((run for run in study["runs"] if run["name"] == study["error"].get("reference")), None)
+    tolerance = next((run["check"]["tolerance"] for run in study["runs"] if run.get("check")), None)
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for ax, x, label in ((axes[0], lambda r: r["seconds"]["total"], "wall time [s]"),
                          (axes[1], lambda r: r["cost"]["cells"], "cost [cells of all participants]")):
@@ -146,12 +147,16 @@ def study_plot(path: Path, study: dict) -> None:
             ax.annotate(run["name"], (x(run), run["error"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
         if reference is not None:
             ax.axvline(x(reference), color="k", ls=":", lw=1, label=f"reference {reference['name']}")
+        if tolerance is not None:
+            ax.axhline(tolerance, color="k", ls="--", lw=0.8, label=f"[check] tolerance {tolerance:g}")
+        if reference is not None or tolerance is not None:
             ax.legend(fontsize=7)
         ax.set_xlabel(label)
         ax.grid(True, which="both", alpha=0.3)
     if not runs:
         axes[0].text(0.5, 0.5, "no run with an error to draw", transform=axes[0].transAxes, ha="center")
-    axes[0].set_ylabel(f"relative L2 difference of {study['error']['field']}" if reference else "error")
+    axes[0].set_ylabel(f"relative L2 difference of {study['error']['field']}" if reference else
+                       f"error ([check] {study['check']})" if study["check"] else "error")
     fig.suptitle(f"{study['case']}: error against {study['error']['against']}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

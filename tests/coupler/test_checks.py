@@ -126,3 +126,11 @@ def test_hertz_fit_recovers_an_exact_hertz_pressure():
     assert abs(np.dot(measured["normal"], rotation[:, 2])) == pytest.approx(1.0)
     with pytest.raises(Exception, match="test: 0 slave vertices carry pressure"):
         fit(points, 0 * pressure, np.full(len(points), h * h), "test")
+
+
+def test_varcouple_check_prints_the_check(capsys):
+    from coupler.cli import main
+
+    assert main(["check", "--quick", str(CASES / "hertz")]) == 0
+    assert "check         hertz: a sphere pressed onto a block: contact radius and peak pressure against Hertz " \
+           "theory (tolerance 0.1)" in capsys.readouterr().out
