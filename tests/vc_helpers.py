@@ -251,3 +251,13 @@ def copy_case(source, directory, replace=None):
         scene = scene.replace(old, new)
     (case / "scene.toml").write_text(scene)
     return case
+
+
+def hertz_mesh_file(path, **params) -> None:
+    """solid_fenicsx.contact_meshes.hertz_mesh(path, **params) in a child process: gmsh loaded in
+    the test process makes VTK's later offscreen rendering abort (tests/coupler/test_pictures.py)."""
+    import subprocess
+    import sys
+
+    code = f"from solid_fenicsx.contact_meshes import hertz_mesh; hertz_mesh({str(path)!r}, **{params!r})"
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)

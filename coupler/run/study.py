@@ -50,6 +50,10 @@ def combinations(varies: list[str]) -> list[dict]:
     return [dict(zip(keys, values)) for values in itertools.product(*(values for _, values in parsed))]
 
 
+def _distinct(values: list) -> list:
+    return [v for i, v in enumerate(values) if v not in values[:i]]
+
+
 def _label(values: dict) -> str:
     return ", ".join(f"{key}={json.dumps(value)}" for key, value in values.items())
 
@@ -171,7 +175,7 @@ def run_study(case, varies: list[str], output=None, field: str = "solid.displace
     lock = OutputLock(directory, new_run_id())
     prepare(directory, "--output" if output is not None else f"{base.path}: [output] directory")
     study = {"case": str(base.case_dir), "scene": str(base.path), "description": getattr(base, "description", ""),
-             "vary": {key: [values[key] for _, values, _ in runs] for key in runs[0][1]},
+             "vary": {key: _distinct([values[key] for _, values, _ in runs]) for key in runs[0][1]},
              "check": base.check["kind"] if getattr(base, "check", None) else None, "runs": []}
     with lock:
         try:

@@ -16,7 +16,7 @@ from coupler.errors import SceneError
 from coupler.run.study import combinations, difference, plan
 from coupler.scene.overrides import apply, parse_vary
 from transfer.generate import box_tetrahedra
-from vc_helpers import CASES, copy_case
+from vc_helpers import CASES, copy_case, hertz_mesh_file
 
 
 def test_the_product_of_the_values():
@@ -125,11 +125,9 @@ def test_small_fracture_with_two_grid_shapes(tmp_path):
 
 def test_hertz_with_two_mesh_sizes_reports_its_check(tmp_path):
     pytest.importorskip("gmsh")
-    from solid_fenicsx.contact_meshes import hertz_mesh
-
     case = copy_case(CASES / "hertz", tmp_path)
     for h in (0.08, 0.06):
-        hertz_mesh(case / f"hertz_h{h}.msh", radius=1.0, h_contact=h, h_far=0.3, refine_radius=0.25)
+        hertz_mesh_file(case / f"hertz_h{h}.msh", radius=1.0, h_contact=h, h_far=0.3, refine_radius=0.25)
     code, out, study = _study(tmp_path, case, 'geometry.solid.mesh=["hertz_h0.08.msh", "hertz_h0.06.msh"]')
     assert study["check"] == "hertz" and "kind hertz" in study["error"]["against"]
     coarse, fine = study["runs"]
@@ -157,3 +155,4 @@ def test_a_knob_without_a_mesh_change_and_a_failed_run(tmp_path):
     reference = study["error"]["reference"]
     assert next(r for r in study["runs"] if r["name"] == reference)["error"] == 0.0
     assert len({r["cost"]["cells"] for r in study["runs"]}) == 1
+    assert study["vary"] == {"coupling.acceleration": ["aitken", "iqn-ils"], "coupling.max_iterations": [2, 50]}
