@@ -8,6 +8,7 @@ from itertools import combinations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from transfer import Mesh
 
@@ -251,6 +252,10 @@ def copy_case(source, directory, replace=None):
         scene = scene.replace(old, new)
     (case / "scene.toml").write_text(scene)
     return case
+
+
+#: gmsh present, found without importing it (imported, it breaks VTK's offscreen rendering: hertz_mesh_file)
+NEEDS_GMSH = pytest.mark.skipif(importlib.util.find_spec("gmsh") is None, reason="gmsh not installed")
 
 
 def hertz_mesh_file(path, **params) -> None:

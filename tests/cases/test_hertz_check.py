@@ -8,16 +8,15 @@ import json
 
 import pytest
 
-pytest.importorskip("gmsh")
-
-from coupler.checks.hertz import theory  # noqa: E402
-from coupler.cli import main  # noqa: E402
-from vc_helpers import CASES, copy_case, hertz_mesh_file  # noqa: E402
+from coupler.checks.hertz import theory
+from coupler.cli import main
+from vc_helpers import CASES, NEEDS_GMSH, copy_case, hertz_mesh_file
 
 SLAVE_R1 = 'slave = "(z > 1e-12) & (z < 0.3) & (abs(sqrt(x**2 + y**2 + (z - 1)**2) - 1) < 0.05)"'
 SLAVE_R05 = 'slave = "(z > 1e-12) & (z < 0.15) & (abs(sqrt(x**2 + y**2 + (z - 0.5)**2) - 0.5) < 0.025)"'
 
 
+@NEEDS_GMSH
 def test_hertz_check_at_half_the_radius(tmp_path, capsys):
     case = copy_case(CASES / "hertz", tmp_path, {SLAVE_R1: SLAVE_R05, "radius = 1.0": "radius = 0.5"})
     hertz_mesh_file(case / "hertz.msh", radius=0.5, half_width=1.0, depth=1.0, h_contact=0.02, h_far=0.3,

@@ -16,7 +16,7 @@ from coupler.errors import SceneError
 from coupler.run.study import combinations, difference, plan
 from coupler.scene.overrides import apply, parse_vary
 from transfer.generate import box_tetrahedra
-from vc_helpers import CASES, copy_case, hertz_mesh_file
+from vc_helpers import CASES, NEEDS_GMSH, copy_case, hertz_mesh_file
 
 
 def test_the_product_of_the_values():
@@ -123,8 +123,8 @@ def test_small_fracture_with_two_grid_shapes(tmp_path):
     assert (out / "study.png").stat().st_size > 0 and "run_02" in (out / "index.html").read_text()
 
 
+@NEEDS_GMSH
 def test_hertz_with_two_mesh_sizes_reports_its_check(tmp_path):
-    pytest.importorskip("gmsh")
     case = copy_case(CASES / "hertz", tmp_path)
     for h in (0.08, 0.06):
         hertz_mesh_file(case / f"hertz_h{h}.msh", radius=1.0, h_contact=h, h_far=0.3, refine_radius=0.25)
