@@ -117,7 +117,8 @@ def test_varcouple_run_refuses_a_load_on_an_empty_boundary(tmp_path, boundary, l
     old = ['boundary = "zmin"', "", "", 'boundary = "zmax"'][load - 1]
     case = copy_case(BLOCK, tmp_path, {old: f'boundary = "{name}"',
                                        "[materials.solid]": f"[geometry.solid.boundaries]\n{boundary}\n\n"
-                                                            "[materials.solid]"})
+                                                            "[materials.solid]",
+                                       '[check]\nkind = "uniaxial"': "[check]\nz = \"0\""})  # not uniaxial now
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
                          capture_output=True, text=True, timeout=300)
