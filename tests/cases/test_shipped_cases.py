@@ -23,6 +23,11 @@ DROPPED = {("small_fracture", "fluid", "cell:solid_velocity"), ("fracture_flow",
 #: summary entries that moved in the reorganisation: old path -> new path (None: no longer reported)
 MOVED = {"/couplings": None}
 RTOL = 1e-7
+#: residuals, step sizes and conservation errors measure round-off once a solve has converged: a
+#: reordered sum in the transfer kernels moved them by up to 1e-5 relative (and figures near 1e-15 by
+#: any factor) while every field stayed within RTOL; they are compared to NOISE_RTOL plus NOISE_ATOL
+NOISY = ("residual", "kkt_residual", "final_step", "conservation_error")
+NOISE_RTOL, NOISE_ATOL = 1e-3, 1e-12
 
 
 def cases() -> list:
@@ -45,6 +50,14 @@ def honest(summary: dict) -> None:
 def close(a, b) -> bool:
     return np.allclose(np.asarray(a, float), np.asarray(b, float), rtol=RTOL, atol=RTOL * max(
         np.max(np.abs(np.asarray(b, float)), initial=0.0), 1e-300))
+
+
+def close_figure(path: str, a, b) -> bool:
+    """A summary figure equals its record; one of the NOISY kinds to round-off."""
+    parts = path.split("/")
+    if parts[-1] in NOISY or parts[-2] == "residuals":
+        return bool(np.allclose(float(a), float(b), rtol=NOISE_RTOL, atol=NOISE_ATOL))
+    return close(a, b)
 
 
 @pytest.mark.parametrize("name", cases())
@@ -75,6 +88,6 @@ def test_a_shipped_case_is_honest_and_unchanged(tmp_path, name):
             path = MOVED[key] + path[len(key):]
         if path not in found["summary"]:
             changed.append(f"summary {path}: missing (was {value})")
-        elif not close(found["summary"][path], value):
+        elif not close_figure(path, found["summary"][path], value):
             changed.append(f"summary {path}: {found['summary'][path]} (was {value})")
     assert not changed, f"{name}:\n" + "\n".join(changed)
