@@ -42,6 +42,23 @@ without dolfinx or OpenFOAM.
     Returns its inputs unchanged (for benchmarks and tests). Config: ``{"reply": "same"}``
     (default) or ``"empty"`` (reply without arrays: one-way timing), ``"delay": s``
     (sleep in ``advance``), ``"fail": "message"`` (``advance`` raises it).
+
+Participants that solve nothing, which the runner serves in its own process
+(:mod:`coupler.run.local`):
+
+``rigid_solid``
+    A fixed solid: its tetrahedral mesh, and zero displacement and velocity in every
+    ``advance`` (no inner solve). Config: ``{"mesh": "file"}`` (any format meshio reads),
+    ``{"box": {...}}`` (as ``spring_solid``) or ``{"generator": {"name": ..., "parameters":
+    {...}}}`` (:mod:`transfer.generators`).
+
+``mesh_file``
+    A mesh file and, with ``"field"``, one of its fields, served as its output (P1/Q1 point
+    data or P0/Q0 cell data). It accepts any input (a transferred field, which the runner
+    writes with its own outputs) and gives ``covered``: 1 at the dofs where every input is
+    finite (a transfer reached them), 0 elsewhere. Config: ``{"file": "path", "field": "name"}``.
+    ``report_figures``: ``reoriented_cells``, cells the file numbers with negative orientation
+    (reordered on reading).
 """
 
 from __future__ import annotations
@@ -259,7 +276,107 @@ class Echo(Participant):
         pass
 
 
-STANDINS = {"replay_fluid": ReplayFluid, "spring_solid": SpringSolid, "echo": Echo}
+# -- participants that solve nothing (served in the coupler's process) ------------------------------
+class RigidSolid(Participant):
+    """A fixed solid: its mesh, zero displacement (see module doc)."""
+
+    kind = "rigid_solid"
+
+    def __init__(self):
+        self.mesh = None
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": ["displacement", "velocity"], "accepts": []}
+
+    def configure(self, config: dict) -> None:
+        if "mesh" in config:
+            from transfer.meshfile import MeshFile
+
+            mesh = MeshFile.read(config["mesh"]).mesh
+        elif "box" in config:
+            from transfer.generate import box_tetrahedra
+
+            b = config["box"]
+            mesh = box_tetrahedra(b["shape"], b["lower"], b["upper"], jitter=float(b.get("jitter", 0.0)),
+                                  seed=int(b.get("seed", 0)))
+        elif "generator" in config:
+            from transfer.generators import GENERATORS, parameters
+
+            g = config["generator"]
+            mesh = GENERATORS[g["name"]].mesh(parameters(g["name"], g.get("parameters", {})))
+        else:
+            raise ValueError("rigid_solid needs config 'mesh', 'box' or 'generator'")
+        if mesh.cell_type != "tetra":
+            raise ValueError(f"rigid_solid needs a tetrahedral mesh, got {mesh.cell_type} cells")
+        self.mesh = mesh
+        log.info("rigid_solid: %d tetrahedra, %d points", mesh.num_cells, mesh.num_points)
+
+    def geometry(self):
+        if self.mesh is None:
+            raise RuntimeError("geometry before configure")
+        return ({"cell_type": "tetra", "boundaries": {}},
+                {"points": Field("points", self.mesh.points, "m"), "cells": Field("cells", self.mesh.cells)})
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.mesh is None:
+            raise RuntimeError("advance before configure")
+        zero = np.zeros_like(self.mesh.points)
+        return {"displacement": Field("displacement", zero, "m"), "velocity": Field("velocity", zero, "m/s")}
+
+    def save_state(self, window):
+        pass  # nothing moves
+
+    def restore_state(self, window):
+        pass
+
+
+class MeshFileParticipant(Participant):
+    """A mesh file, and optionally one of its fields as output (see module doc)."""
+
+    kind = "mesh_file"
+
+    def __init__(self):
+        self.file = self.field = None
+
+    def announce(self) -> dict:
+        return {"kind": self.kind, "provides": [self.field.name] if self.field else ["covered"], "accepts": ["*"]}
+
+    def configure(self, config: dict) -> None:
+        from transfer.meshfile import MeshFile
+
+        self.file = MeshFile.read(config["file"])
+        self.field = self.file.field(config["field"]) if config.get("field") else None
+        log.info("mesh_file %s: %s", self.file.path, self.file.describe())
+
+    def geometry(self):
+        if self.file is None:
+            raise RuntimeError("geometry before configure")
+        m = self.file.mesh
+        return ({"cell_type": m.cell_type, "boundaries": {}},
+                {"points": Field("points", m.points, "m"), "cells": Field("cells", m.cells)})
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.file is None:
+            raise RuntimeError("advance before configure")
+        self.report_figures(reoriented_cells=self.file.mesh.reoriented)
+        out = {}
+        if self.field is not None:
+            out[self.field.name] = Field(self.field.name, self.field.values)
+        if inputs:
+            arrays = [np.asarray(f.data).reshape(len(f.data), -1) for f in inputs.values()]
+            out["covered"] = Field("covered", np.all([np.isfinite(a).all(axis=1) for a in arrays], axis=0)
+                                   .astype(np.uint8))
+        return out
+
+    def save_state(self, window):
+        pass  # a file does not change
+
+    def restore_state(self, window):
+        pass
+
+
+STANDINS = {"replay_fluid": ReplayFluid, "spring_solid": SpringSolid, "echo": Echo,
+            "rigid_solid": RigidSolid, "mesh_file": MeshFileParticipant}
 
 
 def cli(argv=None):

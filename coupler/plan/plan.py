@@ -16,7 +16,9 @@ from dataclasses import asdict, dataclass, field
 
 @dataclass
 class PlannedParticipant:
-    """A participant to start: ``python -m module`` on ``ranks`` MPI ranks, sent ``config``."""
+    """A participant to start: ``python -m module`` on ``ranks`` MPI ranks, sent ``config``;
+    or, ``in_process``, a stand-in of ``module`` served inside the coupler (one that solves
+    nothing: a fixed solid, a mesh file)."""
 
     name: str  # "solid", "fluid"
     kind: str  # "solid_fenicsx", "openfoam", "spring_solid", ...
@@ -24,8 +26,11 @@ class PlannedParticipant:
     ranks: int
     config: dict = field(default_factory=dict)
     allow_unconverged: bool = False  # its unconverged inner solves accepted on purpose
+    in_process: bool = False
 
     def describe(self) -> str:
+        if self.in_process:
+            return f"{self.name}: {self.kind} (served in the coupler's process)"
         return f"{self.name}: {self.kind} (python -m {self.module}, {self.ranks} rank{'s' * (self.ranks > 1)})"
 
 
@@ -35,7 +40,8 @@ class Exchange:
     turns the latest outputs of the `sources` (``"participant.field"``) into the input
     `target` (``"participant.field"``) before the target advances. An accelerated exchange
     carries the interface quantity of the fixed point: its value is the iterate x, and
-    evaluated on the new outputs it is H(x)."""
+    evaluated on the new outputs it is H(x). `options` are the operator's (e.g. how the solid
+    fraction is sampled, a projection's quadrature degree)."""
 
     sources: list[str]
     target: str
@@ -43,6 +49,7 @@ class Exchange:
     step: str  # its place in Steps 1-6 of paper 2.3
     accelerated: bool = False
     description: str = ""
+    options: dict = field(default_factory=dict)
 
     @property
     def target_participant(self) -> str:
@@ -54,7 +61,9 @@ class Exchange:
 
     def describe(self) -> str:
         acc = ", accelerated" if self.accelerated else ""
-        return f"{', '.join(self.sources)} -> {self.target}: {self.operator} [step {self.step}{acc}] {self.description}"
+        options = f" ({', '.join(f'{k} {v}' for k, v in self.options.items())})" if self.options else ""
+        return (f"{', '.join(self.sources)} -> {self.target}: {self.operator}{options} [step {self.step}{acc}] "
+                f"{self.description}")
 
 
 @dataclass

@@ -10,7 +10,10 @@ its inputs (the accelerated exchanges deliver x, the others are evaluated on the
 outputs just before), and H(x) is the accelerated exchanges evaluated on the new outputs;
 Aitken or IQN-ILS give the next x. Every advance returns each inner solve's report
 (:mod:`coupler.run.solves`): a step is converged only when the coupling and every final
-inner solve converged.
+inner solve converged. Participants the plan marks ``in_process`` (stand-ins that solve
+nothing: a fixed solid, mesh files) are served in this process through the same verbs
+(:mod:`coupler.run.local`); a plan of such participants only opens no zenoh session and
+starts no process.
 
 Written to the output directory: ``<participant>_NNNN.vtu`` per output step (the
 participant's outputs and the inputs it got; for an accelerated exchange its accepted
@@ -23,6 +26,7 @@ every step, so a failed run keeps what it did), ``residuals.png`` for implicit p
 from __future__ import annotations
 
 import time
+from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -42,9 +46,11 @@ from coupler.protocol.transport import new_run_id
 from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession
 from coupler.run.launch import Launcher
+from coupler.run.local import LocalClient
 from coupler.run.preflight import check_memory, estimate
 from coupler.run.solves import StepSolves
 from transfer import Mesh, StructuredGrid
+from transfer.mesh import CELL_TYPES
 
 
 class Phases:
@@ -79,15 +85,15 @@ class Phases:
 
 def _mesh_of(name: str, header: dict, fields: dict):
     """The mesh or grid a participant's ``geometry`` describes; a file's orientation
-    convention is accepted (negative tetrahedra reordered)."""
+    convention is accepted (negative volume cells reordered)."""
     if "grid" in header:
         g = header["grid"]
         return StructuredGrid(g["origin"], g["spacing"], g["shape"], name=f"{name} grid")
-    if header.get("cell_type") != "tetra":
+    if header.get("cell_type") not in CELL_TYPES:
         raise CouplerError(f"participant {name!r} gave cells of type {header.get('cell_type')!r}; "
-                           f"the coupler needs a tetrahedral mesh or a structured grid")
-    return Mesh(np.array(fields["points"].data), np.array(fields["cells"].data), "tetra", name=f"{name} mesh",
-                reorient=True)
+                           f"the coupler needs a mesh of {', '.join(CELL_TYPES)} cells or a structured grid")
+    return Mesh(np.array(fields["points"].data), np.array(fields["cells"].data), header["cell_type"],
+                name=f"{name} mesh", reorient=True)
 
 
 def _as_arrays(fields: dict) -> dict:
@@ -110,10 +116,8 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     write_summary(out, summary)
     start = time.perf_counter()
     try:
-        with CouplerSession(run_id, mode=scene.messaging["mode"], connect=scene.messaging["connect"],
-                            connect_timeout=min(10.0, scene.messaging["timeout"])) as session, \
-                Launcher(run_id, out, session.endpoints) as launcher:
-            result = Run(scene, plan, session, launcher, out, phases, summary, log).execute(progress)
+        with processes(scene, plan, run_id, out) as (session, launcher):
+            result = Run(scene, plan, session, launcher, out, phases, summary, log, run_id).execute(progress)
         summary.update(result, status="completed")
     except BaseException as exc:
         summary["status"] = run_status(exc)
@@ -134,26 +138,48 @@ def rehearse(scene, plan: Plan, log=print) -> dict:
 
     run_id = new_run_id()
     quiet = Phases()
+    plan = replace(plan, participants=[replace(p, config={k: v for k, v in p.config.items() if k != "case_dir"})
+                                       for p in plan.participants])  # a check keeps nothing
     with tempfile.TemporaryDirectory(prefix=f"varcouple-{run_id}-check-") as logs, \
-            CouplerSession(run_id, mode=scene.messaging["mode"], connect=scene.messaging["connect"],
-                           connect_timeout=min(10.0, scene.messaging["timeout"])) as session, \
-            Launcher(run_id, logs, session.endpoints) as launcher:
-        plan = replace(plan, participants=[replace(p, config={k: v for k, v in p.config.items() if k != "case_dir"})
-                                           for p in plan.participants])  # a check keeps nothing
-        rehearsal = Run(scene, plan, session, launcher, Path(logs), quiet, {}, log=lambda line: None)
+            processes(scene, plan, run_id, logs) as (session, launcher):
+        rehearsal = Run(scene, plan, session, launcher, Path(logs), quiet, {}, lambda line: None, run_id)
         rehearsal.start()
-        for name, client in rehearsal.clients.items():
-            client.finish()
-            launcher.wait(name, timeout=30)
+        rehearsal.finish()
     return rehearsal.meshes
+
+
+@contextmanager
+def processes(scene, plan: Plan, run_id: str, logs):
+    """``(session, launcher)`` for the participant processes of `plan` (zenoh session and
+    launcher, both closed on exit), or ``(None, None)`` when every participant is served in
+    this process."""
+    if all(p.in_process for p in plan.participants):
+        yield None, None
+        return
+    with ExitStack() as stack:
+        session = stack.enter_context(CouplerSession(run_id, mode=scene.messaging["mode"],
+                                                     connect=scene.messaging["connect"],
+                                                     connect_timeout=min(10.0, scene.messaging["timeout"])))
+        yield session, stack.enter_context(Launcher(run_id, logs, session.endpoints))
+
+
+def served_in_process(p, run_id: str):
+    """The participant object of the in-process participant `p` (a stand-in of
+    :mod:`coupler.standins`), bound to the run."""
+    from coupler.standins import STANDINS
+
+    handler = STANDINS[p.kind]()
+    handler.bind(run_id, p.name)
+    return handler
 
 
 class Run:
     """One execution of a plan (set up by :meth:`start`, stepped by :meth:`execute`)."""
 
-    def __init__(self, scene, plan: Plan, session, launcher, out: Path, phases: Phases, summary: dict, log):
+    def __init__(self, scene, plan: Plan, session, launcher, out: Path, phases: Phases, summary: dict, log,
+                 run_id: str = ""):
         self.scene, self.plan, self.session, self.launcher = scene, plan, session, launcher
-        self.out, self.phases, self.summary, self.log = out, phases, summary, log
+        self.out, self.phases, self.summary, self.log, self.run_id = out, phases, summary, log, run_id
         self.clients: dict = {}
         self.outputs: dict[str, dict] = {}  # latest outputs per participant
         self.inputs: dict[str, dict] = {}  # latest inputs per participant
@@ -166,6 +192,10 @@ class Run:
         """Start, configure and read the geometry of every participant; build the operators."""
         timeout = self.scene.messaging["timeout"]
         for p in self.plan.participants:
+            if p.in_process:
+                self.clients[p.name] = LocalClient(p.name, served_in_process(p, self.run_id))
+                self.log(f"serving {p.name}: {p.kind} in this process")
+                continue
             extra = ["--kind", p.kind] if p.module == "coupler.standins" else []
             self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=extra)
             self.clients[p.name] = self.session.client(
@@ -251,8 +281,8 @@ class Run:
             self.phases.add("output", time.perf_counter() - start)
         record["figures"] = {name: figures for name, figures in self.figures.items() if figures}
         for op in self.operators:
-            if hasattr(op, "figures"):
-                record.update(op.figures())
+            for key, figures in (op.figures() if hasattr(op, "figures") else {}).items():
+                record.setdefault(key, {}).update(figures)  # operators of one kind share a key
         u = self.outputs.get("solid", {}).get("displacement")
         if u is not None:
             record["max_displacement"] = float(np.max(np.linalg.norm(u, axis=1)))
@@ -285,9 +315,7 @@ class Run:
         finally:
             bar.close()
         self.summary["accelerator"] = result.accelerator
-        for name, client in self.clients.items():
-            client.finish()
-            self.launcher.wait(name, timeout=30)
+        self.finish()
         if plan.implicit:
             residual_plot(self.out / "residuals.png", result)
         self.log(f"{steps} step{'s' * (steps > 1)} done; results in {self.out}")
@@ -301,6 +329,13 @@ class Run:
         """The final fields (outputs and inputs) of every participant on its mesh, and its last figures."""
         fields = {name: {**self.inputs.get(name, {}), **self.outputs.get(name, {})} for name in self.meshes}
         return checks.Result(meshes=self.meshes, fields=fields, figures=dict(self.figures))
+
+    def finish(self) -> None:
+        """Finish every participant (and wait for the processes to exit)."""
+        for p in self.plan.participants:
+            self.clients[p.name].finish()
+            if not p.in_process:
+                self.launcher.wait(p.name, timeout=30)
 
     # -- checkpoints of an implicit step (coupler.coupling.loop.Checkpoint) ------------
     def save(self, window) -> None:

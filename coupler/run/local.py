@@ -1,0 +1,82 @@
+"""Participants served inside the coupler process: the same :class:`~coupler.protocol.participant.Participant`
+interface and the same client verbs as a participant process (:class:`coupler.run.client.ParticipantClient`),
+called directly instead of over zenoh.
+
+The runner serves a planned participant this way when the plan says ``in_process`` (light
+participants that solve nothing: a fixed solid, mesh files; :mod:`coupler.standins`). Its
+configuration goes through JSON as it would over the wire; its replies are checked like the
+wire's (outputs finite, names matching); an exception of the participant is its error reply
+(:class:`~coupler.protocol.errors.ParticipantError`). Inputs are handed over as they are: a
+mesh file receives NaN where a transfer did not reach it (documented by the operators that
+deliver NaN), which the wire would refuse to carry.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+from coupler.protocol.errors import FieldError, ParticipantError
+from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite
+
+
+class LocalClient:
+    """The coupler's handle on a participant object in this process (see module doc)."""
+
+    def __init__(self, name: str, handler):
+        self.name, self.handler = name, handler
+        self.finished = False
+        self.last_solves: list[SolveReport] = []
+        self.last_figures: dict[str, float] = {}
+        self.stats = {"calls": 0, "seconds": 0.0, "remote_seconds": 0.0, "bytes_out": 0, "bytes_in": 0,
+                      "shm_out": 0, "shm_in": 0}
+
+    def _call(self, verb: str, *args):
+        start = time.perf_counter()
+        try:
+            return getattr(self.handler, verb)(*args)
+        except Exception as exc:  # noqa: BLE001 - a participant's failure is its error reply, as over the wire
+            raise ParticipantError(self.name, f"{type(exc).__name__}: {exc}") from exc
+        finally:
+            elapsed = time.perf_counter() - start
+            self.stats["calls"] += 1
+            self.stats["seconds"] += elapsed
+            self.stats["remote_seconds"] += elapsed
+
+    def wait_alive(self, timeout: float | None = None) -> None:
+        """Nothing to wait for: the participant lives in this process."""
+
+    def announce(self, timeout: float | None = None) -> dict:
+        return {"name": self.name, "pid": os.getpid(), "ranks": 1, "in_process": True,
+                **(self._call("announce") or {})}
+
+    def configure(self, config, timeout: float | None = None) -> None:
+        self._call("configure", json.loads(json.dumps(dict(config))))
+
+    def geometry(self, timeout: float | None = None) -> tuple[dict, dict[str, Field]]:
+        header, fields = self._call("geometry")
+        return dict(header or {}), {f.name: f for f in as_fields(fields)}
+
+    def advance(self, window: int, iteration: int, t: float, dt: float, inputs=None,
+                timeout: float | None = None) -> dict[str, Field]:
+        out = self._call("advance", int(window), int(iteration), float(t), float(dt), dict(inputs or {}))
+        solves, figures = self.handler.take_reports()
+        self.last_solves, self.last_figures = list(solves), {str(k): float(v) for k, v in figures.items()}
+        fields = {f.name: f for f in as_fields(out)}
+        for f in fields.values():
+            try:
+                check_finite(f.name, f.data)
+            except FieldError as exc:  # what the participant's own encoding refuses over the wire
+                raise ParticipantError(self.name, f"{type(exc).__name__}: {exc}") from None
+        return fields
+
+    def save_state(self, window: int, timeout: float | None = None) -> None:
+        self._call("save_state", int(window))
+
+    def restore_state(self, window: int, timeout: float | None = None) -> None:
+        self._call("restore_state", int(window))
+
+    def finish(self, timeout: float | None = None) -> None:
+        self._call("finish")
+        self.finished = True
