@@ -148,8 +148,9 @@ class SolidOnGrid:
     ``fraction``: the solid volume fraction per grid cell (the Q0 projection of the solid's
     indicator: exact intersection volumes / cell volume); ``to_fluid``: the P1 -> Q0 transfer
     of the solid velocity; ``interface``: the wetted surface (:class:`WettedInterface`) or the
-    fallback (:class:`VolumeInterface`). :meth:`update` rebuilds all three from the deformed
-    solid (points + displacement), so the flow sees the aperture the pressure made; it keeps
+    fallback (:class:`VolumeInterface`), None for a solid the fluid does not load
+    (``wetted=False``); ``current``: the solid's mesh as it is now. :meth:`update` rebuilds them
+    from the deformed solid (points + displacement), so the flow sees the aperture the pressure made; it keeps
     the current operators when the displacement is zero (below 1e-12 of the grid spacing) or
     unchanged since the last build, and always with ``deform=False`` or the volume fallback.
     The interface vector keeps its size and vertex order (one value per interface vertex),
@@ -159,8 +160,8 @@ class SolidOnGrid:
     """
 
     def __init__(self, S, G: StructuredGrid, triangles, where: str, deform: bool = True,
-                 traction: str = "pressure"):
-        self.S, self.G, self.where = S, G, where
+                 traction: str = "pressure", wetted: bool = True):
+        self.S, self.G, self.where, self.wetted = S, G, where, wetted
         self.triangles = None if triangles is None or not len(triangles) else np.asarray(triangles)
         if traction == "full" and self.triangles is None:
             raise CouplerError(f"{where}: [coupling] traction = 'full' needs the solid's wetted boundary "
@@ -173,7 +174,7 @@ class SolidOnGrid:
         self.max_displacement = 0.0
         self._u = None
         self._build(None)
-        self.reference_weights = self.interface.weights
+        self.reference_weights = self.interface.weights if wetted else None
         self.builds, self.build_seconds = 0, 0.0  # count the rebuilds only, not the initial build
 
     def _build(self, u) -> None:
@@ -190,17 +191,19 @@ class SolidOnGrid:
         to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(self.G, "Q0"), "pseudo_l2")
         volumes = np.asarray(to_fluid.D.diagonal())
         self.outside = max(1.0 - float(volumes.sum()) / float(S.cell_measures().sum()), 0.0)
-        if self.triangles is not None:
+        interface = None  # a solid the fluid does not load has none
+        if self.wetted and self.triangles is not None:
             interface = WettedInterface(self.S, self.triangles, self.G, self.where,
                                         points=None if u is None else S.points)
             if self.traction == "full":
                 self.deeper = [self._deeper(depth, None if u is None else S.points) for depth in DEPTHS]
-        else:
+        elif self.wetted:
             if self.outside > 1e-9:
                 raise CouplerError(f"{self.where}: the fluid grid does not cover the solid "
                                    f"({self.outside:.3g} of the solid's volume lies outside it)")
             interface = VolumeInterface(S, self.G, self.where)
         self.to_fluid, self.fraction, self.interface = to_fluid, volumes / self.G.cell_measures(), interface
+        self.current = S
         self.builds += 1
         self.build_seconds += time.perf_counter() - start
 

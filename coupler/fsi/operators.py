@@ -21,6 +21,7 @@ import numpy as np
 from coupler.errors import CouplerError
 from transfer import FunctionSpace, StructuredGrid, Transfer
 
+from .centres import centres_inside
 from .interface import SolidOnGrid, WettedInterface
 from .viscous import FluidTraction, traction_figures
 
@@ -48,7 +49,8 @@ class OperatorContext:
 
 class FluidSolid:
     """The solid as the grid sees it (:class:`SolidOnGrid`) for the exchanges of a flow scene,
-    updated from the solid's displacement whenever an operator asks."""
+    updated from the solid's displacement whenever an operator asks. A solid the fluid does
+    not load (no ``[coupling] interface``: a fixed solid) has no wetted interface."""
 
     def __init__(self, ctx: OperatorContext):
         scene = ctx.scene
@@ -57,12 +59,14 @@ class FluidSolid:
         start = time.perf_counter()
         triangles = ctx.geometry["solid"].get("interface_triangles")
         triangles = None if triangles is None else np.asarray(triangles)
+        wetted = scene.coupling["interface"] is not None
         self.on_grid = SolidOnGrid(ctx.meshes["solid"], ctx.meshes["fluid"], triangles,
                                    f"{scene.path}: [geometry.fluid]", deform=scene.coupling["deformation"],
-                                   traction=scene.coupling["traction"])
+                                   traction=scene.coupling["traction"], wetted=wetted)
         ctx.phases.add("transfer", time.perf_counter() - start)
         interface, g = self.on_grid.interface, self.on_grid
-        self.interface = {**interface.describe(), "traction": scene.coupling["traction"]}  # as first built
+        self.interface = ({**interface.describe(), "traction": scene.coupling["traction"]} if wetted
+                          else {"method": "none (the fluid does not load the solid)"})  # as first built
         if isinstance(interface, WettedInterface):
             ctx.log(f"interface {scene.coupling['interface']}: {interface.num_vertices} vertices, "
                     f"{interface.num_triangles} triangles, pressure sampled up to {interface.offset:.3g} m into "
@@ -70,7 +74,7 @@ class FluidSolid:
             if g.outside > 1e-9:
                 ctx.log(f"the fluid grid covers the wetted interface; {g.outside:.3g} of the solid's volume lies "
                         f"outside it")
-        else:  # stand-in solids without a boundary (spring_solid): the volume projection onto all vertices
+        elif wetted:  # stand-in solids without a boundary (spring_solid): the volume projection onto all vertices
             ctx.log(f"interface: no boundary triangles from the solid; pressure projected onto all "
                     f"{ctx.meshes['solid'].num_points} solid vertices (volume projection)")
         ctx.log(f"transfers: {g.to_fluid.stats['pairs_intersected']} cell pairs; solid fills "
@@ -148,16 +152,25 @@ class ViscousTraction:
 
 
 class SolidFraction:
-    """Before Step 1: the solid volume fraction of every grid cell (exact intersection volumes of
-    the deformed solid's indicator, P0 -> Q0)."""
+    """Before Step 1: the solid volume fraction of every grid cell, option ``fraction``:
+    ``exact`` (default) the intersection volumes of the deformed solid's indicator (P0 -> Q0),
+    ``cell_centre`` 1 where the cell's centre is in the solid and 0 elsewhere (the binary mask
+    the exact fractions replace: the wall moves to the nearest cell faces)."""
 
     units = "1"
 
     def __init__(self, ctx: OperatorContext, exchange=None):
         self.fs = _fluid_solid(ctx)
+        self.centres = (exchange.options.get("fraction", "exact") == "cell_centre") if exchange else False
+        self._mask = None  # (the solid mesh it was sampled on, the mask)
 
     def evaluate(self, outputs) -> np.ndarray:
-        return self.fs.update(outputs).fraction
+        on_grid = self.fs.update(outputs)
+        if not self.centres:
+            return on_grid.fraction
+        if self._mask is None or self._mask[0] is not on_grid.current:
+            self._mask = on_grid.current, centres_inside(on_grid.current, on_grid.G).astype(np.float64)
+        return self._mask[1]
 
     def deliver(self, value) -> np.ndarray:
         return value

@@ -76,19 +76,41 @@ def _mesh_cells(path: Path, where: str) -> int:
         raise SceneError(f"{where}: {exc}") from None
 
 
+def _solid_cells(scene) -> tuple[int, str]:
+    """Tetrahedra of the scene's solid and the key that sets their number."""
+    solid = scene.solid
+    if solid.box is not None:
+        shape = solid.box["shape"]
+        return 6 * shape[0] * shape[1] * shape[2], f"{scene.path}: [geometry.solid] shape"
+    if solid.generator is not None:
+        from transfer.generators import GENERATORS
+
+        g = solid.generator
+        return GENERATORS[g["name"]].mesh(g["parameters"]).num_cells, f"{scene.path}: [geometry.solid.parameters]"
+    key = f"{scene.path}: [geometry.solid] mesh"
+    return _mesh_cells(solid.mesh, key), key
+
+
 def estimate(scene) -> list[Estimate]:
-    """Cells and memory of every part of the coupled `scene` (participants and coupler)."""
-    solid_cfg = scene.solvers["solid"]
-    if scene.solid.box is not None:
-        shape = scene.solid.box["shape"]
-        tets, key = 6 * shape[0] * shape[1] * shape[2], f"{scene.path}: [geometry.solid] shape"
-    else:
-        key = f"{scene.path}: [geometry.solid] mesh"
-        tets = _mesh_cells(scene.solid.mesh, key)
-    fixed, per = COSTS[solid_cfg["participant"]]
-    degree_factor = 5 if solid_cfg.get("degree", 1) == 2 else 1
-    out = [Estimate("solid", tets, fixed * solid_cfg["ranks"] + per * degree_factor * tets, key)]
-    coupler = COSTS["coupler_solid"][0] + COSTS["coupler_solid"][1] * tets
+    """Cells and memory of every part of the coupled `scene` (participants and coupler; parts
+    served in the coupler's process count as the coupler's)."""
+    from coupler.plan.effects import RULES
+
+    out, coupler = [], COSTS["coupler_solid"][0]
+    if scene.solid is not None:
+        tets, key = _solid_cells(scene)
+        solid_cfg = scene.solvers.get("solid")
+        if solid_cfg is None:  # a fixed solid, served in the coupler
+            out.append(Estimate("solid", tets, 0, key))
+        else:
+            fixed, per = COSTS[solid_cfg["participant"]]
+            degree_factor = 5 if solid_cfg.get("degree", 1) == 2 else 1
+            out.append(Estimate("solid", tets, fixed * solid_cfg["ranks"] + per * degree_factor * tets, key))
+        coupler += COSTS["coupler_solid"][1] * tets
+    for name in scene.effects:  # meshes an effect serves in the coupler (mesh files of a transfer)
+        for part, cells, key in getattr(RULES[name], "in_process_cells", lambda scene: [])(scene):
+            out.append(Estimate(part, cells, 0, key))
+            coupler += COSTS["coupler_solid"][1] * cells
     if "fluid" in scene.solvers:
         fluid_cfg = scene.solvers["fluid"]
         g = scene.fluid.shape

@@ -47,6 +47,7 @@ class SolidGeometry:
     mesh: Path | None  # a mesh file, or None for the box generator
     box: dict | None  # lower, upper, shape, jitter, seed
     boundaries: dict[str, str | int]  # name -> expression on facet midpoints, box face, or file tag
+    generator: dict | None = None  # {"name": ..., "parameters": {...}} (transfer.generators)
 
 
 @dataclass
@@ -129,9 +130,12 @@ TABLES = {
 SOLID_KEYS = {"mesh": "mesh file (any format meshio reads), relative to the case",
               "lower": "box generator: lower corner", "upper": "box generator: upper corner",
               "shape": "box generator: cells per axis", "jitter": "box generator: random vertex shift",
-              "seed": "box generator: random seed", "boundaries": "table: name -> boundary"}
+              "seed": "box generator: random seed", "boundaries": "table: name -> boundary",
+              "generator": "a geometry generator (transfer/generators), instead of a mesh or a box",
+              "parameters": "table: the generator's parameters"}
 FLUID_KEYS = {"origin": "grid origin", "spacing": "grid spacing", "shape": "cells per axis",
-              "lower": "grid lower corner (instead of origin/spacing)", "upper": "grid upper corner"}
+              "lower": "grid lower corner (instead of origin/spacing)", "upper": "grid upper corner",
+              "generator": "the grid made by the solid's generator for it (its name), instead of the keys above"}
 LOAD_KEYS = {"type": f"one of {', '.join(LOAD_TYPES)}", "boundary": "a named boundary",
              "value": "number (pressure, fixed value) or [x, y, z] (traction, body force)",
              "components": "dirichlet: constrained components, subset of ['x', 'y', 'z']"}
@@ -182,32 +186,56 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     effects = physics.strings("effects", choices=list(RULES))
     if not effects:
         raise physics.error("effects", "must name at least one effect")
-    if "elasticity" not in effects:
-        raise physics.error("effects", "every coupled scene needs 'elasticity' (the rock); "
-                                       f"got {effects!r}")
+    for name in effects:  # what each effect builds on (contact on an elastic solid, ...)
+        for need in getattr(RULES[name], "NEEDS", ()):
+            if need not in effects:
+                raise physics.error("effects", f"{name!r} needs {need!r} ({RULES[need].DESCRIPTION}); got {effects!r}")
+    roles = {role for name in effects for role in getattr(RULES[name], "ROLES", ())}
+    domains = {domain for name in effects for domain in getattr(RULES[name], "DOMAINS", ())}
 
     geometry = Table(path, "geometry", data.get("geometry", {}), TABLES["geometry"])
-    if "solid" not in geometry.data:
-        raise geometry.error("solid", "missing (the rock: a mesh file or a box)")
-    solid = _solid_geometry(path, case_dir, geometry.data["solid"])
-    fluid = _fluid_geometry(path, geometry.data["fluid"]) if "fluid" in geometry.data else None
+    solid = None
+    if "solid" in domains:
+        if "solid" not in geometry.data:
+            raise geometry.error("solid", "missing (the rock: a mesh file, a box or a generator)")
+        solid = _solid_geometry(path, case_dir, geometry.data["solid"])
+    elif "solid" in geometry.data:
+        raise geometry.error("solid", f"no effect of {effects!r} has a solid")
+    fluid = _fluid_geometry(path, geometry.data["fluid"], solid) if "fluid" in geometry.data else None
 
     materials = Table(path, "materials", data.get("materials", {}), TABLES["materials"])
-    if "solid" not in materials.data:
-        raise materials.error("solid", "missing (E, nu, density of the rock)")
-    rock = Table(path, "materials.solid", materials.data["solid"],
-                 {"E": "Young's modulus [Pa]", "nu": "Poisson ratio", "density": "[kg/m^3]"})
-    material = {"E": rock.number("E", positive=True), "nu": rock.number("nu", minimum=-0.99, maximum=0.4999999),
-                "density": rock.number("density", default=2600.0, positive=True)}
+    material = {}
+    if "solid" in roles:  # a deforming solid
+        if "solid" not in materials.data:
+            raise materials.error("solid", "missing (E, nu, density of the rock)")
+        rock = Table(path, "materials.solid", materials.data["solid"],
+                     {"E": "Young's modulus [Pa]", "nu": "Poisson ratio", "density": "[kg/m^3]"})
+        material = {"E": rock.number("E", positive=True), "nu": rock.number("nu", minimum=-0.99, maximum=0.4999999),
+                    "density": rock.number("density", default=2600.0, positive=True)}
+    elif "solid" in materials.data:
+        raise materials.error("solid", f"the material of a deforming solid, but no effect of {effects!r} deforms "
+                                       f"one (a fixed solid needs none)")
     water = Table(path, "materials.fluid", materials.data.get("fluid", {}),  # water unless the scene says
                   {"density": "[kg/m^3]", "viscosity": "dynamic viscosity [Pa s]"})
     fluid_material = {"density": water.number("density", default=1000.0, positive=True),
                       "viscosity": water.number("viscosity", default=1e-3, positive=True)}
 
-    loads = _loads(path, data.get("loads", []), solid, effects)
+    if "solid" in roles:
+        loads = _loads(path, data.get("loads", []), solid, effects)
+    elif data.get("loads"):
+        raise SceneError(f"{path}: [[loads]]: loads act on a deforming solid, but no effect of {effects!r} "
+                         f"deforms one")
+    else:
+        loads = []
 
     solvers = Table(path, "solvers", data.get("solvers", {}), TABLES["solvers"])
-    solver_cfg = {"solid": _solver(path, "solid", solvers.data.get("solid", {}), SOLID_PARTICIPANTS, "solid_fenicsx")}
+    solver_cfg = {}
+    if "solid" in roles:
+        solver_cfg["solid"] = _solver(path, "solid", solvers.data.get("solid", {}), SOLID_PARTICIPANTS,
+                                      "solid_fenicsx")
+    elif "solid" in solvers.data:
+        raise solvers.error("solid", f"no effect of {effects!r} needs a solid participant (a fixed solid is "
+                                     f"served by the coupler)")
     if any("fluid" in getattr(RULES[e], "ROLES", ()) for e in effects):
         if fluid is None:
             raise geometry.error("fluid", "missing: the scene asks for 'flow' but has no fluid domain (a grid)")
@@ -230,9 +258,10 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                     "traction": coupling.string("traction", "pressure", TRACTIONS)}
     if coupling_cfg["traction"] == "full" and "flow" not in effects:
         raise coupling.error("traction", "'full' (the viscous stress of a flow) needs the effect 'flow'")
-    if coupling_cfg["traction"] == "full" and solver_cfg["solid"]["participant"] != "solid_fenicsx":
-        raise coupling.error("traction", "'full' needs a solid with a wetted surface (solid_fenicsx), got "
-                                         f"{solver_cfg['solid']['participant']!r}")
+    solid_kind = solver_cfg.get("solid", {}).get("participant", "a fixed solid")
+    if coupling_cfg["traction"] == "full" and solid_kind != "solid_fenicsx":
+        raise coupling.error("traction", f"'full' needs a solid with a wetted surface (solid_fenicsx), got "
+                                         f"{solid_kind!r}")
     messaging = Table(path, "messaging", data.get("messaging", {}), TABLES["messaging"])
     messaging_cfg = {"mode": messaging.string("mode", "peer", ("peer", "client")),
                      "connect": messaging.strings("connect", []),
@@ -284,8 +313,12 @@ def _interface(coupling: Table):
 def _solid_geometry(path, case_dir, data) -> SolidGeometry:
     t = Table(path, "geometry.solid", data, SOLID_KEYS)
     mesh = t.string("mesh", None)
-    box = None
-    if mesh is not None:
+    box = generator = None
+    if "generator" in t.data:
+        generator = _generator(t)
+    elif "parameters" in t.data:
+        raise t.error("parameters", "the parameters of a generator: name it with generator = \"NAME\"")
+    elif mesh is not None:
         if any(k in t.data for k in ("lower", "upper", "shape", "jitter", "seed")):
             raise t.error("mesh", "give either a mesh file or the box keys (lower, upper, shape), not both")
         mesh = t.file("mesh", case_dir)
@@ -309,16 +342,48 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
                              f"true on the boundary's facets, or a tag number of the mesh file; got {spec!r}")
         if isinstance(spec, str) and spec not in BOX_FACES:
             check_expression(spec, where)
-        if isinstance(spec, int) and box is not None:
-            raise SceneError(f"{where}: tag numbers need a mesh file; the box has faces {', '.join(BOX_FACES)}")
+        if isinstance(spec, int) and mesh is None:
+            raise SceneError(f"{where}: tag numbers need a mesh file; a box has faces {', '.join(BOX_FACES)}")
         boundaries[name] = spec
     if box is not None:  # the box's faces first: a named boundary takes its facets from them (a facet has one tag)
         boundaries = {**{face: face for face in BOX_FACES if face not in boundaries}, **boundaries}
-    return SolidGeometry(mesh=mesh, box=box, boundaries=boundaries)
+    return SolidGeometry(mesh=mesh, box=box, boundaries=boundaries, generator=generator)
 
 
-def _fluid_geometry(path, data) -> FluidGeometry:
+def _generator(t: Table) -> dict:
+    """``[geometry.solid] generator`` and its checked ``parameters`` (transfer.generators)."""
+    from transfer.generators import GENERATORS, parameters
+
+    name = t.string("generator", choices=tuple(GENERATORS))
+    for key in ("mesh", "lower", "upper", "shape", "jitter", "seed"):
+        if key in t.data:
+            raise t.error(key, f"give either a generator or a mesh file or a box, not both (generator {name!r})")
+    values = t.data.get("parameters", {})
+    if not isinstance(values, dict):
+        raise t.error("parameters", f"must be a table of the generator's parameters, got {values!r}")
+    try:
+        return {"name": name, "parameters": parameters(name, values)}
+    except ValueError as exc:
+        raise SceneError(f"{t.path}: [geometry.solid.parameters] {exc}") from None
+
+
+def _fluid_geometry(path, data, solid: SolidGeometry | None) -> FluidGeometry:
     t = Table(path, "geometry.fluid", data, FLUID_KEYS)
+    if "generator" in t.data:  # the grid a solid generator made for its geometry (an immersed-boundary study)
+        from transfer.generators import GENERATORS
+
+        name = t.string("generator")
+        made = solid.generator if solid is not None else None
+        if made is None or made["name"] != name:
+            solid_is = f"[geometry.solid] generator is {made['name']!r}" if made else "the solid is not generated"
+            raise t.error("generator", f"{name!r}: the grid comes from the solid's generator, and {solid_is}")
+        if not hasattr(GENERATORS[name], "grid"):
+            raise t.error("generator", f"generator {name!r} makes no fluid grid; give origin, spacing and shape")
+        if len(t.data) > 1:
+            other = next(k for k in t.data if k != "generator")
+            raise t.error(other, f"the grid comes from generator {name!r}; give no other key")
+        g = GENERATORS[name].grid(made["parameters"])
+        return FluidGeometry(g["origin"], g["spacing"], g["shape"])
     shape = t.shape("shape")
     if "lower" in t.data or "upper" in t.data:
         lower, upper = t.vector("lower"), t.vector("upper")

@@ -116,7 +116,7 @@ def test_nearly_incompressible_gets_a_note(tmp_path):
 
 BAD = [
     ('["elasticity", "flow"]', "", "[geometry] fluid", "no fluid domain"),
-    ('["flow"]', FLUID, "[physics] effects", "needs 'elasticity'"),
+    ('["dynamics"]', "", "[physics] effects", "'dynamics' needs 'elasticity'"),
     ('["elasticity", "magic"]', "", "[physics] effects", "unknown value 'magic'"),
     ('["elasticity", "fluid_pressure"]', "", "[physics] effects", "fluid_pressure"),
     ('["elasticity"]', '\n[[loads]]\ntype = "pressure"\nboundary = "roof"\nvalue = 1.0\n',

@@ -8,6 +8,7 @@ from coupler.scene.tables import Table
 NAME = "contact"
 DESCRIPTION = "contact between fracture faces (mortar coupling, paper 2.2)"
 ORDER = 2
+NEEDS = ("elasticity",)  # the bodies in contact deform
 #: nonsmooth solvers of [contact] solver (nonsmooth.solvers)
 CONTACT_SOLVERS = ("active_set", "snes_vi", "multilevel")
 TABLES = {"contact": {

@@ -3,6 +3,7 @@
 NAME = "dynamics"
 DESCRIPTION = "inertia: elastodynamics with time steps (paper eq. 13)"
 ORDER = 1
+NEEDS = ("elasticity",)  # the inertia of an elastic solid
 TIME_STEPS = True  # [time] dt and steps are required
 
 

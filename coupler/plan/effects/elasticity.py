@@ -4,6 +4,25 @@ participant on the rock's mesh, with its loads; static, one solve per step."""
 NAME = "elasticity"
 DESCRIPTION = "linear elastic deformation of the rock (solid participant)"
 ORDER = 0
+ROLES = ("solid",)  # the [solvers.X] tables it needs
+DOMAINS = ("solid",)  # the [geometry.X] tables it needs
+
+
+def parse(scene, data: dict) -> None:
+    """What the solid participant cannot build: generated geometry (a fixed solid only, for now)."""
+    if scene.solid.generator is not None:
+        raise scene.error("geometry.solid", "generator", f"{scene.solid.generator['name']!r}: the elastic solid "
+                                                         f"takes a mesh file or a box; generated geometry is for "
+                                                         f"a fixed solid (effects without 'elasticity')")
+
+
+def geometry_config(solid) -> dict:
+    """The solid's geometry as a participant is configured with it: a mesh file, a box or a generator."""
+    from pathlib import Path
+
+    if solid.generator is not None:
+        return {"generator": solid.generator}
+    return {"mesh": str(Path(solid.mesh).resolve())} if solid.mesh else {"box": solid.box}
 
 
 def describe_load(load) -> str:
@@ -19,10 +38,8 @@ def describe_load(load) -> str:
 def solid_config(scene) -> dict:
     """What the solid participant is configured with: its mesh (a file or a box), named
     boundaries, material, loads (each with its scene key) and solver settings."""
-    from pathlib import Path
-
     solver = scene.solvers["solid"]
-    geometry = {"mesh": str(Path(scene.solid.mesh).resolve())} if scene.solid.mesh else {"box": scene.solid.box}
+    geometry = geometry_config(scene.solid)
     loads = [{"type": "pressure" if load.type == "fluid_pressure" else load.type, "key": f"[loads.{i}]",
               "boundary": load.boundary, "value": load.value, "components": load.components}
              for i, load in enumerate(scene.loads, start=1)]

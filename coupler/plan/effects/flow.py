@@ -2,13 +2,21 @@
 immersed-boundary scheme of paper 2.3 (Steps 1-6): a fluid participant on the grid and the
 exchanges between it and the solid.
 
-Per coupling iteration, in the order the participants advance: the solid advances under the
-fluid's load on its wetted boundary (``[coupling] interface``: the pressure, or with
-``traction = "full"`` the traction (-p I + tau) n; Steps 2-4), which is the accelerated
-interface quantity; the fluid advances in the grid cells the deformed solid fills (the solid
-fraction, before Step 1) and, when the solid moves in time (``dynamics``), with the solid's
-velocity on the grid (Step 6). A quasi-static scene sends no velocity: the solid is at rest
-in each step.
+With ``elasticity``, per coupling iteration, in the order the participants advance: the solid
+advances under the fluid's load on its wetted boundary (``[coupling] interface``: the
+pressure, or with ``traction = "full"`` the traction (-p I + tau) n; Steps 2-4), which is the
+accelerated interface quantity; the fluid advances in the grid cells the deformed solid fills
+(the solid fraction, before Step 1) and, when the solid moves in time (``dynamics``), with the
+solid's velocity on the grid (Step 6). A quasi-static scene sends no velocity: the solid is at
+rest in each step.
+
+Without ``elasticity`` the solid is fixed: a stand-in served by the coupler (``rigid_solid``:
+its mesh and zero displacement) and a one-way plan, the solid fraction only (Step 1 with a
+solid that the fluid does not load): one fluid solve per step, no fixed point.
+
+``[flow] solid_fraction`` says how the fraction is sampled: ``exact`` intersection volumes
+(default) or ``cell_centre`` (1 where the cell's centre is in the solid, 0 elsewhere: the
+binary mask the exact fractions replace).
 """
 
 import math
@@ -22,14 +30,19 @@ DESCRIPTION = "fluid flow on a structured grid, coupled to the solid (fluid part
 ORDER = 3
 TIME_STEPS = True  # [time] dt and steps are required
 ROLES = ("fluid",)  # the [solvers.X] tables it needs
+DOMAINS = ("solid", "fluid")  # the [geometry.X] tables it needs: the solid, elastic or fixed, and the grid
 #: conditions of the fluid grid's side faces ([flow] walls, faces); xmin is the inlet, xmax the outlet
 FACE_CONDITIONS = ("wall", "slip", "symmetry", "empty")
+#: how the solid fraction of a grid cell is sampled ([flow] solid_fraction; coupler/fsi/operators.py)
+FRACTIONS = ("exact", "cell_centre")
 TABLES = {"flow": {
     "inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
     "inlet_pressure": "fixed inlet pressure on the grid face xmin [Pa]",
     "outlet_pressure": "fixed outlet pressure on the grid face xmax [Pa] (default 0)",
     "walls": f"condition of the other grid faces: one of {', '.join(FACE_CONDITIONS)} (default wall)",
-    "faces": "table: face (ymin ... zmax) -> condition ({ pressure = p } for an open face), overriding walls"}}
+    "faces": "table: face (ymin ... zmax) -> condition ({ pressure = p } for an open face), overriding walls",
+    "solid_fraction": "how a grid cell's solid fraction is sampled: 'exact' (intersection volumes, default) or "
+                      "'cell_centre' (1 where the cell centre is in the solid)"}}
 
 
 def parse(scene, data: dict) -> None:
@@ -39,7 +52,12 @@ def parse(scene, data: dict) -> None:
         raise SceneError(f"{path}: [geometry] fluid: missing: the scene asks for 'flow' but has no fluid domain "
                          f"(a grid)")
     interface = scene.coupling["interface"]
-    if interface is None:
+    if "elasticity" not in scene.effects:  # a fixed solid: the fluid does not load it
+        if interface is not None:
+            raise SceneError(f"{path}: [coupling] interface: a fixed solid (no 'elasticity') is not loaded by the "
+                             f"fluid: the plan is one-way, the solid fraction only")
+        interface = []
+    elif interface is None:
         raise SceneError(f"{path}: [coupling] interface: missing: the solid boundary the fluid pressure acts on")
     for name in [interface] if isinstance(interface, str) else interface:
         if name not in scene.solid.boundaries:
@@ -94,7 +112,8 @@ def _boundary_conditions(path, data, fluid) -> dict:
         if a == "empty" and fluid is not None and fluid.shape[axis] != 1:
             raise t.error("faces", f"'empty' on {lo} and {hi} needs one cell along {'xyz'[axis]} in "
                                    f"[geometry.fluid] shape, got {fluid.shape[axis]}")
-    return {"inlet": inlet, "outlet": outlet, "walls": walls, "faces": faces}
+    return {"inlet": inlet, "outlet": outlet, "walls": walls, "faces": faces,
+            "solid_fraction": t.string("solid_fraction", "exact", FRACTIONS)}
 
 
 
@@ -130,28 +149,28 @@ def fluid_config(scene) -> dict:
 def plan(scene, plan) -> None:
     from coupler.plan.plan import Exchange, PlannedParticipant
 
+    from .elasticity import geometry_config
+
     solver = scene.solvers["fluid"]
     c = scene.coupling
-    solid = plan.participant("solid")
-    solid.config.update(wetted=c["interface"], traction=c["traction"])
+    elastic = "elasticity" in scene.effects
+    if elastic:
+        plan.participant("solid").config.update(wetted=c["interface"], traction=c["traction"])
+    else:
+        plan.participants.append(PlannedParticipant("solid", "rigid_solid", "coupler.standins", 1,
+                                                    geometry_config(scene.solid), in_process=True))
     plan.participants.append(PlannedParticipant("fluid", solver["participant"], solver["module"], solver["ranks"],
                                                 fluid_config(scene), solver["allow_unconverged"]))
     dynamic = "dynamics" in scene.effects
-    interface = c["interface"] if isinstance(c["interface"], str) else ", ".join(c["interface"])
-    if c["traction"] == "full":
-        plan.exchanges.append(Exchange(
-            ["fluid.pressure", "fluid.velocity", "solid.velocity"], "solid.traction", "viscous_traction", "2-3",
-            accelerated=True, description=f"(-p I + tau) n on the wetted boundary '{interface}': the Q0 pressure "
-                                          f"traced half a cell into the fluid, the wall shear from three velocity "
-                                          f"samples (coupler/fsi/viscous.py)"))
-    else:
-        plan.exchanges.append(Exchange(
-            ["fluid.pressure"], "solid.pressure", "pressure_trace", "2-3", accelerated=True,
-            description=f"Q0 (grid) -> P1 on the wetted boundary '{interface}' moved half a fluid cell into the "
-                        f"fluid, pseudo_l2 trace (solids without boundary triangles: onto all solid vertices)"))
-    deformed = "the deformed solid" if c["deformation"] else "the undeformed solid ([coupling] deformation = false)"
+    if elastic:
+        _loading(scene, plan)
+    fraction = (scene.effect_settings.get(NAME) or {}).get("solid_fraction", "exact")
+    deformed = ("the fixed solid" if not elastic else "the deformed solid" if c["deformation"] else
+                "the undeformed solid ([coupling] deformation = false)")
+    sampled = "exact volume fractions" if fraction == "exact" else "1 where the cell centre is in the solid"
     plan.exchanges.append(Exchange(["solid.displacement"], "fluid.solid_fraction", "solid_fraction", "before 1",
-                                   description=f"P0 indicator of {deformed} -> Q0, exact volume fractions"))
+                                   description=f"P0 indicator of {deformed} -> Q0, {sampled}",
+                                   options={"fraction": fraction}))
     if dynamic:
         plan.exchanges.append(Exchange(["solid.displacement", "solid.velocity"], "fluid.solid_velocity",
                                        "solid_velocity", "6",
@@ -160,7 +179,8 @@ def plan(scene, plan) -> None:
     if solver["participant"] == "openfoam":
         quasi = (f", transient: pimpleFoam over each step ({solver['substeps']} time step"
                  f"{'s' * (solver['substeps'] > 1)}) and an elastodynamic solid" if dynamic
-                 else ", quasi-static: steady simpleFoam and a static solid per step")
+                 else ", quasi-static: steady simpleFoam and a static solid per step" if elastic
+                 else ", steady simpleFoam")
         if dynamic:
             plan.notes.append("openfoam: the solid velocity is applied per solid body (a rigid translation with the "
                               "mean velocity of its wetted cells; rotation and deformation within a body are not)"
@@ -173,10 +193,34 @@ def plan(scene, plan) -> None:
     if solver["participant"] == "chorin":
         quasi = (", transient: Chorin projection time steps over each step (implicit Euler) and an elastodynamic "
                  "solid" if dynamic else ", quasi-static: Chorin projection in pseudo-time to steady state and a "
-                 "static solid per step")
+                 "static solid per step" if elastic else ", Chorin projection in pseudo-time to steady state")
         if dynamic:
             plan.notes.append("chorin: the solid velocity is applied per cell (the fluid follows rotating and "
                               "deforming solids)")
-    plan.iteration = (f"{scene.time['steps']} time steps of {scene.time['dt']:g} s{quasi}; implicit fixed point per "
-                      f"step ({c['acceleration']}, tolerance {c['tolerance']:g}, at most {c['max_iterations']} "
-                      f"iterations)")
+    n = scene.time["steps"]
+    if elastic:
+        plan.iteration = (f"{n} time steps of {scene.time['dt']:g} s{quasi}; implicit fixed point per step "
+                          f"({c['acceleration']}, tolerance {c['tolerance']:g}, at most {c['max_iterations']} "
+                          f"iterations)")
+    else:
+        plan.iteration = (f"{n} time step{'s' * (n > 1)} of {scene.time['dt']:g} s{quasi}; one-way (a fixed "
+                          f"solid): one fluid solve per step, no fixed point")
+
+
+def _loading(scene, plan) -> None:
+    """Steps 2-3: the fluid's load on the elastic solid's wetted boundary, the accelerated exchange."""
+    from coupler.plan.plan import Exchange
+
+    c = scene.coupling
+    interface = c["interface"] if isinstance(c["interface"], str) else ", ".join(c["interface"])
+    if c["traction"] == "full":
+        plan.exchanges.append(Exchange(
+            ["fluid.pressure", "fluid.velocity", "solid.velocity"], "solid.traction", "viscous_traction", "2-3",
+            accelerated=True, description=f"(-p I + tau) n on the wetted boundary '{interface}': the Q0 pressure "
+                                          f"traced half a cell into the fluid, the wall shear from three velocity "
+                                          f"samples (coupler/fsi/viscous.py)"))
+    else:
+        plan.exchanges.append(Exchange(
+            ["fluid.pressure"], "solid.pressure", "pressure_trace", "2-3", accelerated=True,
+            description=f"Q0 (grid) -> P1 on the wetted boundary '{interface}' moved half a fluid cell into the "
+                        f"fluid, pseudo_l2 trace (solids without boundary triangles: onto all solid vertices)"))

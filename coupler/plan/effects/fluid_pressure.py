@@ -4,6 +4,7 @@ the faces (its ``[[loads]]`` of type ``fluid_pressure``); no fluid solver is sta
 NAME = "fluid_pressure"
 DESCRIPTION = "a static fluid pressure on fracture faces, applied as a load (no fluid solver)"
 ORDER = 2
+NEEDS = ("elasticity",)  # a load on the elastic solid
 
 
 def plan(scene, plan) -> None:
