@@ -15,7 +15,7 @@ from case_figures import RECORD, figures, run_case
 
 
 RECORDED = json.loads(RECORD.read_text())
-SLOW = {"cube_obstacle_large", "fracture_closure", "rock_obstacle", "fracture_flow", "hertz", "parallel_plates"}
+SLOW = {"cube_obstacle_large", "fracture_closure", "rock_obstacle", "fracture_flow", "hertz"}
 #: fields a case no longer writes, on purpose: the quasi-static flow plan sends no solid velocity to
 #: the grid (the solid is at rest in each step; the field was zero)
 DROPPED = {("small_fracture", "fluid", "cell:solid_velocity"), ("fracture_flow", "fluid", "cell:solid_velocity"),

@@ -8,23 +8,27 @@ from __future__ import annotations
 
 import json
 import shutil
+from types import SimpleNamespace
 
+import meshio
 import numpy as np
 import pytest
 
+from coupler.cli import main
 from coupler.plan.plan import make_plan
 from coupler.errors import CouplerError, SceneError
 from coupler.fsi.interface import SolidOnGrid
 from coupler.scene import load
 from coupler.fsi.viscous import FluidTraction, traction_figures, velocity_gradient, wall_shear
-from fluid_openfoam.plates import Plates, geometry
 from transfer import Mesh, StructuredGrid
 from transfer.generate import box_tetrahedra
+from transfer.generators import parameters
+from transfer.generators.plates import blocks, grid
 from vc_helpers import CASES, copy_case
 
 CASE = CASES / "small_fracture"
 needs_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")
-PLATES = Plates()
+PLATES = SimpleNamespace(w=1e-3, length=2e-3, dp=1e-2, mu=1e-3)  # cases/parallel_plates
 TAU_W = PLATES.dp / PLATES.length * PLATES.w / 2  # the analytical wall shear [Pa]
 
 
@@ -41,10 +45,13 @@ def face_triangles(mesh, axis: int, value: float, sign: int) -> np.ndarray:
 
 
 def plates_on_grid(n_across: int, offset: float = 0.3):
-    """(SolidOnGrid with traction 'full', lower wall y, upper wall y) of fluid_openfoam.plates'
+    """(SolidOnGrid with traction 'full', lower wall y, upper wall y) of the plates generator's
     geometry: two blocks, the grid's lines off their faces, the wetted faces both plates' inner ones."""
-    grid, lower, upper = geometry(n_across, offset)
-    G = StructuredGrid(grid["origin"], grid["spacing"], grid["shape"])
+    p = parameters("plates", {"aperture": PLATES.w, "length": PLATES.length, "cells_across": n_across,
+                              "offset": offset})
+    lower, upper = blocks(p)
+    g = grid(p)
+    G = StructuredGrid(g["origin"], g["spacing"], g["shape"])
     a, b = box_tetrahedra((4, 2, 1), *lower), box_tetrahedra((4, 2, 1), *upper)
     S = Mesh(np.vstack([a.points, b.points]), np.vstack([a.cells, b.cells + len(a.points)]), "tetra")
     y0, y1 = lower[1][1], upper[0][1]
@@ -169,6 +176,15 @@ def test_a_thin_channel_drops_the_samples_beyond_the_grid():
 
 
 # ---------------------------------------------------------------- OpenFOAM's immersed plates
+def openfoam_plates(tmp_path, n: int) -> dict:
+    """The fluid's cell fields of cases/parallel_plates at n cells across, the plates at offset 0.3."""
+    case = copy_case(CASES / "parallel_plates", tmp_path / f"n{n}", {"cells_across = 8 ": f"cells_across = {n} ",
+                                                                      "offset = 0.25 ": "offset = 0.3 "})
+    assert main(["run", str(case)]) in (0, 1)  # 1: the cubic law's 5 % missed at 4 cells across
+    vtu = meshio.read(case / "results" / "fluid_0000.vtu")
+    return {name: vtu.cell_data[name][0] for name in ("solid_fraction", "velocity", "pressure")}
+
+
 @needs_foam
 def test_openfoam_plates_wall_shear_and_force_balance(tmp_path):
     """simpleFoam on the immersed plates (wall penalization, exact fractions) at 4, 8, 16 cells
@@ -176,11 +192,9 @@ def test_openfoam_plates_wall_shear_and_force_balance(tmp_path):
     vertex, where the flow rate is still 5.8, 1.4, 0.36 % off the cubic law: the shear is fixed
     by the momentum balance, not by where the discrete wall sits), the integrated shear balances
     the pressure drop, and the grid-stress alternative converges at first order."""
-    from fluid_openfoam.plates import run
-
     stress_errors = []
     for n in (4, 8, 16):
-        fields = run(n, "wall", workdir=tmp_path / f"n{n}", keep_fields=True)["fields"]
+        fields = openfoam_plates(tmp_path, n)
         on_grid, _, _ = plates_on_grid(n)
         assert np.allclose(on_grid.fraction, fields["solid_fraction"])
         traction = FluidTraction(PLATES.mu)
@@ -225,10 +239,6 @@ def test_small_fracture_with_full_traction(tmp_path, capsys):
     """cases/small_fracture with traction = "full" end to end: converges; the viscous part is a
     few percent of the pressure's locally but carries the streamwise force: the rock's net x force
     (pressure + shear) balances the inlet pressure over the gap's cross-section."""
-    import meshio
-
-    from coupler.cli import main
-
     case = copy_case(CASE, tmp_path / "case", {'interface = ["fracture_lower", "fracture_upper"]':
                                                'interface = ["fracture_lower", "fracture_upper"]\ntraction = "full"'})
     out = tmp_path / "out"

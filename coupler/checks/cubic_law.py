@@ -1,0 +1,65 @@
+"""``[check] kind = "cubic_law"``: the flow rate through a gap of aperture w against the cubic
+law ``Q = w^3 dp / (12 mu L)`` (plane Poiseuille flow, per unit width), with dp the pressure
+drop from the inlet (xmin) to the outlet (xmax), L the grid's length along x and mu the
+fluid's viscosity, all from the scene.
+
+The flow rate is measured through every cross-section of the grid (a column of cells at one x,
+per unit width: the cells' x velocity times their height across the aperture, summed across
+and averaged over the width) and averaged along x; their spread tells how well the discrete
+flow conserves mass.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+KIND = "cubic_law"
+DESCRIPTION = "the flow rate through a gap against the cubic law w^3 dp / (12 mu L)"
+KEYS = {"aperture": "w, the gap [m] (default: the aperture parameter of the [geometry.solid] generator)",
+        "across": "the grid axis across the gap, 'y' (default) or 'z'; the other one is the width",
+        "tolerance": "largest accepted |Q / Q_cubic - 1|"}
+
+
+def parse(table, scene) -> dict:
+    if "flow" not in scene.effects:
+        raise table.error("kind", f"'cubic_law' compares a flow: needs the effect 'flow', got {scene.effects!r}")
+    inlet, outlet = scene.flow["inlet"], scene.flow["outlet"]
+    if "pressure" not in inlet:
+        raise table.error("kind", "'cubic_law' needs the pressure drop: give [flow] inlet_pressure")
+    dp = inlet["pressure"] - outlet["pressure"]
+    if not dp > 0:
+        raise table.error("kind", f"'cubic_law' needs a pressure drop: [flow] inlet_pressure - outlet_pressure is "
+                                  f"{dp:g} Pa")
+    generated = (scene.solid.generator or {}).get("parameters", {})
+    if "aperture" not in table.data and "aperture" not in generated:
+        raise table.error("aperture", "missing: the gap w [m] (no generator of [geometry.solid] gives one)")
+    g = scene.fluid
+    return {"aperture": table.number("aperture", generated.get("aperture"), positive=True),
+            "across": table.string("across", "y", ("y", "z")), "tolerance": table.number("tolerance", positive=True),
+            "pressure_drop": dp, "viscosity": scene.fluid_material["viscosity"], "length": g.spacing[0] * g.shape[0]}
+
+
+def flow_rates(grid, velocity: np.ndarray, across: int) -> np.ndarray:
+    """The flow rate per unit width through each cross-section x = const of `grid` (one per
+    column of cells along x) [m^2/s]; `across`: the axis (1 or 2) across the gap."""
+    nx, ny, nz = grid.shape
+    ux = np.asarray(velocity)[:, 0].reshape(nz, ny, nx)
+    per_width = ux.sum(axis=2 - across) * grid.spacing[across]  # (k, j, i): across y sums j, across z sums k
+    return per_width.mean(axis=0)
+
+
+def evaluate(settings, scene, result) -> dict:
+    across = "xyz".index(settings["across"])
+    Q = flow_rates(result.meshes["fluid"], result.fields["fluid"]["velocity"], across)
+    w, dp, mu, L = settings["aperture"], settings["pressure_drop"], settings["viscosity"], settings["length"]
+    q_cubic = w ** 3 * dp / (12 * mu * L)
+    difference = float(Q.mean() / q_cubic - 1)
+    return {"error": abs(difference), "tolerance": settings["tolerance"],
+            "passed": bool(abs(difference) <= settings["tolerance"]), "relative_difference": difference,
+            "Q": float(Q.mean()), "Q_cubic": q_cubic, "Q_spread": float(np.ptp(Q) / abs(Q.mean())),
+            "aperture": w, "pressure_drop": dp, "viscosity": mu, "length": L}
+
+
+def describe(report: dict) -> str:
+    return (f"flow rate {report['Q']:.5g} m^2/s against the cubic law's {report['Q_cubic']:.5g}: "
+            f"{report['relative_difference']:+.3%}")
