@@ -202,16 +202,11 @@ def check(args: argparse.Namespace) -> int:
     have each participant read its part (meshes, boundaries) without solving anything
     (``--quick``: the scene alone)."""
     from coupler import scene as scenes
-    from coupler.scene.transfer import TransferScene
 
     scene = scenes.load(args.case)
     study = scenes.study_module(scene)
     print(f"scene         {scene.path}: valid")
-    if isinstance(scene, TransferScene):
-        print(f"transfer      {scene.source.name} -> {scene.target.name}: field {scene.field!r}, "
-              f"methods {', '.join(scene.methods)}")
-        print("participants  none (a transfer runs in the coupler, no solver is started)")
-    elif study is not None:
+    if study is not None:
         for line in study.plan_lines(scene):
             print(line)
     else:

@@ -58,7 +58,8 @@ Participants that solve nothing, which the runner serves in its own process
     writes with its own outputs) and gives ``covered``: 1 at the dofs where every input is
     finite (a transfer reached them), 0 elsewhere. Config: ``{"file": "path", "field": "name"}``.
     ``report_figures``: ``reoriented_cells``, cells the file numbers with negative orientation
-    (reordered on reading).
+    (reordered on reading). Its ``geometry`` names the mesh after the file and describes it
+    (``note``: cells, points, reordered cells, the field).
 """
 
 from __future__ import annotations
@@ -352,7 +353,8 @@ class MeshFileParticipant(Participant):
         if self.file is None:
             raise RuntimeError("geometry before configure")
         m = self.file.mesh
-        return ({"cell_type": m.cell_type, "boundaries": {}},
+        note = f"{self.file.path}: {self.file.describe()}" + (f"; {self.field.describe()}" if self.field else "")
+        return ({"cell_type": m.cell_type, "boundaries": {}, "name": self.file.path, "note": note},
                 {"points": Field("points", m.points, "m"), "cells": Field("cells", m.cells)})
 
     def advance(self, window, iteration, t, dt, inputs):

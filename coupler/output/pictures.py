@@ -6,7 +6,8 @@ EGL render window: no X server) from the run's last VTU files.
 - flow: the fluid speed on the grid's mid-plane across its thinnest extent (through a
   fracture's gap), with the solid's outline and streamlines, and the fluid pressure on the
   wetted faces of the solid;
-- contact: the contact pressure and the in-contact map on the slave face.
+- contact: the contact pressure and the in-contact map on the slave face;
+- transfer: the source field and each transferred one on the same slice, with one colour range.
 
 Colour maps are perceptually uniform (viridis, cividis, inferno), every colour bar names
 its quantity and unit, and the camera frames the part that matters (the wetted faces, the
@@ -242,6 +243,42 @@ def contact_face(solid, out: Path) -> list[Picture]:
     return pictures
 
 
+def transferred_fields(out: Path, files: list[Path]) -> Picture | None:
+    """The field of the first file (the source) and the same field of the others (its transfers)
+    on the mid-plane of the source across its thinnest extent, side by side, one colour range;
+    white where a transfer did not reach (NaN)."""
+    import pyvista as pv
+
+    meshes = [pv.read(f) for f in files]
+    source = meshes[0]
+    names = [n for n in (*source.point_data, *source.cell_data) if n != "covered"]
+    if not names:
+        return None
+    field = names[0]
+    b = source.bounds
+    axis = int(np.argmin([b[1] - b[0], b[3] - b[2], b[5] - b[4]]))
+    normal, origin = np.eye(3)[axis], source.center
+    cuts = [m.slice(normal=normal, origin=origin) for m in meshes]
+    values = [_magnitude(c[field]) for c in cuts if c.n_points and field in c.array_names]
+    if len(values) < len(cuts) or not all(np.isfinite(v).any() for v in values):
+        return None
+    clim = (min(float(np.nanmin(v)) for v in values), max(float(np.nanmax(v)) for v in values))
+    p = pv.Plotter(off_screen=True, shape=(1, len(cuts)), window_size=(600 * len(cuts), 600))
+    p.set_background("white")
+    for i, (cut, file) in enumerate(zip(cuts, files)):
+        p.subplot(0, i)
+        p.add_mesh(cut, scalars=_magnitude(cut[field]), clim=clim, cmap="viridis", nan_color="white",
+                   scalar_bar_args=_bar(field) if i == len(cuts) - 1 else None, show_scalar_bar=i == len(cuts) - 1)
+        p.add_text(file.stem.rsplit("_", 1)[0], position="upper_left", font_size=12, color="black")
+        _view(p, cut.bounds, normal)
+    where = f"{'xyz'[axis]} = {origin[axis]:.3g}"
+    path = out / "transfer.png"
+    p.screenshot(str(path))
+    p.close()
+    return Picture(path.name, "Transfer", f"'{field}' on the source and on each target (" +
+                   ", ".join(f.stem.rsplit("_", 1)[0] for f in files[1:]) + f") on the plane {where}.")
+
+
 def render(out: Path, effects: list[str], timeout: float = 600.0) -> list[Picture]:
     """The pictures of a run's effects from its last VTU files in `out`, rendered in a child
     process: VTK's wheel and dolfinx's Debian libraries must not meet in one process (a
@@ -266,7 +303,7 @@ def render_here(out: Path, effects: list[str]) -> list[Picture]:
     pictures: list[Picture] = []
     solid_file, fluid_file = last_step(out, "solid"), last_step(out, "fluid")
     solid = pv.read(solid_file) if solid_file else None
-    if solid is not None and "displacement" in solid.point_data:
+    if "elasticity" in effects and solid is not None and "displacement" in solid.point_data:
         pictures.append(deformed_solid(solid, out))
         pictures.append(von_mises_cut(solid, out))
     if "flow" in effects and fluid_file is not None:
@@ -275,6 +312,9 @@ def render_here(out: Path, effects: list[str]) -> list[Picture]:
             pictures.append(wetted_pressure(solid, out))
     if "contact" in effects and solid is not None:
         pictures += contact_face(solid, out)
+    if "transfer" in effects and last_step(out, "source") is not None:
+        targets = sorted(out.glob("target_*.pvd"))
+        pictures.append(transferred_fields(out, [last_step(out, "source")] + [last_step(out, t.stem) for t in targets]))
     return [p for p in pictures if p is not None]
 
 

@@ -46,7 +46,7 @@ class Exchange:
     sources: list[str]
     target: str
     operator: str
-    step: str  # its place in Steps 1-6 of paper 2.3
+    step: str  # its place in Steps 1-6 of paper 2.3 ("" outside a fluid-solid coupling)
     accelerated: bool = False
     description: str = ""
     options: dict = field(default_factory=dict)
@@ -62,8 +62,8 @@ class Exchange:
     def describe(self) -> str:
         acc = ", accelerated" if self.accelerated else ""
         options = f" ({', '.join(f'{k} {v}' for k, v in self.options.items())})" if self.options else ""
-        return (f"{', '.join(self.sources)} -> {self.target}: {self.operator}{options} [step {self.step}{acc}] "
-                f"{self.description}")
+        step = f" [step {self.step}{acc}]" if self.step else ""
+        return f"{', '.join(self.sources)} -> {self.target}: {self.operator}{options}{step} {self.description}"
 
 
 @dataclass

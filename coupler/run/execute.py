@@ -1,4 +1,4 @@
-"""One scene run into its output directory, whatever its kind (coupled, study, transfer): what
+"""One scene run into its output directory, whatever its kind (a plan or a study): what
 ``varcouple run`` does and what ``varcouple study`` does for each of its runs."""
 
 from __future__ import annotations
@@ -7,7 +7,6 @@ from coupler import scene as scenes
 from coupler.errors import CouplerError, NotConverged, RunFailed, SceneError, one_line
 from coupler.protocol.transport import new_run_id
 from coupler.run.outdir import OutputLock, prepare
-from coupler.scene.transfer import TransferScene
 from transfer import TransferError
 
 
@@ -24,10 +23,6 @@ def execute(scene, origin: str, log=print) -> dict:
         if lock.note:
             log(f"note: {out}: {lock.note}")
         try:
-            if isinstance(scene, TransferScene):
-                from coupler.run.studies.transfer import run as run_transfer
-
-                return run_transfer(scene, log=log)
             if study is not None:
                 return study.run(scene, log=log)
             from coupler.run.runner import run as run_coupled_case

@@ -35,12 +35,13 @@ import numpy as np
 from coupler import checks
 from coupler.coupling.acceleration import make_accelerator
 from coupler.coupling.loop import run_coupled
-from coupler.errors import CouplerError, run_status
+from coupler.errors import CouplerError, SceneError, run_status
 from coupler.fsi.operators import OPERATORS, OperatorContext
 from coupler.output.plots import residual_plot
 from coupler.output.progress import ProgressBar
 from coupler.output.publish import publish
-from coupler.output.results import Series, write_summary
+from coupler.output.report import PAGE
+from coupler.output.results import SUMMARY, Series, write_summary
 from coupler.plan.plan import Plan, make_plan
 from coupler.protocol.transport import new_run_id
 from coupler.protocol.wire import Field
@@ -51,6 +52,7 @@ from coupler.run.preflight import check_memory, estimate
 from coupler.run.solves import StepSolves
 from transfer import Mesh, StructuredGrid
 from transfer.mesh import CELL_TYPES
+from transfer.meshfile import same_file
 
 
 class Phases:
@@ -84,8 +86,8 @@ class Phases:
 
 
 def _mesh_of(name: str, header: dict, fields: dict):
-    """The mesh or grid a participant's ``geometry`` describes; a file's orientation
-    convention is accepted (negative volume cells reordered)."""
+    """The mesh or grid a participant's ``geometry`` describes (named as its header says, e.g. a
+    file); a file's orientation convention is accepted (negative volume cells reordered)."""
     if "grid" in header:
         g = header["grid"]
         return StructuredGrid(g["origin"], g["spacing"], g["shape"], name=f"{name} grid")
@@ -93,7 +95,7 @@ def _mesh_of(name: str, header: dict, fields: dict):
         raise CouplerError(f"participant {name!r} gave cells of type {header.get('cell_type')!r}; "
                            f"the coupler needs a mesh of {', '.join(CELL_TYPES)} cells or a structured grid")
     return Mesh(np.array(fields["points"].data), np.array(fields["cells"].data), header["cell_type"],
-                name=f"{name} mesh", reorient=True)
+                name=header.get("name", f"{name} mesh"), reorient=True)
 
 
 def _as_arrays(fields: dict) -> dict:
@@ -106,6 +108,7 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     log(f"memory: {check_memory(scene, estimate(scene))}")
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
+    check_inputs_kept(scene, plan, out)
     for note in plan.notes:
         log(f"warning: {note}")
     run_id = run_id or new_run_id()
@@ -146,6 +149,21 @@ def rehearse(scene, plan: Plan, log=print) -> dict:
         rehearsal.start()
         rehearsal.finish()
     return rehearsal.meshes
+
+
+def check_inputs_kept(scene, plan: Plan, out: Path) -> None:
+    """SceneError before anything is written when a file the run writes in `out` is an input of
+    the scene (the scene file, a participant's mesh or file), whatever its spelling (links, ..)."""
+    inputs = [scene.path] + [p.config[k] for p in plan.participants for k in ("mesh", "file")
+                             if isinstance(p.config.get(k), str)]
+    names = [SUMMARY, "residuals.png", "convergence.png", PAGE]
+    for p in plan.participants:
+        names += [f"{p.name}.pvd"] + [f"{p.name}_{step:04d}.vtu" for step in range(scene.time["steps"])]
+    for name in names:
+        clash = same_file(out / name, inputs)
+        if clash is not None:
+            raise SceneError(f"{out / name}: is {clash}, an input of the scene: writing there would overwrite it; "
+                             f"choose another output directory")
 
 
 @contextmanager
@@ -212,6 +230,8 @@ class Run:
             meshes[p.name] = _mesh_of(p.name, header, fields)
             geometry[p.name] = _as_arrays(fields or {})
             self.log(f"{p.name}: {announced[p.name].get('kind')} on {meshes[p.name].num_cells} cells")
+            if header.get("note"):
+                self.log(f"{p.name}: {header['note']}")
         self.summary["participants_announced"] = announced
         self.summary["sizes"] = {name: {"cells": m.num_cells, "vertices": m.num_points} for name, m in meshes.items()}
         self.meshes = meshes
@@ -274,10 +294,13 @@ class Run:
             for name, series in self.series.items():
                 fields = {**self.outputs[name], **self.inputs.get(name, {})}
                 fields.update({f: v for (n, f), v in accepted.items() if n == name})
-                if isinstance(self.meshes[name], StructuredGrid):
+                mesh = self.meshes[name]
+                if isinstance(mesh, StructuredGrid):
                     series.write(window.index, window.t_end, cell_data=fields)
-                else:
-                    series.write(window.index, window.t_end, point_data=fields)
+                else:  # per point, or per cell (a P0 field)
+                    points = {k: v for k, v in fields.items() if len(v) == mesh.num_points}
+                    series.write(window.index, window.t_end, point_data=points,
+                                 cell_data={k: v for k, v in fields.items() if k not in points})
             self.phases.add("output", time.perf_counter() - start)
         record["figures"] = {name: figures for name, figures in self.figures.items() if figures}
         for op in self.operators:

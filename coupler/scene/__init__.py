@@ -1,9 +1,8 @@
 """Scene files: ``cases/NAME/scene.toml`` read with tomllib and validated.
 
-A scene is a coupled case (a ``[physics]`` table, :mod:`coupler.scene.coupled`), a study
-run inside the coupler (a marker table, :data:`STUDIES`) or a transfer (a ``[transfer]``
-table, :mod:`coupler.scene.transfer`); cases/README.md documents every key. Every error
-names the scene file, the table and key, and the reason.
+A scene is a case of effects (a ``[physics]`` table, :mod:`coupler.scene.coupled`) or a study
+run inside the coupler (a marker table, :data:`STUDIES`); cases/README.md documents every
+key. Every error names the scene file, the table and key, and the reason.
 """
 
 from __future__ import annotations
@@ -19,8 +18,7 @@ from .tables import STUDIES, scene_path
 
 def load(case, output: str | Path | None = None, overrides: dict | None = None):
     """Read and validate the scene of `case` (a case directory or its scene.toml):
-    a :class:`~coupler.scene.coupled.CoupledScene`, a study's scene or a
-    :class:`~coupler.scene.transfer.TransferScene`.
+    a :class:`~coupler.scene.coupled.CoupledScene` or a study's scene.
     `output` overrides ``[output] directory`` (relative to the working directory); `overrides`
     (``{dotted key: value}``, :mod:`coupler.scene.overrides`) set keys before validation."""
     path, case_dir = scene_path(case)
@@ -40,13 +38,13 @@ def load(case, output: str | Path | None = None, overrides: dict | None = None):
     for marker, module in STUDIES.items():
         if marker in data:
             return importlib.import_module(module).parse(path, case_dir, data, output)
-    from .transfer import parse
-
-    return parse(path, case_dir, data, output)
+    hint = ' (a [transfer] table: effects = ["transfer"])' if "transfer" in data else ""
+    raise SceneError(f"{path}: [physics] effects: missing: the effects the scene simulates{hint}; or a study's "
+                     f"{', '.join(f'[{m}]' for m in STUDIES)} table")
 
 
 def study_module(scene):
-    """The module of a study scene (one of :data:`STUDIES`), or None for coupled and transfer scenes."""
+    """The module of a study scene (one of :data:`STUDIES`), or None for coupled scenes."""
     module = type(scene).__module__
     return importlib.import_module(module) if module in STUDIES.values() else None
 

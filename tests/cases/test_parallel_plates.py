@@ -65,6 +65,14 @@ def test_single_runs_give_the_study_s_numbers(tmp_path, method):
 
 
 @needs_foam
+def test_a_fixed_solid_is_pictured_in_the_flow_only(tmp_path):
+    case = copy_case(CASE, tmp_path, {'solid_fraction = "exact"': 'solid_fraction = "exact"\n[output]\npictures = true'})
+    assert main(["run", str(case)]) == 0
+    s = json.loads((case / "results" / "summary.json").read_text())
+    assert s["pictures"] == ["flow_speed.png"] and "pictures_error" not in s  # no deformed solid
+
+
+@needs_foam
 def test_a_failed_check_exits_1(tmp_path, capsys):
     code, s = run(tmp_path, 4, 0.0)
     assert code == 1 and s["status"] == "completed" and not s["check"]["passed"]

@@ -142,32 +142,37 @@ def test_run_demo(tmp_path, capsys):
     (out / "keep.txt").write_text("not ours")
     code, stdout, err = run_cli(capsys, "run", DEMO, "--output", out)
     assert code == 0, err
-    assert "[l2]" in stdout and "[pseudo_l2]" in stdout
-    for name in ("source.vtu", "target_l2.vtu", "target_pseudo_l2.vtu", "transfer.png", "summary.json"):
+    assert "serving source: mesh_file in this process" in stdout and "l2 L2 error 2.924e-02" in stdout
+    for name in ("source_0000.vtu", "target_l2_0000.vtu", "target_pseudo_l2_0000.vtu", "summary.json", "index.html"):
         assert (out / name).is_file(), name
     assert (out / "keep.txt").read_text() == "not ours"
-    assert (out / "transfer.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     after = [p for p in sorted(p.relative_to(DEMO) for p in DEMO.rglob("*")) if p.parts[0] != "results"]
     assert after == before  # nothing written into the case itself
 
     summary = json.loads((out / "summary.json").read_text())
-    assert set(summary["methods"]) == {"l2", "pseudo_l2"}
-    for m in summary["methods"].values():
-        assert {"assembly_seconds", "covered_fraction", "conservation_error", "max_error"} <= set(m)
-        assert m["covered_fraction"] == 1.0
-        assert m["conservation_error"] < 1e-10
+    assert [p["name"] for p in summary["participants"]] == ["source", "target_l2", "target_pseudo_l2"]
+    assert all(p["in_process"] for p in summary["participants"])
+    assert [e["operator"] for e in summary["exchanges"]] == ["l2", "pseudo_l2"]
+    check = summary["check"]
+    assert check["kind"] == "exact_transfer" and check["passed"] and set(check["methods"]) == {"l2", "pseudo_l2"}
+    for method, m in check["methods"].items():
+        projected = summary["steps"][0]["projections"][f"target_{method}.pressure"]
+        assert projected["covered_fraction"] == 1.0 and projected["conservation_error"] < 1e-10
         assert 0 < m["max_error"] < 0.5
         # the L2 error against exact (2.9e-2, 3.1e-2) exceeds the distance to its interpolant (1.5e-2, 1.7e-2)
         assert 0.02 < m["relative_l2_error"] < 0.04 and 0.01 < m["relative_interpolant_distance"] < 0.02
-    assert summary["source"]["cells"] == 1536 and summary["target"]["cells"] == 3630
-    assert summary["exact"]["source_max_difference"] < 1e-12
+    assert check["error"] == check["methods"]["pseudo_l2"]["relative_l2_error"]
+    assert summary["sizes"]["source"]["cells"] == 1536 and summary["sizes"]["target_l2"]["cells"] == 3630
+    assert check["source_max_difference"] < 1e-12
 
-    res = meshio.read(out / "target_l2.vtu")
-    assert {"pressure", "covered", "error"} <= set(res.point_data)
-    assert len(res.point_data["pressure"]) == summary["target"]["points"]
+    res = meshio.read(out / "target_l2_0000.vtu")
+    assert {"pressure", "covered"} <= set(res.point_data)
+    assert len(res.point_data["pressure"]) == summary["sizes"]["target_l2"]["vertices"]
 
 
-SCENE = """[transfer]
+SCENE = """[physics]
+effects = ["transfer"]
+[transfer]
 source = "rock_block.vtu"
 target = "target_block.vtu"
 field = "pressure"
@@ -192,7 +197,8 @@ def case(tmp_path):
     (SCENE.replace('"rock_block.vtu"', '"a.vtu"'), ["[transfer] source", "file 'a.vtu' not found"]),
     (SCENE.replace('"pressure"', '"temperature"'), ["[transfer] field", "'temperature'"]),
     (SCENE + "sorce = 'x'\n", ["[transfer] sorce", "unknown key"]),
-    (SCENE + "exact = 'foo(x)'\n", ["[transfer] exact", "'foo'"]),
+    (SCENE + "[check]\nkind = 'exact_transfer'\nexact = 'foo(x)'\ntolerance = 0.1\n", ["[check] exact", "'foo'"]),
+    (SCENE.replace("[physics]\neffects = [\"transfer\"]\n", ""), ["[physics] effects", "effects = [\"transfer\"]"]),
     (SCENE + "threads = 0\n", ["[transfer] threads"]),
     (SCENE + "[output]\ndirectory = 3\n", ["[output] directory"]),
 ])

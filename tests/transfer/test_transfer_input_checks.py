@@ -20,10 +20,10 @@ from vc_helpers import Linear
 
 
 def write_scene(case, source, target, field="T", more='method = "l2"\n'):
-    """A [transfer] scene in the directory `case` (files relative to it); `more`: further lines."""
+    """A transfer scene in the directory `case` (files relative to it); `more`: further lines."""
     case.mkdir(exist_ok=True)
-    (case / "scene.toml").write_text(f'[transfer]\nsource = "{source}"\ntarget = "{target}"\n'
-                                     f'field = "{field}"\n{more}')
+    (case / "scene.toml").write_text(f'[physics]\neffects = ["transfer"]\n[transfer]\nsource = "{source}"\n'
+                                     f'target = "{target}"\nfield = "{field}"\n{more}')
     return case
 
 
@@ -130,7 +130,8 @@ def test_scene_records_reoriented_cells(delaunay_file, tmp_path, capsys):
     write_mesh(tmp_path / "box.vtu", box_tetrahedra((2, 2, 2)))
     stdout, summary = run_scene(capsys, write_scene(tmp_path, path.name, "box.vtu"), tmp_path / "out")
     n = np.count_nonzero(volumes(meshio.read(path).points, cells) < 0)
-    assert summary["source"]["reoriented_cells"] == n > 0 and summary["target"]["reoriented_cells"] == 0
+    figures = summary["steps"][0]["figures"]
+    assert figures["source"]["reoriented_cells"] == n > 0 and figures["target_l2"]["reoriented_cells"] == 0
     assert f"{n} of {len(cells)} tetra cells had negative orientation" in stdout
 
 
@@ -273,11 +274,11 @@ def test_output_over_an_input_is_refused_and_the_input_kept(pair, tmp_path, caps
 
 def test_scene_output_over_an_input_is_refused(pair, tmp_path, capsys):
     src, dst = pair
-    (src.parent / "source.vtu").symlink_to(src)  # what the scene writes into its output directory
-    case = write_scene(tmp_path / "case", "../in/source.vtu", "../in/dst.vtu")
+    (src.parent / "source_0000.vtu").symlink_to(src)  # what the scene writes into its output directory
+    case = write_scene(tmp_path / "case", "../in/source_0000.vtu", "../in/dst.vtu")
     before = src.read_bytes()
     code, _, err = run_cli(capsys, "run", case, "--output", src.parent)
-    assert_clean_error(code, err, "source.vtu", "overwrite", "input of the scene")
+    assert_clean_error(code, err, "source_0000.vtu", "overwrite", "input of the scene")
     assert src.read_bytes() == before and not (src.parent / "summary.json").exists()
 
 
@@ -312,7 +313,8 @@ def cube_case(tmp_path):
     def make(f, exact, case="description"):
         cube = box_tetrahedra((1, 1, 1))
         write_mesh(tmp_path / "cube.vtu", cube, {"T": f(cube.points)})
-        more = f'methods = ["l2", "pseudo_l2"]\nexact = "{exact}"\n[case]\n{case} = "x^2 on the unit cube"\n'
+        more = (f'methods = ["l2", "pseudo_l2"]\n[check]\nkind = "exact_transfer"\nexact = "{exact}"\ntolerance = 1.0\n'
+                f'[case]\n{case} = "x^2 on the unit cube"\n')
         return write_scene(tmp_path, "cube.vtu", "cube.vtu", more=more)
 
     return make
@@ -326,10 +328,10 @@ def test_scene_reports_the_true_l2_error_and_the_interpolant_distance(cube_case,
     f = {"x**2": lambda p: p[:, 0] ** 2, "1 + x - 2*y + 3*z": lambda p: 1 + p @ [1.0, -2.0, 3.0]}[exact]
     stdout, summary = run_scene(capsys, cube_case(f, exact), tmp_path / "out")
     assert summary["description"] == "x^2 on the unit cube"
-    for m in summary["methods"].values():
+    for m in summary["check"]["methods"].values():
         assert m["relative_interpolant_distance"] < 1e-14
         assert m["relative_l2_error"] == pytest.approx(error, rel=1e-12, abs=1e-15)
-    assert stdout.count("L2 error vs exact") == 2
+    assert stdout.count(" L2 error ") == 2
 
 
 def test_case_table_keys_are_checked(cube_case, capsys):

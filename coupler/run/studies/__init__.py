@@ -1,1 +1,1 @@
-"""Scenes run inside the coupler process (plates, obstacle, closure, transfer)."""
+"""Scenes run inside the coupler process (obstacle, closure)."""

@@ -1,0 +1,142 @@
+"""A transfer is a plan without processes (coupler/plan/effects/transfer.py): mesh files served in
+the coupler's process, one exchange per method, the generic output, and [check] kind =
+"exact_transfer" (coupler/checks/exact_transfer.py)."""
+
+from __future__ import annotations
+
+import json
+
+import meshio
+import numpy as np
+import pytest
+
+from cli_helpers import assert_clean_error, run_cli, write_mesh
+from coupler.errors import SceneError
+from coupler.plan.plan import make_plan
+from coupler.run import runner
+from coupler.scene import load
+from transfer.generate import box_hexahedra, box_tetrahedra
+from vc_helpers import CASES
+
+SCENE = """[physics]
+effects = ["transfer"]
+[transfer]
+source = "src.vtu"
+target = "dst.vtu"
+field = "{field}"
+methods = ["l2", "pseudo_l2"]
+"""
+CHECK = """[check]
+kind = "exact_transfer"
+exact = "{exact}"
+tolerance = {tolerance}
+"""
+
+
+def case(tmp_path, field="T", check="", target=None):
+    """src.vtu: a jittered tet box with T = 1 + x - 2 y + 3 z (points) and k = 7 (cells); dst.vtu: a
+    hexahedral box (`target`: another mesh)."""
+    src = box_tetrahedra((3, 3, 3), jitter=0.2, seed=4)
+    write_mesh(tmp_path / "src.vtu", src, {"T": 1 + src.points @ [1.0, -2.0, 3.0]}, {"k": np.full(src.num_cells, 7.0)})
+    write_mesh(tmp_path / "dst.vtu", target if target is not None else box_hexahedra((4, 4, 4)))
+    (tmp_path / "scene.toml").write_text(SCENE.format(field=field) + check)
+    return tmp_path
+
+
+def test_the_plan_serves_the_files_in_process():
+    plan = make_plan(load(CASES / "transfer_demo"))
+    assert [(p.name, p.kind, p.in_process) for p in plan.participants] == [
+        ("source", "mesh_file", True), ("target_l2", "mesh_file", True), ("target_pseudo_l2", "mesh_file", True)]
+    assert [(e.sources, e.target, e.operator, e.options) for e in plan.exchanges] == [
+        (["source.pressure"], f"target_{m}.pressure", m, {"kind": "point", "fill": "nan", "threads": 1})
+        for m in ("l2", "pseudo_l2")]
+    assert not plan.implicit and plan.participants[0].config["file"].endswith("rock_block.vtu")
+
+
+def test_a_transfer_opens_no_session_and_starts_no_process(tmp_path, capsys, monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("a plan without processes opened a zenoh session or a launcher")
+
+    monkeypatch.setattr(runner, "CouplerSession", refuse)
+    monkeypatch.setattr(runner, "Launcher", refuse)
+    code, _, err = run_cli(capsys, "run", case(tmp_path, check=CHECK.format(exact="1 + x - 2*y + 3*z",
+                                                                            tolerance=1e-12)), "-o", tmp_path / "out")
+    assert code == 0, err
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    for m in s["check"]["methods"].values():  # a linear field: both methods reproduce it
+        assert m["relative_l2_error"] < 1e-13 and m["max_error"] < 1e-12
+    out = meshio.read(tmp_path / "out" / "target_l2_0000.vtu")
+    np.testing.assert_allclose(out.point_data["T"], 1 + out.points @ [1.0, -2.0, 3.0], atol=1e-12)
+    assert out.point_data["covered"].min() == 1
+
+
+def test_a_cell_field_is_written_per_cell(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "run", case(tmp_path, field="k"), "-o", tmp_path / "out")
+    assert code == 0, err
+    out = meshio.read(tmp_path / "out" / "target_pseudo_l2_0000.vtu")
+    np.testing.assert_allclose(out.cell_data["k"][0], 7.0, rtol=1e-12)
+    assert out.cell_data["covered"][0].min() == 1 and "k" not in out.point_data
+
+
+def test_where_the_source_does_not_reach_the_target_is_nan_and_not_covered(tmp_path, capsys):
+    """A target twice as long as the source: the uncovered half is NaN, the errors are over the
+    covered dofs and cells only (a linear field: exact there)."""
+    target = box_tetrahedra((4, 2, 2), upper=(2, 1, 1))
+    check = CHECK.format(exact="1 + x - 2*y + 3*z", tolerance=1e-12)
+    code, _, err = run_cli(capsys, "run", case(tmp_path, check=check, target=target), "-o", tmp_path / "out")
+    assert code == 0, err
+    out = meshio.read(tmp_path / "out" / "target_l2_0000.vtu")
+    covered, T = out.point_data["covered"], out.point_data["T"]
+    np.testing.assert_array_equal(covered == 1, out.points[:, 0] <= 1 + 1e-12)
+    assert np.isnan(T[covered == 0]).all() and np.isfinite(T[covered == 1]).all()
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    projection = s["steps"][0]["projections"]["target_l2.T"]
+    assert projection["uncovered_dofs"] == int((covered == 0).sum()) and projection["covered_fraction"] < 1
+    assert s["check"]["passed"] and s["check"]["error"] < 1e-13
+
+
+def test_a_check_beyond_its_tolerance_exits_1(tmp_path, capsys):
+    code, stdout, _ = run_cli(capsys, "run", case(tmp_path, check=CHECK.format(exact="1 + x - 2*y + 3*z + 0.1*x*y",
+                                                                                 tolerance=1e-6)))
+    assert code == 1 and "transfer against exact: l2 L2 error" in stdout and "FAIL" in stdout
+
+
+@pytest.mark.parametrize("field, check, words", [
+    ("T", CHECK.format(exact="1 + x", tolerance=0.1) + "radius = 1.0\n", ["[check] radius", "unknown key"]),
+    ("T", CHECK.format(exact="log(x - 5)", tolerance=0.1), ["[check] exact", "not finite at every source point"]),
+    ("T", CHECK.format(exact="arctan2(x)", tolerance=0.1), ["[check] exact", "cannot evaluate"]),
+    ("nope", "", ["[transfer] field", "no field 'nope'"]),
+])
+def test_bad_transfer_scenes_name_the_key(tmp_path, capsys, field, check, words):
+    code, _, err = run_cli(capsys, "run", case(tmp_path, field=field, check=check))
+    assert_clean_error(code, err, "scene.toml", *words)
+
+
+def test_exact_transfer_needs_a_transfer_and_a_scalar_field(tmp_path):
+    src = box_tetrahedra((2, 2, 2))
+    write_mesh(tmp_path / "src.vtu", src, {"u": src.points})
+    write_mesh(tmp_path / "dst.vtu", box_tetrahedra((3, 3, 3)))
+    (tmp_path / "scene.toml").write_text(SCENE.format(field="u") + CHECK.format(exact="x", tolerance=0.1))
+    with pytest.raises(SceneError, match=r"\[check\] exact: is a scalar expression but field 'u' has shape \(3,\)"):
+        load(tmp_path)
+    text = (CASES / "block_compression" / "scene.toml").read_text().split("[check]")[0]
+    (tmp_path / "scene.toml").write_text(text + CHECK.format(exact="x", tolerance=0.1))
+    with pytest.raises(SceneError, match=r"\[check\] kind: 'exact_transfer' compares a transfer: needs the effect"):
+        load(tmp_path)
+
+
+def test_the_picture_shows_the_source_and_each_target(tmp_path, capsys):
+    case = tmp_path / "case"
+    case.mkdir()
+    for name in ("rock_block.vtu", "target_block.vtu"):
+        (case / name).write_bytes((CASES / "transfer_demo" / name).read_bytes())
+    text = (CASES / "transfer_demo" / "scene.toml").read_text()
+    (case / "scene.toml").write_text(text.replace('directory = "results"', 'directory = "results"\npictures = true'))
+    code, _, err = run_cli(capsys, "run", case)
+    assert code == 0, err
+    s = json.loads((case / "results" / "summary.json").read_text())
+    assert s["pictures"] == ["transfer.png"] and "pictures_error" not in s
+    from PIL import Image
+
+    width, height = Image.open(case / "results" / "transfer.png").size
+    assert width == 3 * height  # the source and two targets side by side
