@@ -7,9 +7,10 @@ coupling iteration) and the Chorin participant (fluid_chorin, state in memory).
   displacement per step, the pressure drop (small_fracture: mean pressure of the fluid-centred
   cells of the inlet column minus the outlet column), and the Chorin run's differences to the
   OpenFOAM run;
-* ``plates``: the fluid alone on the immersed plates of fluid_openfoam/plates.py (4 to 32 cells
-  across the aperture, offset 0.3 of a cell): error of the flow rate against the cubic law and
-  solve time per fluid (accuracy against cost).
+* ``plates``: the fluid alone on the immersed plates of cases/parallel_plates (4 to 32 cells
+  across the aperture, offset 0.3 of a cell), run once per fluid as well: error of the flow rate
+  against the cubic law (the scene's [check]) and the fluid's time (set-up and solve) per fluid
+  (accuracy against cost).
 
 Goal (PASS/MISS): coupled small_fracture at least 2x faster end to end with the Chorin fluid.
 
@@ -56,8 +57,9 @@ def pressure_drop(out: Path, step: int) -> float | None:
     return float(p[..., 0][fluid[..., 0]].mean() - p[..., -1][fluid[..., -1]].mean())
 
 
-def run_case(case: str, fluid: str) -> dict:
-    """``varcouple run`` on a copy of cases/CASE with ``participant = FLUID`` for the fluid."""
+def run_case(case: str, fluid: str, replace: dict | None = None) -> dict:
+    """``varcouple run`` on a copy of cases/CASE with ``participant = FLUID`` for the fluid (and the
+    text replacements `replace` in its scene)."""
     from coupler.cli import main
 
     with tempfile.TemporaryDirectory(prefix=f"bench-fluids-{case}-{fluid}-") as tmp:
@@ -69,6 +71,8 @@ def run_case(case: str, fluid: str) -> dict:
         scene = scene.replace('participant = "openfoam"', f'participant = "{fluid}"')
         if fluid == "chorin":  # simpleFoam's iteration budget is not a pseudo-time step budget
             scene = scene.replace("max_iterations = 3000\n", "")
+        for old, new in (replace or {}).items():
+            scene = scene.replace(old, new)
         (copy / "scene.toml").write_text(scene)
         out = Path(tmp) / "out"
         t0 = time.perf_counter()
@@ -86,7 +90,10 @@ def run_case(case: str, fluid: str) -> dict:
                 "seconds_per_coupling_iteration": wall / iterations if iterations else None,
                 "fluid_seconds_per_coupling_iteration": fluid_seconds / iterations if iterations else None,
                 "max_displacement": [s.get("max_displacement") for s in steps],
-                "pressure_drop": pressure_drop(out, len(steps) - 1) if steps else None}
+                "pressure_drop": pressure_drop(out, len(steps) - 1) if steps else None,
+                "fluid_setup_seconds": phases.get("fluid setup", 0.0), "check": summary.get("check"),
+                "fluid_cells": summary.get("sizes", {}).get("fluid", {}).get("cells"),
+                "fluid_solves": steps[-1]["solves"].get("fluid", []) if steps else []}
 
 
 def compare(runs: dict) -> dict:
@@ -102,30 +109,19 @@ def compare(runs: dict) -> dict:
 
 
 def plates_side_by_side(across) -> list[dict]:
-    """The immersed plates at offset 0.3 with both fluids: error against the cubic law and time."""
-    from fluid_chorin.solver import ChorinSolver
-    from fluid_chorin.spec import ChorinSpec
-    from fluid_openfoam import plates
-
+    """cases/parallel_plates at offset 0.3 with both fluids: the error against the cubic law (its
+    [check]) and the fluid's seconds (set-up and solve)."""
     rows = []
-    p = plates.Plates()
     for n in across:
-        with tempfile.TemporaryDirectory(prefix="bench-fluids-plates-") as tmp:
-            of = plates.run(n, "wall", 0.3, Path(tmp) / "case")
-        grid, lower, upper = plates.geometry(n, 0.3)
-        t0 = time.perf_counter()
-        config = {"grid": grid, "inlet": {"pressure": p.dp}, "outlet": {"pressure": 0.0}, "rho": p.rho, "mu": p.mu,
-                  "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-7}
-        solver = ChorinSolver(ChorinSpec.from_config(config))
-        solver.set_solid(plates.exact_fractions(grid, (lower, upper)))
-        run = solver.steady()
-        ny = grid["shape"][1]
-        Q = solver.cell_velocity()[:, 0].reshape(ny, plates.NX).sum(axis=0) * grid["spacing"][1]
-        rows.append({"cells_across": n, "cells": of["cells"],
-                     "openfoam": {"error": of["error"], "seconds": of["time_setup"] + of["time_solve"],
-                                  "iterations": of["iterations"], "converged": of["converged"]},
-                     "chorin": {"error": float(Q.mean() / p.q_cubic - 1), "seconds": time.perf_counter() - t0,
-                                "iterations": run.report.iterations, "converged": run.converged}})
+        replace = {"cells_across = 8 ": f"cells_across = {n} ", "offset = 0.25 ": "offset = 0.3 "}
+        runs = {fluid: run_case("parallel_plates", fluid, {**replace, **({"max_iterations = 5000\n": ""}
+                                                                         if fluid == "chorin" else {})})
+                for fluid in FLUIDS}
+        rows.append({"cells_across": n, "cells": runs["openfoam"]["fluid_cells"],
+                     **{fluid: {"error": r["check"]["relative_difference"] if r["check"] else None,
+                                "seconds": r["fluid_setup_seconds"] + r["fluid_seconds"],
+                                "iterations": sum(s["iterations"] for s in r["fluid_solves"]),
+                                "converged": r["status"] == "completed"} for fluid, r in runs.items()}})
     return rows
 
 

@@ -8,9 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from coupler.checks.cubic_law import flow_rates
 from fluid_chorin.solver import ChorinSolver
 from fluid_chorin.spec import ChorinSpec
-from fluid_openfoam import plates
+from transfer import FunctionSpace, StructuredGrid, Transfer
+from transfer.generators import GENERATORS, parameters
 
 # Ghia, U., Ghia, K. N., Shin, C. T. (1982). High-Re solutions for incompressible flow using
 # the Navier-Stokes equations and a multigrid method. J. Comput. Phys. 48, 387-411.
@@ -100,21 +102,24 @@ def test_taylor_green_vortex_decays_at_the_exact_rate_on_32_cubed():
 @pytest.mark.parametrize("n_across,offset,low,high", [(8, 0.3, 0.0, 0.05), (8, 0.0, 0.025, 0.04),
                                                       (4, 0.3, 0.05, 0.065)])
 def test_immersed_plates_follow_the_cubic_law(n_across, offset, low, high):
-    """The geometry of fluid_openfoam.plates (exact fractions of two tetrahedral blocks, grid lines
-    off the walls), the 'wall' penalization: 8 cells across within 5 % of Q = w^3 dp / (12 mu L)
-    (measured +1.44 % at offset 0.3, +3.13 % = 2 (h/w)^2 with the walls on grid faces, as real walls;
-    4 across +5.77 %: the OpenFOAM fluid's figures to three digits)."""
-    grid, lower, upper = plates.geometry(n_across, offset)
-    p = plates.Plates()
-    config = {"grid": grid, "inlet": {"pressure": p.dp}, "outlet": {"pressure": 0.0}, "rho": p.rho, "mu": p.mu,
+    """The geometry of cases/parallel_plates (the plates generator: exact fractions of two
+    tetrahedral blocks, grid lines off the walls; w = 1 mm, L = 2 mm, dp = 0.01 Pa, mu = 1e-3 Pa s),
+    the 'wall' penalization: 8 cells across within 5 % of Q = w^3 dp / (12 mu L) (measured +1.44 % at
+    offset 0.3, +3.13 % = 2 (h/w)^2 with the walls on grid faces, as real walls; 4 across +5.77 %:
+    the OpenFOAM fluid's figures to three digits)."""
+    w, length, dp, mu = 1e-3, 2e-3, 1e-2, 1e-3
+    p = parameters("plates", {"aperture": w, "length": length, "cells_across": n_across, "offset": offset})
+    grid = GENERATORS["plates"].grid(p)
+    G = StructuredGrid(grid["origin"], grid["spacing"], grid["shape"])
+    volumes = Transfer.assemble(FunctionSpace(GENERATORS["plates"].mesh(p), "P0"), FunctionSpace(G, "Q0"), "l2").D
+    config = {"grid": grid, "inlet": {"pressure": dp}, "outlet": {"pressure": 0.0}, "rho": 1000.0, "mu": mu,
               "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-9}
     solver = ChorinSolver(ChorinSpec.from_config(config))
-    solver.set_solid(plates.exact_fractions(grid, (lower, upper)))
+    solver.set_solid(np.asarray(volumes.diagonal()) / G.cell_measures())
     assert solver.steady().converged
-    ny = grid["shape"][1]
-    Q = solver.cell_velocity()[:, 0].reshape(ny, plates.NX).sum(axis=0) * grid["spacing"][1]
+    Q = flow_rates(G, solver.cell_velocity(), across=1)
     assert np.ptp(Q) < 1e-9 * Q.mean()  # the same flow rate through every column
-    assert low < Q.mean() / p.q_cubic - 1 < high
+    assert low < Q.mean() / (w ** 3 * dp / (12 * mu * length)) - 1 < high
 
 
 def couette(n: int, omega: float):
