@@ -3,7 +3,8 @@
 A rule module defines ``NAME``, ``DESCRIPTION``, ``ORDER`` (rules apply in increasing order:
 the one that creates a participant before those that configure it) and ``plan(scene,
 plan)``, which adds to the :class:`~coupler.plan.plan.Plan` what the effect needs:
-participants, exchanges, loads, notes. Adding an effect is adding a module here (and what
+participants, exchanges, loads, notes; optionally ``TABLES``, ``TIME_STEPS``, ``ROLES``,
+``DOMAINS``, ``NEEDS``, ``in_process_cells`` and ``parse`` (docs/architecture.md). Adding an effect is adding a module here (and what
 its participant must do); :data:`RULES` finds every module of this package.
 """
 
