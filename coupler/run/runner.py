@@ -25,6 +25,7 @@ every step, so a failed run keeps what it did), ``residuals.png`` for implicit p
 
 from __future__ import annotations
 
+import re
 import time
 from contextlib import ExitStack, contextmanager
 from dataclasses import replace
@@ -156,13 +157,13 @@ def check_inputs_kept(scene, plan: Plan, out: Path) -> None:
     the scene (the scene file, a participant's mesh or file), whatever its spelling (links, ..)."""
     inputs = [scene.path] + [p.config[k] for p in plan.participants for k in ("mesh", "file")
                              if isinstance(p.config.get(k), str)]
-    names = [SUMMARY, "residuals.png", "convergence.png", PAGE]
-    for p in plan.participants:
-        names += [f"{p.name}.pvd"] + [f"{p.name}_{step:04d}.vtu" for step in range(scene.time["steps"])]
-    for name in names:
-        clash = same_file(out / name, inputs)
+    series = "|".join(re.escape(p.name) for p in plan.participants)
+    written = re.compile(rf"({series})(\.pvd|_\d{{4,}}\.vtu)|" + "|".join(map(re.escape, (SUMMARY, PAGE, "residuals.png",
+                                                                                          "convergence.png"))))
+    for entry in out.iterdir():  # what is there already and would be written over
+        clash = same_file(entry, inputs) if written.fullmatch(entry.name) else None
         if clash is not None:
-            raise SceneError(f"{out / name}: is {clash}, an input of the scene: writing there would overwrite it; "
+            raise SceneError(f"{entry}: is {clash}, an input of the scene: writing there would overwrite it; "
                              f"choose another output directory")
 
 
