@@ -2,8 +2,8 @@
 (vinewtonrsls, CG + BoomerAMG) on the same transformed contact problems (paper eq. 10-11).
 
 Hertz (cases/hertz: half-sphere on a block, contact cells h = 0.06, 0.04, 0.025 m) and the
-rough fracture (the box specimen of solid_fenicsx.contact_fracture, 0.1 m side; lattices 8,
-16, 24 per side, upper face 2x coarser) at three refinements, each in load steps that start
+rough fracture (the specimen of cases/fracture_closure as a 0.1 m box; lattices 8, 16, 24 per
+side, upper face 2x coarser) at three refinements, each in load steps that start
 from the previous step (Hertz: platen displacement 0.02 m in 3 steps; fracture: 0.08 ..
 0.32 mm in 4 steps, about 2 to 20 MPa). Per level and solver: dofs, iterations per load
 step, Krylov iterations, wall time, and the largest difference between the two solvers'
@@ -38,8 +38,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from solid_fenicsx.contact_fracture import ClosureTest, Specimen  # noqa: E402
+from coupler.plan.plan import make_plan  # noqa: E402
+from coupler.scene import load  # noqa: E402
 from solid_fenicsx.contact_hertz import PUSH, hertz_contact  # noqa: E402
+from solid_fenicsx.participant import SolidParticipant  # noqa: E402
+from transfer.generators import generate  # noqa: E402
 
 #: name -> (solver, options); "active_set_hypre" separates the method from the AMG
 SOLVERS = {"active_set": ("active_set", {}), "snes_vi": ("snes_vi", {}),
@@ -47,10 +50,11 @@ SOLVERS = {"active_set": ("active_set", {}), "snes_vi": ("snes_vi", {}),
 
 
 def load_steps(contact, holder, values) -> dict:
-    """Solve the load steps (platen displacements), each from the last; the figures."""
+    """Solve the load steps (platen displacements down, `holder` of all components or of z
+    alone), each from the last; the figures."""
     per_step, start = [], time.perf_counter()
     for d in values:
-        holder.value[:] = [0.0, 0.0, -d]
+        holder.value = [0.0, 0.0, -d] if np.size(holder.value) == 3 else -d
         state = contact.solve()
         per_step.append({"iterations": state.solution.iterations,
                          "krylov_iterations": state.solution.krylov_iterations,
@@ -70,11 +74,27 @@ def hertz_level(tmp, h, steps) -> dict:
     return out
 
 
+def fracture_contact(shape, solver, options):
+    """The contact and the top platen's displacement holder of cases/fracture_closure's solid as
+    a 0.1 m box on the lattice `shape`, the platen displacement-controlled (a Dirichlet load)."""
+    config = make_plan(load(ROOT / "cases" / "fracture_closure")).participant("solid").config
+    generated = config["generator"]["parameters"]
+    generated.update(shape="box", size=0.1, lattice=list(shape))
+    info = generate("fracture_specimen", generated).info
+    config["contact"].update(solver=solver, search_distance=2 * info["max_initial_aperture"] + generated["rms"])
+    config["loads"][1:] = [{"type": "dirichlet", "boundary": "top", "value": 0.0, "components": ["x", "y"]},
+                           {"type": "dirichlet", "boundary": "top", "value": 0.0, "components": ["z"]}]
+    p = SolidParticipant()
+    p.comm, p.rank = None, 0
+    p.configure(config)
+    p.contact.options = dict(options)  # each solver's own defaults, as for Hertz
+    return p.contact, p.loads[2].holder
+
+
 def fracture_level(shape, displacements) -> dict:
     out = {"shape": list(shape)}
     for name, (solver, options) in SOLVERS.items():
-        test = ClosureTest(Specimen(lattice=shape), solver=solver, **options)  # the box specimen
-        out[name] = load_steps(test.contact, test.platen, displacements)
+        out[name] = load_steps(*fracture_contact(shape, solver, options), displacements)
     return out
 
 

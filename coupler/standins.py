@@ -301,10 +301,10 @@ class RigidSolid(Participant):
             mesh = box_tetrahedra(b["shape"], b["lower"], b["upper"], jitter=float(b.get("jitter", 0.0)),
                                   seed=int(b.get("seed", 0)))
         elif "generator" in config:
-            from transfer.generators import GENERATORS, parameters
+            from transfer.generators import generate
 
             g = config["generator"]
-            mesh = GENERATORS[g["name"]].mesh(parameters(g["name"], g.get("parameters", {})))
+            mesh = generate(g["name"], g.get("parameters")).mesh
         else:
             raise ValueError("rigid_solid needs config 'mesh', 'box' or 'generator'")
         if mesh.cell_type != "tetra":

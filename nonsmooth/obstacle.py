@@ -1,4 +1,7 @@
-"""The obstacle problem of paper section 4.3 as a :class:`BoundConstrainedQP`.
+"""The obstacle problem of paper section 4.3 as a :class:`BoundConstrainedQP`, assembled
+without dolfinx: the nonsmooth package's own test problem (its solvers are tested on it), and
+the reference the solid participant's contact with a rigid plane is checked against
+(tests/solid_fenicsx/test_obstacle.py: the same matrix to round-off).
 
 Linear elasticity with P1 tetrahedra (assembled here, vectorised, node-major
 unknowns ``u[3 * node + component]``), prescribed displacements on some nodes,

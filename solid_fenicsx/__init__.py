@@ -14,21 +14,23 @@ Modules: :mod:`.mesh` (meshes and boundary tags), :mod:`.constitutive`
 (material, stress), :mod:`.timestepping` (Newmark, generalized-alpha),
 :mod:`.linear_solver` (KSP set-up, how each solve ended), :mod:`.elasticity` (the solver),
 :mod:`.vertex_io` (arrays for the coupler), :mod:`.output` (XDMF, VTU),
-:mod:`.cases` (block compression, penny crack, bar, cantilever); two-body
-frictionless mortar contact (paper 2.2, eq. 7-11): :mod:`.mortar` (contact faces,
-slave normals, ``T = D^-1 B`` with the dual basis, weighted gap), :mod:`.contact`
-(the transformed system of eq. 10 as a bound-constrained QP, pressure, load steps),
-:mod:`.contact_meshes`, :mod:`.contact_hertz`, :mod:`.contact_fracture` (the cases).
+:mod:`.cases` (block compression, penny crack, bar, cantilever); load steps
+(:mod:`.load_steps`: constant, ramped or per step; :mod:`.platen`: a rigid platen under stress
+control); frictionless contact (paper 2.2, eq. 7-11): :mod:`.mortar` (contact faces, slave
+normals, ``T = D^-1 B`` with the dual basis, weighted gap), :mod:`.obstacle` (a rigid plane,
+T = 0), :mod:`.contact` (the transformed system of eq. 10 as a bound-constrained QP, pressure),
+:mod:`.contact_hertz` (the Hertz case and its theory). Case geometry comes from
+:mod:`transfer.generators`.
 """
 
 from .constitutive import LockingWarning, Material
 from .elasticity import Elasticity, evaluate
 from .linear_solver import LinearSolve, LinearSolveError, SolverOptions
-from .mesh import SolidMesh, SolidMeshError, box_mesh, from_arrays, graded_nodes, read_mesh
+from .mesh import SolidMesh, SolidMeshError, box_mesh, from_arrays, read_mesh
 from .output import VTUSeries, XDMFSeries
 from .timestepping import Scheme, make_scheme
 from .vertex_io import VertexIO, write_vtu
 
 __all__ = ["Elasticity", "LinearSolve", "LinearSolveError", "LockingWarning", "Material", "Scheme", "SolidMesh",
            "SolidMeshError", "SolverOptions", "VTUSeries", "VertexIO", "XDMFSeries", "box_mesh", "evaluate",
-           "from_arrays", "graded_nodes", "make_scheme", "read_mesh", "write_vtu"]
+           "from_arrays", "make_scheme", "read_mesh", "write_vtu"]

@@ -20,9 +20,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from mpi4py import MPI
 
+from transfer.generators import generate
+
 from .constitutive import Material
 from .elasticity import Elasticity
-from .mesh import SolidMesh, box_arrays, box_mesh, from_arrays, graded_nodes
+from .mesh import SolidMesh, box_mesh, from_arrays
 
 
 def _rel_max(err_local: float, ref_local: float, comm: MPI.Comm) -> float:
@@ -78,39 +80,14 @@ def sneddon_opening(r, a: float, E: float, nu: float, p: float) -> np.ndarray:
     return 8.0 * (1.0 - nu ** 2) * p * a / (np.pi * E) * np.sqrt(np.clip(1.0 - (r / a) ** 2, 0.0, None))
 
 
-def penny_crack_arrays(a: float = 0.1, extent: float = 8.0, h_tip: float | None = None,
-                       growth: float = 1.3) -> tuple[np.ndarray, np.ndarray]:
-    """Points and tets of the quarter model [0, L]^2 x [0, H] (L = H = extent * a)
-    of a penny crack of radius ``a`` in the plane z = 0.
-
-    A lattice graded toward x = a, y = a (spacing ``h_tip``, default a/32,
-    growing by ``growth`` toward 0 and L) and toward z = 0 is morphed in the
-    (x, y) plane so that the square max(x, y) = rho becomes the circle r = rho
-    for rho <= a + 2 h_tip (blended back to the lattice at rho = 2a): the crack
-    front r = a is a row of mesh edges, refined, with no staircase.
-    """
-    h = a / 32 if h_tip is None else float(h_tip)
-    L = extent * a
-    axis = np.unique(np.concatenate([graded_nodes(a, 0.0, h, 0.0, growth), graded_nodes(a, L, h, 0.0, growth)]))
-    zs = graded_nodes(0.0, L, h, 0.0, growth)
-    r1, r2 = a + 2.0 * h, 2.0 * a
-    points, cells = box_arrays([axis, axis, zs])
-    x, y = points[:, 0], points[:, 1]
-    rho, r = np.maximum(x, y), np.hypot(x, y)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        to_circle = np.where(r > 0, rho / r, 1.0)
-    w = np.clip((r2 - rho) / (r2 - r1), 0.0, 1.0)
-    scale = w * to_circle + (1.0 - w)
-    points[:, 0] *= scale
-    points[:, 1] *= scale
-    return points, cells
-
-
 def penny_crack_mesh(a: float = 0.1, extent: float = 8.0, h_tip: float | None = None, growth: float = 1.3,
                      comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
-    """:func:`penny_crack_arrays` as a distributed mesh with the boundaries ``crack``
-    (z = 0, r < a), ``zmin`` (z = 0, r > a), ``xmin``, ``ymin``, ``xmax``, ``ymax``, ``zmax``."""
-    points, cells = penny_crack_arrays(a, extent, h_tip, growth) if comm.rank == 0 else (None, None)
+    """The mesh of generator ``penny_crack`` (:mod:`transfer.generators`), distributed, with the
+    boundaries ``crack`` (z = 0, r < a), ``zmin`` (z = 0, r > a), ``xmin``, ``ymin``, ``xmax``,
+    ``ymax``, ``zmax``."""
+    values = {"a": a, "extent": extent, "h_tip": h_tip, "growth": growth}
+    crack = generate("penny_crack", values) if comm.rank == 0 else None
+    points, cells = (crack.points, crack.cells) if crack else (None, None)
     L, tol = extent * a, 1e-9 * a
     faces = {}
     for d, name in enumerate("xyz"):

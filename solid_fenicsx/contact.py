@@ -1,12 +1,13 @@
-"""Frictionless two-body mortar contact for :class:`Elasticity` (paper 2.2, eq. 7-11).
+"""Frictionless contact for :class:`Elasticity` (paper 2.2, eq. 7-11): two bodies by mortar
+coupling, or one body and a rigid plane (:mod:`solid_fenicsx.obstacle`, T = 0).
 
 The unknowns are transformed as in eq. 10-11, ``u = O Q x``:
 
 * ``O`` adds the mortar projection of the master displacement to the slave
   nodes (``u_S = x_S + T x_M``, per component), so the slave unknowns become
-  the jump ``u_S - T u_M``;
-* ``Q`` rotates each constrained slave node to (normal, tangent, tangent)
-  coordinates of its normal.
+  the jump ``u_S - T u_M`` (the identity against an obstacle);
+* ``Q`` rotates each constrained slave node to coordinates of its normal and two
+  tangents (:func:`tangent_frames`).
 
 The stiffness matrix becomes ``A = (OQ)^T K (OQ)`` (eq. 10), and
 non-penetration (eq. 11) the nodewise bound ``x_normal <= g`` (the weighted gap
@@ -32,29 +33,42 @@ from nonsmooth import solvers as nonsmooth_solvers
 from nonsmooth.obstacle import rigid_body_modes as body_modes
 
 from .mortar import ContactSetupError, Mortar, boundary_face, mortar
+from .obstacle import Plane
 
 
-def tangent_frames(normals: np.ndarray) -> np.ndarray:
-    """(k, 3, 3) orthonormal frames with columns (n, t1, t2)."""
+def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 3, 3) orthonormal frames and (k,) the column of each that is its normal n: the
+    normal takes the place of its largest component, the tangents are the other two axes
+    made orthogonal to it (Gram-Schmidt), so a normal along a coordinate axis leaves the
+    components where they are (only the normal's sign may flip)."""
     n = normals / np.linalg.norm(normals, axis=1)[:, None]
-    helper = np.where(np.abs(n[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(n, helper)
-    t1 /= np.linalg.norm(t1, axis=1)[:, None]
-    t2 = np.cross(n, t1)
-    return np.stack([n, t1, t2], axis=2)
+    slot = np.argmax(np.abs(n), axis=1)
+    frames = np.zeros((len(n), 3, 3))
+    frames[np.arange(len(n)), :, slot] = n
+    for shift in (1, 2):
+        column = (slot + shift) % 3
+        t = np.zeros_like(n)
+        t[np.arange(len(n)), column] = 1.0
+        for done in range(shift):  # against the normal and the tangents already made
+            prev = frames[np.arange(len(n)), :, (slot + done) % 3]
+            t -= np.einsum("ij,ij->i", t, prev)[:, None] * prev
+        frames[np.arange(len(n)), :, column] = t / np.linalg.norm(t, axis=1)[:, None]
+    return frames, slot
 
 
 def transformation(m: Mortar, num_dofs: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """``O`` and ``Q`` of eq. 10-11 for block size 3 (u = O Q x)."""
-    s_nodes, m_nodes = m.slave.nodes, m.master.nodes
+    """``O`` and ``Q`` of eq. 10-11 for block size 3 (u = O Q x), in the numbering of the
+    mortar's faces; without a master (an obstacle) ``O`` is the identity."""
+    s_nodes = m.slave.nodes
     T = m.T.tocoo()
     rows, cols, vals = [np.arange(num_dofs)], [np.arange(num_dofs)], [np.ones(num_dofs)]
-    for c in range(3):  # O: u_S += T x_M, per component
-        rows.append(3 * s_nodes[T.row] + c)
-        cols.append(3 * m_nodes[T.col] + c)
-        vals.append(T.data)
+    if m.master is not None:
+        for c in range(3):  # O: u_S += T x_M, per component
+            rows.append(3 * s_nodes[T.row] + c)
+            cols.append(3 * m.master.nodes[T.col] + c)
+            vals.append(T.data)
     O = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), (num_dofs, num_dofs))
-    R = tangent_frames(m.normals)  # Q: x_S = R^T w_S at every slave node
+    R, _ = tangent_frames(m.normals)  # Q: x_S = R^T u_S at every slave node
     keep = np.ones(num_dofs, bool)
     qr, qc, qv = [], [], []
     for i in range(3):
@@ -89,12 +103,13 @@ def rigid_body_modes(points: np.ndarray, K: sp.csr_matrix) -> np.ndarray:
 class ContactState:
     """The result of one contact solve (arrays on the slave nodes unless said)."""
 
-    u: np.ndarray  # (num_dofs,) displacement
+    u: np.ndarray  # (num_dofs,) displacement, dof numbering
     pressure: np.ndarray  # contact pressure (dual multiplier coefficient), > 0 only where active, exactly 0 elsewhere
     gap: np.ndarray  # current gap g - x_n (NaN where not covered)
     active: np.ndarray  # nodes in contact
     force: np.ndarray  # (3,) total contact force on the slave body (sum of nodal forces)
     area_fraction: float  # active weight / covered weight of the slave face
+    mean_gap: float  # the weighted mean of the gap over the covered slave nodes
     solution: Solution
     seconds: dict = field(default_factory=dict)
 
@@ -102,59 +117,95 @@ class ContactState:
         covered = np.isfinite(self.gap)
         return {**self.solution.as_dict(), "active_nodes": int(self.active.sum()), "area_fraction": self.area_fraction,
                 "max_pressure": float(np.max(self.pressure, initial=0.0)),
-                "min_gap": float(np.min(self.gap[covered], initial=np.inf)),
+                "min_gap": float(np.min(self.gap[covered], initial=np.inf)), "mean_gap": self.mean_gap,
                 "contact_force": self.force.tolist(), "phase_seconds": self.seconds}
 
 
 class Contact:
-    """Two-body frictionless mortar contact on an :class:`Elasticity` (P1, serial).
+    """Frictionless contact on an :class:`Elasticity` (P1, serial): two bodies of one mesh
+    (mortar, a ``master`` face) or one body and a rigid plane (``obstacle``).
 
-    elasticity : the solid with its loads and Dirichlet conditions; both bodies in one mesh
-    slave, master : names (or tags) of the contact boundaries; the slave carries
-        the dual multiplier (take the finer or the curved side)
-    solver : a name of :data:`nonsmooth.solvers.SOLVERS`; ``options`` go to it
+    elasticity : the solid with its loads and Dirichlet conditions
+    slave : name (or tag) of the boundary carrying the contact pressure (with a master: the
+        finer or curved side; it carries the dual multiplier)
+    master : name (or tag) of the other body's contact boundary; or
+    obstacle : a rigid plane instead (then no master): ``{"plane": [a, b, c, d]}`` or
+        ``{"normal": [a, b, c], "gap": g}`` (:meth:`solid_fenicsx.obstacle.Plane.from_config`)
+    solver : a name of :data:`nonsmooth.solvers.SOLVERS`; ``options`` go to it (the multilevel
+        solver's hierarchy is built from ``levels``, ``coarse_shape``, ``margin``, ``threads``)
     search_distance, max_normal_angle : of the mortar segmentation
         (:func:`solid_fenicsx.mortar.mortar`)
     near_nullspace : give the solver the rigid body modes of each body (transformed).
         Off by default: measured on the Hertz case (6.5k dofs), GAMG with them took
         2.5-6 s per active-set solve against 0.85 s without (block size 3 only)
+
+    The unknowns x of the QP are numbered like the mesh's input vertices (the order of the
+    generator's or the file's points, whatever dolfinx's own numbering), so that
+    order-dependent solvers (Gauss-Seidel sweeps of the multilevel method) do the same
+    work for the same mesh.
     """
 
-    def __init__(self, elasticity, slave, master, solver: str = "active_set", search_distance: float | None = None,
-                 max_normal_angle: float = 45.0, near_nullspace: bool = False, **options):
+    def __init__(self, elasticity, slave, master=None, solver: str = "active_set",
+                 search_distance: float | None = None, max_normal_angle: float = 45.0, obstacle=None,
+                 near_nullspace: bool = False, **options):
         if elasticity.mesh.comm.size > 1:
             raise ContactSetupError("contact runs on one process (the transformed system is assembled in scipy)")
+        if (master is None) == (obstacle is None):
+            raise ContactSetupError("contact needs either a master face or an obstacle, not both")
         nonsmooth_solvers.get(solver)  # unknown names fail here, before any assembly
         t0 = time.perf_counter()
         self.elasticity = elasticity
+        self.slave_boundary, self.master_boundary = slave, master
         V = elasticity.V
         self.solver, self.options, self.near_nullspace = solver, options, near_nullspace
-        slave_face = boundary_face(elasticity.solid, V, slave, name=f"slave:{slave}")
-        master_face = boundary_face(elasticity.solid, V, master, name=f"master:{master}")
-        self.mortar = mortar(slave_face, master_face, search_distance, max_normal_angle)
+        self.num_dofs = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+        n = self.num_dofs // 3
+        self.ids = elasticity.vertices.dof_input_ids(V)[:n]  # input vertex id of each dof block
+        self.dofs = np.empty(n, np.int64)
+        self.dofs[self.ids] = np.arange(n)  # dof block of each input vertex
+        vio = elasticity.vertices
+        self.points = np.empty((n, 3))  # the input coordinates (dolfinx's dof coordinates differ by round-off)
+        self.points[vio.input_ids] = elasticity.mesh.geometry.x[:, :3]
+        slave_face = boundary_face(elasticity.solid, V, slave, name=f"slave:{slave}", numbering=self.ids,
+                                   points=self.points)
+        if obstacle is not None:
+            self.mortar = Plane.from_config(obstacle, slave_face).coupling(slave_face)
+        else:
+            master_face = boundary_face(elasticity.solid, V, master, name=f"master:{master}", numbering=self.ids,
+                                        points=self.points)
+            self.mortar = mortar(slave_face, master_face, search_distance, max_normal_angle)
         m = self.mortar
         if not m.covered.any():
             raise ContactSetupError(f"no slave node of {slave!r} faces the master {master!r} within the search "
                                     f"distance and normal angle: nothing can come into contact")
-        self.num_dofs = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
         O, Q = transformation(m, self.num_dofs)
-        self.P = sp.csr_matrix(O @ Q)  # u = P x
+        block = (3 * self.ids[:, None] + np.arange(3)).ravel()
+        Pi = sp.csr_matrix((np.ones(self.num_dofs), (block, np.arange(self.num_dofs))), (self.num_dofs,) * 2)
+        self.P = sp.csr_matrix(Pi.T @ O @ Q)  # u (dof numbering) = P x
         # O = I + N with N^2 = 0 (slave rows, master columns): O^-1 = 2 I - O
-        self.P_inverse = sp.csr_matrix(Q.T @ (2 * sp.identity(self.num_dofs, format="csr") - O))
+        self.to_x = sp.csr_matrix(Q.T @ (2 * sp.identity(self.num_dofs, format="csr") - O))  # input numbering u -> x
+        self.P_inverse = sp.csr_matrix(self.to_x @ Pi)
         fixed = np.asarray(elasticity.dirichlet_dofs, np.int64)
-        on_slave = np.intersect1d(fixed // 3, m.slave.nodes)
+        self.fixed_dofs, self.fixed = fixed, 3 * self.ids[fixed // 3] + fixed % 3
+        on_slave = np.intersect1d(self.fixed // 3, m.slave.nodes)
         if on_slave.size:
             raise ContactSetupError(f"{on_slave.size} slave contact nodes of {slave!r} carry Dirichlet conditions; "
                                     f"constrain the master side or move the Dirichlet boundary")
-        self.fixed = fixed
-        self.normal_dofs = 3 * m.slave.nodes[m.covered]
-        self.points = V.tabulate_dof_coordinates()[: self.num_dofs // 3]
+        _, slot = tangent_frames(m.normals)
+        self.normal_dofs = (3 * m.slave.nodes + slot)[m.covered]
+        self.normal_of_node = 3 * m.slave.nodes + slot  # the normal unknown of every slave node
         self.x: np.ndarray | None = None  # the last transformed solution (next step's start)
         self._nullspace = None
         if solver == "multilevel" and "hierarchy" not in options:
-            options["hierarchy"] = self.multilevel_hierarchy(options.pop("levels", 3))
+            keys = ("levels", "coarse_shape", "margin", "threads")
+            options["hierarchy"] = self.multilevel_hierarchy(**{k: options.pop(k) for k in keys if k in options})
+        self.initial_mean_gap = self.mean(m.gap)
         self.setup_seconds = time.perf_counter() - t0
-        self._internal = None
+
+    def mean(self, values: np.ndarray) -> float:
+        """The mean of slave-node values over the covered part of the slave face (weighted by D_kk)."""
+        m = self.mortar
+        return float(np.sum(m.weights[m.covered] * values[m.covered]) / np.sum(m.weights[m.covered]))
 
     def problem(self) -> BoundConstrainedQP:
         """The transformed QP of eq. 10-11 with the current loads."""
@@ -168,22 +219,25 @@ class Contact:
         b = P.T @ f
         lower, upper = np.full(self.num_dofs, -np.inf), np.full(self.num_dofs, np.inf)
         upper[self.normal_dofs] = self.mortar.gap[self.mortar.covered]
-        lower[self.fixed] = upper[self.fixed] = f[self.fixed]  # Dirichlet values (set_bc put them into F)
+        lower[self.fixed] = upper[self.fixed] = f[self.fixed_dofs]  # Dirichlet values (set_bc put them into F)
         if self.near_nullspace and self._nullspace is None:  # rigid body modes of each body, transformed
-            self._nullspace = self.P_inverse @ rigid_body_modes(self.points, Ks)
+            self._nullspace = self.P_inverse @ rigid_body_modes(self.points[self.ids], Ks)
         return BoundConstrainedQP(A, b, lower, upper, block_size=3, near_nullspace=self._nullspace)
 
-    def multilevel_hierarchy(self, levels: int = 3, coarse_shape=(2, 2, 2)):
+    def multilevel_hierarchy(self, levels: int = 3, coarse_shape=(2, 2, 2), margin: float = 0.0, threads: int = 1):
         """The semi-geometric hierarchy (paper 2.4, :mod:`nonsmooth.hierarchy`), one set of
-        grids per body, for the transformed unknowns: its finest prolongation times P^-1
-        (x = P^-1 u)."""
+        grids per body, for the transformed unknowns: its finest prolongation (input
+        numbering) mapped to x."""
         from dataclasses import replace
 
         from nonsmooth.hierarchy import per_body_hierarchy
 
-        tets = np.asarray(self.elasticity.V.dofmap.list.array).reshape(-1, 4)
-        h = per_body_hierarchy(self.points, tets, levels, coarse_shape, block_size=3)
-        return replace(h, prolongations=h.prolongations[:-1] + [sp.csr_matrix(self.P_inverse @ h.prolongations[-1])])
+        tets = self.ids[np.asarray(self.elasticity.V.dofmap.list.array).reshape(-1, 4)]
+        p = self.points[tets]
+        negative = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) < 0
+        tets[negative] = tets[negative][:, [0, 2, 1, 3]]
+        h = per_body_hierarchy(self.points, tets, levels, coarse_shape, margin=margin, block_size=3, nthreads=threads)
+        return replace(h, prolongations=h.prolongations[:-1] + [sp.csr_matrix(self.to_x @ h.prolongations[-1])])
 
     def solve(self) -> ContactState:
         """Solve with the current loads, starting from the last solution (load stepping).
@@ -207,41 +261,9 @@ class Contact:
         # the nodal contact force: the multiplier at the normal dof of a closed node, zero at an open
         # one (where b - A x is only the Krylov error); the pressure its dual-basis coefficient
         force_n = np.zeros(len(m.slave.nodes))
-        force_n[active] = np.maximum(qp.multiplier(sol.x)[3 * m.slave.nodes[active]], 0.0)
+        force_n[active] = np.maximum(qp.multiplier(sol.x)[self.normal_of_node[active]], 0.0)
         pressure = np.divide(force_n, m.weights, out=np.zeros_like(force_n), where=active)
         force = -(force_n[:, None] * m.normals).sum(axis=0)  # the master pushes the slave along -n
         area = float(m.weights[active].sum() / m.weights[m.covered].sum())
-        return ContactState(u, pressure, gap, active, force, area, sol,
+        return ContactState(u, pressure, gap, active, force, area, self.mean(gap), sol,
                             {"assemble": t1 - t0, "solve": t2 - t1, "setup": self.setup_seconds})
-
-    def reaction(self, boundary) -> np.ndarray:
-        """(3,) the force the body exerts on a Dirichlet boundary: the sum over its
-        nodes of the internal force ``int sigma(u) : eps(w)`` of the current u (a
-        loaded boundary needs its traction added)."""
-        import dolfinx.fem
-        import dolfinx.fem.petsc
-        import ufl
-
-        from .constitutive import epsilon
-
-        el = self.elasticity
-        if self._internal is None:
-            w = ufl.TestFunction(el.V)
-            self._internal = dolfinx.fem.form(ufl.inner(el.sigma(el.u), epsilon(w)) * ufl.dx(domain=el.mesh))
-        vec = dolfinx.fem.petsc.assemble_vector(self._internal)
-        f = vec.getArray().copy().reshape(-1, 3)
-        vec.destroy()
-        nodes = boundary_face(el.solid, el.V, boundary).nodes
-        return f[nodes].sum(axis=0)
-
-    def write_face(self, path, state: ContactState) -> None:
-        """The slave face with pressure, gap, contact flag and normal as a VTU file (deformed coordinates in
-        the point data ``displacement``)."""
-        import meshio
-
-        m = self.mortar
-        u = state.u.reshape(-1, 3)[m.slave.nodes]
-        meshio.write(str(path), meshio.Mesh(m.slave.points, [("triangle", m.slave.triangles)], point_data={
-            "contact_pressure": state.pressure, "gap": np.nan_to_num(state.gap, nan=-1.0),
-            "in_contact": state.active.astype(np.int32), "normal": m.normals, "displacement": u,
-            "covered": m.covered.astype(np.int32)}))

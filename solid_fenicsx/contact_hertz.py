@@ -1,7 +1,7 @@
 """The Hertz contact problem (paper 4.1, figure 5) with :class:`Contact`: a half-sphere
-pushed onto a block (:func:`solid_fenicsx.contact_meshes.hertz_mesh`), compared with
+pushed onto a block (:func:`transfer.generators.hertz.hertz_mesh`), compared with
 Hertz theory for the measured contact force. Used by bench/contact.py (the case's own
-comparison: ``[check] kind = "hertz"``, coupler/checks/hertz.py)."""
+comparison: ``[check] kind = "hertz"``, coupler/checks/hertz.py).
 
 from __future__ import annotations
 
@@ -10,13 +10,35 @@ from pathlib import Path
 
 import numpy as np
 
+from transfer.generators.hertz import hertz_mesh
+
 from .contact import Contact
-from .contact_meshes import hertz_boundaries, hertz_mesh, hertz_solution
 from .elasticity import Elasticity
 from .mesh import read_mesh
 
 #: the case's parameters (cases/hertz/scene.toml)
 RADIUS, E, NU, PUSH = 1.0, 1.0e9, 0.3, 0.02
+
+
+def hertz_boundaries(radius: float = 1.0, cap: float = 0.3) -> dict:
+    """Predicates for :func:`solid_fenicsx.read_mesh`: ``slave`` = the half-sphere's
+    curved face below z = cap * radius (where contact can happen)."""
+    R = float(radius)
+
+    def slave(x):
+        d = np.sqrt(x[0] ** 2 + x[1] ** 2 + (x[2] - R) ** 2)
+        return (x[2] > 1e-12 * R) & (x[2] < cap * R) & (np.abs(d - R) < 0.05 * R)
+
+    return {"slave": slave}
+
+
+def hertz_solution(force: float, radius: float, E: float, nu: float) -> dict:
+    """Hertz theory for a sphere on a half-space of the same material:
+    E* = E / (2 (1 - nu^2)), a = (3 F R / (4 E*))^(1/3), p0 = 3 F / (2 pi a^2)."""
+    E_star = E / (2.0 * (1.0 - nu * nu))
+    a = (3.0 * force * radius / (4.0 * E_star)) ** (1.0 / 3.0)
+    return {"E_star": E_star, "a": a, "p0": 3.0 * force / (2.0 * np.pi * a * a),
+            "approach": a * a / radius}
 
 
 def hertz_contact(directory, h: float, solver: str = "active_set", push: float = PUSH, **options):
@@ -70,5 +92,5 @@ def run(directory, h: float, solver: str = "active_set", steps: int = 1, **optio
     out = {"h": h, "dofs": contact.num_dofs, "slave_nodes": len(contact.mortar.slave.nodes),
            "master_nodes": len(contact.mortar.master.nodes), "active_nodes": int(state.active.sum()),
            "setup_seconds": setup, "steps": per_step, **compare(contact, state)}
-    out["reaction_balance"] = float(abs(contact.reaction("load")[2] + state.force[2]) / abs(state.force[2]))
+    out["reaction_balance"] = float(abs(contact.elasticity.boundary_force("load")[2] + state.force[2]) / abs(state.force[2]))
     return out, contact, state

@@ -164,6 +164,7 @@ class Elasticity:
         self.info = StepInfo()
         self._vm_cache: dict = {}
         self._vertex = None
+        self._internal = None  # the internal force form of boundary_force
 
     # -- loads ----------------------------------------------------------------
     def _components(self, components) -> tuple[int, ...] | None:
@@ -445,6 +446,31 @@ class Elasticity:
         F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         dolfinx.fem.petsc.set_bc(F, self.bcs)
         return K, F
+
+    def boundary_force(self, boundary: Boundary) -> np.ndarray:
+        """(3,) the sum over the dofs of a boundary of the internal force ``int sigma(u) : eps(w)``
+        of the current u: on a Dirichlet boundary without loads, the force the body exerts on
+        its support (a loaded boundary needs its load added), on every rank."""
+        from mpi4py import MPI
+
+        if self._internal is None:
+            w = ufl.TestFunction(self.V)
+            self._internal = dolfinx.fem.form(ufl.inner(self.sigma(self.u), constitutive.epsilon(w))
+                                              * ufl.dx(domain=self.mesh))
+        f = self._assemble(self._internal)
+        dofs = dolfinx.fem.locate_dofs_topological(self.V, self._fdim, self.solid.facets(boundary))
+        owned = dofs[dofs < self.V.dofmap.index_map.size_local]
+        local = f.array.reshape(-1, 3)[owned].sum(axis=0)
+        f.destroy()
+        return self.mesh.comm.allreduce(local, op=MPI.SUM)
+
+    def pressure_resultant(self, boundary: Boundary, p: float) -> np.ndarray:
+        """(3,) the force of a uniform pressure p on a boundary, ``int -p n ds``, on every rank."""
+        from mpi4py import MPI
+
+        ds = self.ds(self.solid.tags_of(boundary))
+        local = [dolfinx.fem.assemble_scalar(dolfinx.fem.form(-self.n[i] * ds)) for i in range(3)]
+        return float(p) * self.mesh.comm.allreduce(np.array(local), op=MPI.SUM)
 
     # -- dynamic --------------------------------------------------------------
     def _require_dynamic(self, dt):

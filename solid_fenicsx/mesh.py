@@ -35,8 +35,8 @@ from mpi4py import MPI
 
 import dolfinx
 import dolfinx.cpp
+from transfer.generators.lattice import box_arrays
 from transfer.grid import BOX_FACES
-from transfer.mesh import lattice_tetrahedra
 
 Predicate = Callable[[np.ndarray], np.ndarray]
 
@@ -260,6 +260,28 @@ def read_mesh(path, boundaries: Mapping[str, Predicate] | None = None, tag_key: 
     return from_arrays(comm=comm, root=root, boundaries=boundaries, **args)
 
 
+def generated_mesh(generator: str, parameters: Mapping | None = None,
+                   boundaries: Mapping[str, Predicate] | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
+                   root: int = 0) -> SolidMesh:
+    """The mesh of a generator of :mod:`transfer.generators` (run on ``root``) with its named
+    faces as boundaries, distributed; ``boundaries`` add predicates as in :func:`from_arrays`."""
+    from transfer.generators import generate
+
+    args, error = {}, None
+    if comm.rank == root:
+        try:
+            block = generate(generator, dict(parameters or {}))
+            triangles, tags = block.tagged_triangles()
+            args = {"points": block.points, "cells": block.cells, "triangles": triangles, "triangle_tags": tags,
+                    "tag_names": block.face_tags}
+        except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
+            error = f"generator {generator!r}: {exc}"
+    error = comm.bcast(error, root=root)
+    if error:
+        raise SolidMeshError(error)
+    return from_arrays(comm=comm, root=root, boundaries=boundaries, **args)
+
+
 def _read_on_root(path: str, tag_key: str | None) -> dict:
     import meshio
 
@@ -292,55 +314,6 @@ def _read_on_root(path: str, tag_key: str | None) -> dict:
 
 
 # -- boxes --------------------------------------------------------------------
-def graded_nodes(start: float, stop: float, h_fine: float, fine_length: float = 0.0,
-                 growth: float = 1.25) -> np.ndarray:
-    """Node coordinates on [start, stop]: spacing about ``h_fine`` over the first
-    ``fine_length`` from ``start``, then cells growing geometrically by a ratio
-    of at most ``growth`` (chosen so the last node lands on ``stop``). Pass
-    start > stop to refine toward the upper end (the nodes then run from start
-    to stop; :func:`box_mesh` sorts its axes)."""
-    length = abs(stop - start)
-    if h_fine <= 0 or length <= 0 or growth < 1:
-        raise SolidMeshError("graded_nodes needs h_fine > 0, start != stop and growth >= 1")
-    fine_length = min(max(fine_length, 0.0), length)
-    n_fine = int(round(fine_length / h_fine))
-    fine = np.linspace(0.0, fine_length, n_fine + 1) if n_fine else np.zeros(1)
-    h = fine_length / n_fine if n_fine else h_fine
-    rest = length - fine[-1]
-    if rest <= 1e-12 * length:
-        x = fine
-    elif growth == 1.0 or rest <= h * growth * 1.5:
-        n = max(1, int(round(rest / h)))
-        x = np.concatenate([fine, fine[-1] + np.linspace(0, rest, n + 1)[1:]])
-    else:
-        k0 = 1 if n_fine else 0  # first coarse cell: h * r (after fine cells) or h
-        n = 1
-        while h * sum(growth ** k for k in range(k0, k0 + n)) < rest:
-            n += 1
-        lo, hi = 1.0, growth  # ratio r with h * (r^k0 + ... + r^(k0+n-1)) = rest
-        for _ in range(100):
-            r = 0.5 * (lo + hi)
-            lo, hi = (r, hi) if h * sum(r ** k for k in range(k0, k0 + n)) < rest else (lo, r)
-        steps = h * r ** np.arange(k0, k0 + n)
-        steps *= rest / steps.sum()
-        x = np.concatenate([fine, fine[-1] + np.cumsum(steps)])
-    x[-1] = length
-    return start + np.sign(stop - start) * x
-
-
-def box_arrays(axes: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Points and tetrahedra of a lattice with node coordinates ``axes`` = (xs, ys, zs)
-    (each increasing); every lattice hexahedron is split into six tets."""
-    xs, ys, zs = (np.asarray(a, float) for a in axes)
-    for a in (xs, ys, zs):
-        if len(a) < 2 or np.any(np.diff(a) <= 0):
-            raise SolidMeshError("box node coordinates must be increasing, at least two per axis")
-    nx, ny, nz = len(xs) - 1, len(ys) - 1, len(zs) - 1
-    Z, Y, X = np.meshgrid(zs, ys, xs, indexing="ij")
-    points = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])  # x fastest
-    return points, lattice_tetrahedra((nx, ny, nz))
-
-
 def box_mesh(lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), shape=(4, 4, 4), axes=None,
              boundaries: Mapping[str, Predicate] | None = None,
              transform: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -348,7 +321,7 @@ def box_mesh(lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), shape=(4, 4, 4), axes
     """A structured tet mesh of a box, faces named ``xmin, xmax, ymin, ymax, zmin, zmax``.
 
     Either ``lower``/``upper``/``shape`` (uniform), or ``axes`` = three increasing
-    arrays of node coordinates (e.g. from :func:`graded_nodes`, to refine toward
+    arrays of node coordinates (e.g. from :func:`transfer.generators.lattice.graded_nodes`, to refine toward
     a crack). ``boundaries`` add named predicates that override the face names
     on the facets they select (e.g. a crack disk on ``zmin``). ``transform``
     maps the (n, 3) lattice points before the mesh is built (e.g. to fit a

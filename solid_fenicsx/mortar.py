@@ -31,7 +31,8 @@ class ContactSetupError(ValueError):
 class Face:
     """A boundary of the mesh as triangles over its own nodes.
 
-    nodes : (k,) block dof indices (P1 vertex dofs of the vector space) of the face's nodes
+    nodes : (k,) node ids of the face's nodes, sorted: block dof indices of the P1 vector space,
+        or another numbering of them (:func:`boundary_face`'s ``numbering``)
     triangles : (t, 3) outward-oriented triangles, indices into ``nodes``
     points : (k, 3) node coordinates
     """
@@ -71,8 +72,11 @@ def vertex_dofs(V) -> np.ndarray:
     return out
 
 
-def boundary_face(solid, V, boundary, name: str | None = None) -> Face:
-    """The facets of a named boundary as an outward-oriented :class:`Face` in dof numbering."""
+def boundary_face(solid, V, boundary, name: str | None = None, numbering: np.ndarray | None = None,
+                  points: np.ndarray | None = None) -> Face:
+    """The facets of a named boundary as an outward-oriented :class:`Face`, its nodes in dof
+    numbering or, with ``numbering`` (block dof -> node id) and ``points`` (the coordinates
+    of each node id), in that one."""
     if V.ufl_element().degree() != 1:
         raise ContactSetupError("contact needs P1 displacements (degree 1)")
     mesh = V.mesh
@@ -94,23 +98,26 @@ def boundary_face(solid, V, boundary, name: str | None = None) -> Face:
     normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     inward = np.einsum("ij,ij->i", normal, coords[opposite] - p[:, 0]) > 0
     tri[inward] = tri[inward][:, [0, 2, 1]]
-    nodes, local = np.unique(tri, return_inverse=True)
-    return Face(name or str(boundary), nodes, local.reshape(-1, 3), coords[nodes])
+    if numbering is None:
+        numbering, points = np.arange(len(coords)), coords
+    nodes, local = np.unique(np.asarray(numbering)[tri], return_inverse=True)
+    return Face(name or str(boundary), nodes, local.reshape(-1, 3), points[nodes])
 
 
 @dataclass
 class Mortar:
-    """The mortar coupling of a slave and a master face (paper eq. 9, dual basis).
+    """The mortar coupling of a slave and a master face (paper eq. 9, dual basis), or of a
+    slave face and a rigid obstacle (no master: T has no columns, eq. 11 with T = 0).
 
     T : (ns, nm) ``D^-1 B`` on the slave nodes the master covers (zero rows elsewhere)
     weights : (ns,) diagonal of D (``int phi_k`` over the covered part)
-    covered : (ns,) slave nodes the master face reaches
-    normals : (ns, 3) unit slave normals (pointing at the master)
+    covered : (ns,) slave nodes the master face (or the obstacle) reaches
+    normals : (ns, 3) unit slave normals (pointing at the master or the obstacle)
     gap : (ns,) weighted gap g_k (NaN where not covered)
     """
 
     slave: Face
-    master: Face
+    master: Face | None
     T: sp.csr_matrix
     weights: np.ndarray
     covered: np.ndarray

@@ -3,15 +3,18 @@
 Started by the coupler as ``[mpirun -n N] python -m solid_fenicsx --run-id R
 --name solid --connect ENDPOINT``. ``configure`` receives the solid's part of the
 scene (:func:`coupler.plan.effects.elasticity.solid_config`, completed by the other
-effects' rules): the mesh (a file or a box), named boundaries (box faces,
-expressions in x, y, z on facet midpoints, or tags of the file), the material, the
-loads, the solver and whether the problem is dynamic (paper eq. 13). ``advance`` solves one step (static: one
-solve) with the coupler's inputs (``pressure`` at the vertices, applied on the
-wetted boundary; with config ``traction = "full"`` the vector ``traction``
-instead) and returns the displacement, velocity and von Mises stress at the
-vertices, in the numbering of ``geometry``; it reports every inner solve
-(``report_solve``: the linear solve, or the contact QP, converged or not) and, with
-contact, the step's contact figures (``report_figures``) and the vertex fields
+effects' rules): the mesh (a file, a box or a generator of :mod:`transfer.generators`),
+named boundaries (box faces, expressions in x, y, z on facet midpoints, or tags of the
+file or generator), the material, the loads (:mod:`solid_fenicsx.load_steps`: constant,
+ramped or per step, a stress-controlled platen), contact (mortar between two faces, or a
+rigid plane), the solver and whether the problem is dynamic (paper eq. 13). ``advance``
+solves one step (static: one solve, or the platen's search of solves) with the coupler's
+inputs (``pressure`` at the vertices, applied on the wetted boundary; with config
+``traction = "full"`` the vector ``traction`` instead) and returns the displacement,
+velocity and von Mises stress at the vertices, in the numbering of ``geometry``; it
+reports every inner solve (``report_solve``: the linear solve, the contact QP, the
+platen's search, converged or not) and the step's figures (``report_figures``: contact,
+platen, fluid forces) and, with contact, the vertex fields
 ``contact_pressure`` (exactly 0 off contact), ``gap``, ``in_contact``, ``slave`` and
 ``mortar_weight`` (D_kk of eq. 9's dual basis; zero off the slave face), so that
 ``sum(contact_pressure * mortar_weight)`` is the normal contact force. ``configure``
@@ -33,7 +36,8 @@ from coupler.protocol.wire import Field
 from coupler.protocol.expressions import evaluate_expression
 
 from .elasticity import Elasticity
-from .mesh import BOX_FACES, SolidMeshError, exterior_midpoints, from_arrays, read_mesh
+from .load_steps import StaticStep, add_loads
+from .mesh import BOX_FACES, SolidMeshError, exterior_midpoints, from_arrays, generated_mesh, read_mesh
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -81,7 +85,8 @@ def _boundary_uses(config: dict) -> list[tuple[str, str | int]]:
     uses += [("[coupling] interface", b) for b in ([] if wetted is None else [wetted] if isinstance(wetted, (str, int))
                                                    else wetted)]
     if config.get("contact"):
-        uses += [(f"[contact] {side}", config["contact"][side]) for side in ("slave", "master")]
+        uses += [(f"[contact] {side}", config["contact"][side]) for side in ("slave", "master")
+                 if config["contact"].get(side) is not None]
     return uses
 
 
@@ -117,11 +122,15 @@ class SolidParticipant(Participant):
                                   seed=box.get("seed", 0)) if comm.rank == 0 else None
             solid = from_arrays(mesh.points if mesh else None, mesh.cells if mesh else None,
                                 boundaries=boundaries, comm=comm)
+        elif "generator" in config:
+            g = config["generator"]
+            solid = generated_mesh(g["name"], g.get("parameters"), boundaries, comm)
         else:
             solid = read_mesh(config["mesh"], boundaries=boundaries, comm=comm)
         for name, tag in tags.items():
             if tag not in solid.boundaries.values():
-                raise ValueError(f"boundary {name!r}: tag {tag} is not in {config['mesh']} "
+                source = config.get("mesh") or f"the mesh of generator {config['generator']['name']!r}"
+                raise ValueError(f"boundary {name!r}: tag {tag} is not in {source} "
                                  f"(tags: {sorted(solid.boundaries.values())})")
         for key, name in _boundary_uses(config):  # a load on no facet: a singular system or a lost load
             if solid.comm.allreduce(len(solid.facets(tags.get(name, name)))) == 0:
@@ -138,21 +147,7 @@ class SolidParticipant(Participant):
         def where(name):
             return tags.get(name, name)
 
-        self.loads = []  # (value holder, full value): contact ramps them over the steps
-        for load in config.get("loads", []):
-            kind, value = load["type"], load.get("value")
-            if kind == "dirichlet":
-                holder = s.add_dirichlet(where(load["boundary"]), value,
-                                         components=[_AXES[c] for c in load["components"]])
-            elif kind == "pressure":
-                holder = s.add_pressure(where(load["boundary"]), value)
-            elif kind == "traction":
-                holder = s.add_traction(where(load["boundary"]), value)
-            elif kind == "body_force":
-                holder = s.add_body_force(value)
-            else:
-                raise ValueError(f"unknown load type {kind!r}")
-            self.loads.append((holder, np.array(holder.value, dtype=float, copy=True)))
+        loads, platen, stresses = add_loads(s, config.get("loads", []), where)
         self.wetted = config.get("wetted")
         self.wetted_boundary = None
         if self.wetted is not None:
@@ -172,10 +167,15 @@ class SolidParticipant(Participant):
             c = config["contact"]
             options = {"active_set": {"tol": c["tolerance"], "max_iter": c["max_iterations"]},
                        "snes_vi": {"rtol": c["tolerance"], "max_iter": c["max_iterations"]},
-                       "multilevel": {"tol": c["tolerance"], "maxiter": c["max_iterations"]}}[c["solver"]]
-            self.contact = Contact(s, where(c["slave"]), where(c["master"]), solver=c["solver"],
-                                   search_distance=c.get("search_distance"),
-                                   max_normal_angle=c.get("max_normal_angle", 45.0), **options)
+                       "multilevel": {"tol": c["tolerance"], "maxiter": c["max_iterations"],
+                                      **{k: c[k] for k in ("levels", "coarse_shape", "margin", "threads") if k in c},
+                                      **({"presmooth": c["smoothing"], "postsmooth": c["smoothing"],
+                                          "coarse_smooth": c["smoothing"]} if "smoothing" in c else {})}}[c["solver"]]
+            sides = {"obstacle": c["obstacle"]} if c.get("obstacle") else {"master": where(c["master"])}
+            self.contact = Contact(s, where(c["slave"]), solver=c["solver"], search_distance=c.get("search_distance"),
+                                   max_normal_angle=c.get("max_normal_angle", 45.0), **sides, **options)
+        self.loads = loads
+        self.static = None if self.dynamic else StaticStep(s, loads, self.steps, platen, stresses, self.contact)
 
     def geometry(self):
         """The mesh in input numbering: ``points`` (n, 3), ``cells`` (m, 4) and, with a
@@ -209,13 +209,17 @@ class SolidParticipant(Participant):
                                  f"traction = {'full' if name == 'traction' else 'pressure'!r}")
             s.set_vertex_field(name, inputs[name].data if self.rank == 0 else None)
         extra = {}
-        if self.contact is not None:
-            extra = self._contact_step(window)
+        if self.static is not None:
+            reports, figures, slave = self.static.run(int(window))
+            for solver, converged, iterations, residual, tolerance, detail, history in reports:
+                self.report_solve(solver, converged, iterations, residual, tolerance, detail=detail, history=history)
+            if figures:
+                self.report_figures(**figures)
+            extra = self._slave_fields(slave)
         else:
-            if self.dynamic:
-                s.step(dt)
-            else:
-                s.solve_static()
+            for load in self.loads:
+                load.apply(int(window), self.steps, ramp=False)
+            s.step(dt)
             for r in s.info.solves:
                 self.report_solve(f"{r.solver} {r.what}", r.converged, r.iterations, r.residual, r.tolerance,
                                   detail=r.reason)
@@ -227,38 +231,32 @@ class SolidParticipant(Participant):
                  "in_contact": "1", "slave": "1", "mortar_weight": "m^2"}
         return {k: Field(k, v, units[k]) for k, v in out.items()}
 
-    def _contact_step(self, window) -> dict:
-        """Load step ``window`` of ``steps`` (loads at (window + 1) / steps of their value),
-        from the last step's solution: the contact solve and its figures reported; the slave
-        face's pressure, gap, contact and slave markers and mortar weights as vertex fields."""
+    def _slave_fields(self, values: dict) -> dict:
+        """Values at the contact's slave nodes as P1 functions, zero off the slave face."""
         import dolfinx.fem
 
-        factor = (int(window) + 1) / self.steps
-        for holder, value in self.loads:
-            holder.value = factor * value
-        state = self.contact.solve()
-        sol = state.solution
-        self.report_solve(f"contact {sol.solver}", sol.converged, sol.iterations, sol.residual, sol.tolerance,
-                          detail=sol.reason)
-        stats = state.summary()
-        self.report_figures(iterations=sol.iterations, krylov_iterations=sol.krylov_iterations,
-                            seconds=state.seconds["solve"], active_nodes=stats["active_nodes"],
-                            area_fraction=state.area_fraction, max_pressure=stats["max_pressure"],
-                            **dict(zip(("force_x", "force_y", "force_z"), state.force)), min_gap=stats["min_gap"])
+        if not values:
+            return {}
         W = dolfinx.fem.FunctionSpace(self.solver.mesh, ("Lagrange", 1))  # same vertex dofs as the P1 vectors
-        m = self.contact.mortar
-        slave_values = {"contact_pressure": state.pressure, "gap": np.nan_to_num(state.gap, nan=0.0),
-                        "in_contact": state.active, "slave": 1.0, "mortar_weight": m.weights}
+        dofs = self.contact.dofs[self.contact.mortar.slave.nodes]
         fields = {}
-        for name, values in slave_values.items():  # zero off the slave face
+        for name, v in values.items():
             fields[name] = dolfinx.fem.Function(W)
-            fields[name].x.array[m.slave.nodes] = values
+            fields[name].x.array[dofs] = v
         return fields
 
     def save_state(self, window):
-        self.states[int(window)] = self.solver.save_state()
+        platen = self.static.platen if self.static is not None else None
+        self.states[int(window)] = {"solid": self.solver.save_state(),
+                                    "platen": platen.save_state() if platen else None,
+                                    "contact": None if self.contact is None else self.contact.x}
         for w in [w for w in self.states if w < int(window) - 1]:
             del self.states[w]
 
     def restore_state(self, window):
-        self.solver.restore_state(self.states[int(window)])
+        state = self.states[int(window)]
+        self.solver.restore_state(state["solid"])
+        if state["platen"] is not None:
+            self.static.platen.restore_state(state["platen"])
+        if self.contact is not None:
+            self.contact.x = state["contact"]

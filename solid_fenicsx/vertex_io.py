@@ -56,6 +56,12 @@ class VertexIO:
             self._p1_maps[key] = (V, m)
         return self._p1_maps[key][1]
 
+    def dof_input_ids(self, V) -> np.ndarray:
+        """The input vertex id of each local block dof of a P1 space V (owned and ghost)."""
+        out = np.full(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, -1, np.int64)
+        out[self._node_to_dof(V)] = self.input_ids
+        return out
+
     def _as_p1(self, f: dolfinx.fem.Function) -> dolfinx.fem.Function:
         V = f.function_space
         element = V.ufl_element()

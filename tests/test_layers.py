@@ -114,8 +114,7 @@ def test_participants_import_only_the_protocol_of_the_coupler():
 
 
 #: the studies that still run physics inside the coupler until they are ordinary scenes
-PENDING = {"coupler.run.studies.closure -> solid_fenicsx.contact_fracture",
-           "coupler.run.studies.closure -> solid_fenicsx.vertex_io"}
+PENDING: set = set()
 
 
 def test_the_coupler_imports_no_participant():

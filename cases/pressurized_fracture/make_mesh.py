@@ -3,7 +3,7 @@
 A quarter model [0, 0.8]^2 x [0, 0.8] m of a penny-shaped crack of radius a = 0.1 m in
 the plane z = 0 (symmetry planes x = 0, y = 0, z = 0): a lattice graded toward the crack
 front (spacing a/32 there) and bent so that the front r = a is a row of mesh edges
-(solid_fenicsx.cases.penny_crack_arrays). Run with
+(generator penny_crack of transfer.generators). Run with
 ``.venv/bin/python cases/pressurized_fracture/make_mesh.py``.
 """
 
@@ -11,10 +11,11 @@ from pathlib import Path
 
 import meshio
 
-from solid_fenicsx.cases import penny_crack_arrays
+from transfer.generators import generate
 
 if __name__ == "__main__":
-    points, cells = penny_crack_arrays(a=0.1, extent=8.0)
+    crack = generate("penny_crack", {"a": 0.1, "extent": 8.0})
+    points, cells = crack.points, crack.cells
     out = Path(__file__).with_name("crack_quarter.vtu")
     meshio.write(out, meshio.Mesh(points, [("tetra", cells)]), compression="zlib")
     print(f"wrote {out}: {len(points)} points, {len(cells)} tetrahedra")

@@ -1,8 +1,8 @@
 """Make cases/small_fracture/solid.msh once: two rock blocks around a rough fracture.
 
 The fracture: 0.05 x 0.025 m, self-affine faces (Hurst 0.8, RMS 0.15 mm, matched above a
-mismatch length of 12.5 mm), mean aperture 1 mm, at least 0.5 mm (transfer.fracture,
-seed 4). Each block is 5 mm thick, 20 x 10 x 2 lattice cells (2400 tetrahedra per
+mismatch length of 12.5 mm), mean aperture 1 mm, at least 0.5 mm (generator
+rough_fracture of transfer.generators, seed 4). Each block is 5 mm thick, 20 x 10 x 2 lattice cells (2400 tetrahedra per
 block). Faces (gmsh physical tags): bottom 1, top 2, fracture_lower 3, fracture_upper 4,
 xmin 5, xmax 6, ymin 7, ymax 8. Prints the z-range the fluid grid must cover.
 
@@ -11,7 +11,7 @@ xmin 5, xmax 6, ymin 7, ymax 8. Prints the z-range the fluid grid must cover.
 
 from pathlib import Path
 
-from transfer.fracture import write_case_mesh
+from transfer.generators import generate
 
 PARAMETERS = dict(
     shape=(20, 10, 2),
@@ -26,4 +26,5 @@ PARAMETERS = dict(
 )
 
 if __name__ == "__main__":
-    print(write_case_mesh(Path(__file__).with_name("solid.msh"), **PARAMETERS))
+    solid = generate("rough_fracture", PARAMETERS)
+    print(f"{solid.write(Path(__file__).with_name('solid.msh'))}: {solid.describe()}")

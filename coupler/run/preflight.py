@@ -83,10 +83,13 @@ def _solid_cells(scene) -> tuple[int, str]:
         shape = solid.box["shape"]
         return 6 * shape[0] * shape[1] * shape[2], f"{scene.path}: [geometry.solid] shape"
     if solid.generator is not None:
-        from transfer.generators import GENERATORS
+        from transfer.generators import cells
 
-        g = solid.generator
-        return GENERATORS[g["name"]].mesh(g["parameters"]).num_cells, f"{scene.path}: [geometry.solid.parameters]"
+        g, key = solid.generator, f"{scene.path}: [geometry.solid.parameters]"
+        try:
+            return cells(g["name"], g["parameters"]), key
+        except Exception as exc:  # noqa: BLE001 - a generator refusing its parameters is bad input
+            raise SceneError(f"{key} (generator {g['name']!r}): {exc}") from None
     key = f"{scene.path}: [geometry.solid] mesh"
     return _mesh_cells(solid.mesh, key), key
 

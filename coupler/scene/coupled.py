@@ -9,6 +9,7 @@ the participants to start and the fields that cross.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,12 +19,15 @@ from coupler.errors import SceneError
 from coupler.protocol.transport import check_endpoint
 from coupler.scene.tables import _REQUIRED, Table, output_directory
 from coupler.protocol.expressions import check_expression
+from transfer.generators import GENERATORS, parameters
 from transfer.grid import BOX_FACES
 
 #: participant kinds -> the module started as ``python -m MODULE``
 SOLID_PARTICIPANTS = {"solid_fenicsx": "solid_fenicsx", "spring_solid": "coupler.standins"}
 FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "chorin": "fluid_chorin", "replay_fluid": "coupler.standins"}
-LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure")
+LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure", "platen")
+#: loads whose value may be a list, one value per step
+STEPPED_LOADS = ("dirichlet", "pressure", "fluid_pressure")
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 #: [coupling] traction: the fluid's pressure only, or its full stress with the viscous part (coupler/viscous.py)
 TRACTIONS = ("pressure", "full")
@@ -44,10 +48,10 @@ def pictures_default() -> bool:
 
 @dataclass
 class SolidGeometry:
-    mesh: Path | None  # a mesh file, or None for the box generator
+    mesh: Path | None  # a mesh file, or None for the box or a generator
     box: dict | None  # lower, upper, shape, jitter, seed
-    boundaries: dict[str, str | int]  # name -> expression on facet midpoints, box face, or file tag
-    generator: dict | None = None  # {"name": ..., "parameters": {...}} (transfer.generators)
+    boundaries: dict[str, str | int]  # name -> expression on facet midpoints, box face, or file/generator tag
+    generator: dict | None = None  # {"name": ..., "parameters": {...}} (transfer.generators), defaults filled in
 
 
 @dataclass
@@ -61,8 +65,14 @@ class FluidGeometry:
 class Load:
     type: str
     boundary: str | None
-    value: object  # float, [3 floats]
+    value: object  # float, [3 floats], or one float per step (a list: STEPPED_LOADS); platen: the stresses
     components: list[str] = field(default_factory=lambda: ["x", "y", "z"])
+    settings: dict = field(default_factory=dict)  # platen: tolerance, area, max_iterations
+
+    @property
+    def per_step(self) -> bool:
+        """One value per step (a platen's stresses, or a list value)."""
+        return self.type == "platen" or (self.type in STEPPED_LOADS and isinstance(self.value, list))
 
 
 @dataclass
@@ -128,17 +138,22 @@ TABLES = {
     "check": {"kind": "the known solution compared with the result (coupler/checks: one module per kind)"},
 }
 SOLID_KEYS = {"mesh": "mesh file (any format meshio reads), relative to the case",
+              "generator": "a geometry generator of transfer.generators (its faces are named boundaries)",
+              "parameters": "table: the generator's parameters",
               "lower": "box generator: lower corner", "upper": "box generator: upper corner",
               "shape": "box generator: cells per axis", "jitter": "box generator: random vertex shift",
-              "seed": "box generator: random seed", "boundaries": "table: name -> boundary",
-              "generator": "a geometry generator (transfer/generators), instead of a mesh or a box",
-              "parameters": "table: the generator's parameters"}
+              "seed": "box generator: random seed", "boundaries": "table: name -> boundary"}
 FLUID_KEYS = {"origin": "grid origin", "spacing": "grid spacing", "shape": "cells per axis",
               "lower": "grid lower corner (instead of origin/spacing)", "upper": "grid upper corner",
               "generator": "the grid made by the solid's generator for it (its name), instead of the keys above"}
 LOAD_KEYS = {"type": f"one of {', '.join(LOAD_TYPES)}", "boundary": "a named boundary",
-             "value": "number (pressure, fixed value) or [x, y, z] (traction, body force)",
-             "components": "dirichlet: constrained components, subset of ['x', 'y', 'z']"}
+             "value": "number (pressure, fixed value) or [x, y, z] (traction, body force); dirichlet, pressure, "
+                      "fluid_pressure: or a list of numbers, one per step",
+             "components": "dirichlet: constrained components, subset of ['x', 'y', 'z']",
+             "stress": "platen: the target mean normal stress of each step [Pa], a list",
+             "tolerance": "platen: relative tolerance on each target stress (default 1e-3)",
+             "area": "platen: the area the mean stress is taken over [m^2] (default: the boundary's, projected)",
+             "max_iterations": "platen: solves per step to find the platen's displacement (default 20)"}
 SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI ranks (default 1)",
                "degree": "polynomial degree (solid: 1 or 2)", "linear_solver": "cg (CG + GAMG) or lu",
                "rtol": "relative tolerance of the linear solver", "stiffness": "spring_solid: spring stiffness",
@@ -227,6 +242,7 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                          f"deforms one")
     else:
         loads = []
+    per_step = {len(load.value) for load in loads if load.per_step}
 
     solvers = Table(path, "solvers", data.get("solvers", {}), TABLES["solvers"])
     solver_cfg = {}
@@ -244,7 +260,8 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     time = Table(path, "time", data.get("time", {}), TABLES["time"])
     stepped = any(getattr(RULES[e], "TIME_STEPS", False) for e in effects)  # dynamics, flow: dt and steps given
     time_cfg = {"dt": time.number("dt", default=_REQUIRED if stepped else 1.0, positive=True),
-                "steps": time.integer("steps", default=_REQUIRED if stepped else 1)}
+                "steps": time.integer("steps", default=_REQUIRED if stepped else max(per_step, default=1))}
+    _check_steps(path, loads, time_cfg["steps"], "steps" in time.data)
 
     coupling = Table(path, "coupling", data.get("coupling", {}), TABLES["coupling"])
     coupling_cfg = {"acceleration": coupling.string("acceleration", "iqn-ils", ACCELERATIONS),
@@ -291,9 +308,9 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     for table, name in owned.items():
         if table in data and name not in effects:
             raise SceneError(f"{path}: [{table}]: needs the effect {name!r} in [physics] effects")
-    for name in effects:
-        if hasattr(RULES[name], "parse"):
-            RULES[name].parse(scene, data)
+    for name, rule in RULES.items():  # in the rules' order: a rule may read what an earlier one parsed
+        if name in effects and hasattr(rule, "parse"):
+            rule.parse(scene, data)
     if "check" in data:  # last: a check kind takes its parameters from the validated scene
         scene.check = checks.parse(path, data["check"], scene)
     return scene
@@ -313,13 +330,19 @@ def _interface(coupling: Table):
 def _solid_geometry(path, case_dir, data) -> SolidGeometry:
     t = Table(path, "geometry.solid", data, SOLID_KEYS)
     mesh = t.string("mesh", None)
-    box = generator = None
+    box = None
+    box_keys = [k for k in ("lower", "upper", "shape", "jitter", "seed") if k in t.data]
+    if "parameters" in t.data and "generator" not in t.data:
+        raise t.error("parameters", "parameters of no generator: give [geometry.solid] generator = \"NAME\"")
     if "generator" in t.data:
+        if mesh is not None or box_keys:
+            raise t.error("generator", "give one of a mesh file, the box keys (lower, upper, shape) or a generator")
         generator = _generator(t)
-    elif "parameters" in t.data:
-        raise t.error("parameters", "the parameters of a generator: name it with generator = \"NAME\"")
-    elif mesh is not None:
-        if any(k in t.data for k in ("lower", "upper", "shape", "jitter", "seed")):
+        faces = dict(getattr(GENERATORS[generator["name"]], "FACES", {}))
+        return SolidGeometry(mesh=None, box=None, boundaries={**faces, **_boundaries(path, t, None, faces)},
+                             generator=generator)
+    if mesh is not None:
+        if box_keys:
             raise t.error("mesh", "give either a mesh file or the box keys (lower, upper, shape), not both")
         mesh = t.file("mesh", case_dir)
     else:
@@ -331,6 +354,27 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
         shape = t.shape("shape")
         box = {"lower": lower, "upper": upper, "shape": shape,
                "jitter": t.number("jitter", 0.0, minimum=0.0, maximum=0.24), "seed": t.integer("seed", 0, minimum=0)}
+    boundaries = _boundaries(path, t, box, {})
+    if box is not None:  # the box's faces first: a named boundary takes its facets from them (a facet has one tag)
+        boundaries = {**{face: face for face in BOX_FACES if face not in boundaries}, **boundaries}
+    return SolidGeometry(mesh=mesh, box=box, boundaries=boundaries)
+
+
+def _generator(t: Table) -> dict:
+    """``[geometry.solid] generator`` and its checked ``parameters`` (transfer.generators)."""
+    name = t.string("generator", choices=tuple(GENERATORS))
+    values = t.data.get("parameters", {})
+    if not isinstance(values, dict):
+        raise t.error("parameters", f"must be a table of the generator's parameters, got {values!r}")
+    try:
+        return {"name": name, "parameters": parameters(name, values)}
+    except ValueError as exc:
+        raise SceneError(f"{t.path}: [geometry.solid.parameters] {exc}") from None
+
+
+def _boundaries(path, t: Table, box, faces: dict) -> dict:
+    """[geometry.solid.boundaries]: name -> box face, expression or tag; a generator's
+    face names (`faces`) are taken."""
     boundaries = {}
     b = t.data.get("boundaries", {})
     if not isinstance(b, dict):
@@ -342,36 +386,17 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
                              f"true on the boundary's facets, or a tag number of the mesh file; got {spec!r}")
         if isinstance(spec, str) and spec not in BOX_FACES:
             check_expression(spec, where)
-        if isinstance(spec, int) and mesh is None:
-            raise SceneError(f"{where}: tag numbers need a mesh file; a box has faces {', '.join(BOX_FACES)}")
+        if isinstance(spec, int) and box is not None:
+            raise SceneError(f"{where}: tag numbers need a mesh file; the box has faces {', '.join(BOX_FACES)}")
+        if name in faces:
+            raise SceneError(f"{where}: the generator names a face {name!r} already; choose another name")
         boundaries[name] = spec
-    if box is not None:  # the box's faces first: a named boundary takes its facets from them (a facet has one tag)
-        boundaries = {**{face: face for face in BOX_FACES if face not in boundaries}, **boundaries}
-    return SolidGeometry(mesh=mesh, box=box, boundaries=boundaries, generator=generator)
-
-
-def _generator(t: Table) -> dict:
-    """``[geometry.solid] generator`` and its checked ``parameters`` (transfer.generators)."""
-    from transfer.generators import GENERATORS, parameters
-
-    name = t.string("generator", choices=tuple(GENERATORS))
-    for key in ("mesh", "lower", "upper", "shape", "jitter", "seed"):
-        if key in t.data:
-            raise t.error(key, f"give either a generator or a mesh file or a box, not both (generator {name!r})")
-    values = t.data.get("parameters", {})
-    if not isinstance(values, dict):
-        raise t.error("parameters", f"must be a table of the generator's parameters, got {values!r}")
-    try:
-        return {"name": name, "parameters": parameters(name, values)}
-    except ValueError as exc:
-        raise SceneError(f"{t.path}: [geometry.solid.parameters] {exc}") from None
+    return boundaries
 
 
 def _fluid_geometry(path, data, solid: SolidGeometry | None) -> FluidGeometry:
     t = Table(path, "geometry.fluid", data, FLUID_KEYS)
     if "generator" in t.data:  # the grid a solid generator made for its geometry (an immersed-boundary study)
-        from transfer.generators import GENERATORS
-
         name = t.string("generator")
         made = solid.generator if solid is not None else None
         if made is None or made["name"] != name:
@@ -411,8 +436,27 @@ def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
                                           f"{', '.join(solid.boundaries) or 'none'}")
         elif "boundary" in t.data:
             raise t.error("boundary", "a body force acts on the volume, not on a boundary")
-        if kind in ("traction", "body_force"):
+        settings = {}
+        for key in ("stress", "tolerance", "area", "max_iterations"):
+            if key in t.data and kind != "platen":
+                raise t.error(key, "only platen loads have it")
+        if kind == "platen":
+            if "value" in t.data:
+                raise t.error("value", "a platen is stress-controlled: give stress = [...], one per step")
+            for other in ("dynamics", "flow"):
+                if other in effects:
+                    raise t.error("type", f"a platen (stress-controlled load steps) is static: not with '{other}'")
+            value = _per_step(t, "stress")
+            if min(value) < 0:
+                raise t.error("stress", f"mean normal stresses are compressive, >= 0; got {value!r}")
+            settings = {"tolerance": t.number("tolerance", 1e-3, positive=True, maximum=0.5),
+                        "max_iterations": t.integer("max_iterations", 20)}
+            if "area" in t.data:
+                settings["area"] = t.number("area", positive=True)
+        elif kind in ("traction", "body_force"):
             value = t.vector("value")
+        elif kind in STEPPED_LOADS and isinstance(t.data.get("value"), list):
+            value = _per_step(t, "value")
         elif kind == "dirichlet":
             value = t.number("value", 0.0)
         else:
@@ -424,13 +468,34 @@ def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
             raise t.error("components", "only dirichlet loads constrain components")
         if kind == "fluid_pressure" and "fluid_pressure" not in effects:
             raise t.error("type", "a fluid_pressure load needs the effect 'fluid_pressure' in [physics] effects")
-        loads.append(Load(kind, boundary, value, components))
+        loads.append(Load(kind, boundary, value, components, settings))
+    if sum(load.type == "platen" for load in loads) > 1:
+        raise SceneError(f"{path}: [[loads]]: more than one platen; the solid has one stress-controlled platen")
     if "fluid_pressure" in effects and not any(load.type == "fluid_pressure" for load in loads):
         raise SceneError(f"{path}: [physics] effects: 'fluid_pressure' asks for a [[loads]] entry with "
                          f"type = \"fluid_pressure\" (the pressure and the fracture faces it acts on)")
-    if not any(load.type == "dirichlet" for load in loads):
+    if not any(load.type in ("dirichlet", "platen") for load in loads):
         raise SceneError(f"{path}: [[loads]]: no dirichlet load: the rock needs supports against rigid motion")
     return loads
+
+
+def _per_step(t: Table, key: str) -> list[float]:
+    """A non-empty list of finite numbers, one per step (repeats allowed)."""
+    value = t.data.get(key)
+    if (not isinstance(value, list) or not value
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in value)):
+        raise t.error(key, f"must be a non-empty list of finite numbers, one per step, got {value!r}")
+    return [float(v) for v in value]
+
+
+def _check_steps(path, loads: list[Load], steps: int, given: bool) -> None:
+    """Every per-step load has one value per step ([time] steps, or the longest list)."""
+    for i, load in enumerate(loads, start=1):
+        if load.per_step and len(load.value) != steps:
+            key = "stress" if load.type == "platen" else "value"
+            origin = "[time] steps is" if given else "another load has"
+            raise SceneError(f"{path}: [loads.{i}] {key}: {len(load.value)} values, one per step, but {origin} "
+                             f"{steps} step{'s' * (steps > 1)}")
 
 
 def _solver(path, part, data, participants, default) -> dict:

@@ -19,8 +19,6 @@ SCENE_FILE = "scene.toml"
 # as text (``varcouple check``) and ``run(scene, log)`` -> the summary dict (a failed
 # ``[check]`` is ``summary["check"]["passed"] == False``).
 STUDIES = {
-    "obstacle": "coupler.run.studies.obstacle",  # a body pressed onto a plane, nonsmooth multilevel
-    "closure": "coupler.run.studies.closure",  # fracture closure under normal stress, mortar contact
 }
 
 

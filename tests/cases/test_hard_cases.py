@@ -21,7 +21,8 @@ import pytest
 
 from coupler.cli import main
 from vc_helpers import CASES, copy_case
-from transfer.fracture import fracture_blocks, fracture_pair
+from transfer.generators.blocks import fracture_blocks
+from transfer.generators.surfaces import fracture_pair
 
 SMALL = CASES / "small_fracture"
 needs_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")
@@ -145,7 +146,7 @@ def test_soft_rock(tmp_path, capsys):
 def test_nearly_closed_fracture(tmp_path, capsys):
     """Mean aperture 0.25 mm (0.21 to 0.28 mm): about one 0.2 mm fluid cell across the gap; the
     pressure drop rises as w^-3 and opens the fracture by about half. Mesh regenerated here with
-    transfer.fracture (same generator and seed as small_fracture). Measured: 9 coupling
+    transfer.generators (same generator and seed as small_fracture). Measured: 9 coupling
     iterations, about 13 s, largest displacement 0.15 mm."""
     lower, upper = fracture_pair((20, 10), (0.05, 0.025), aperture=0.25e-3, hurst=0.8, rms=0.05e-3, seed=4,
                                  min_aperture=0.1e-3, periodic=False, mismatch_length=0.0125)

@@ -17,7 +17,7 @@ from coupler.fsi.interface import SolidOnGrid, WettedInterface
 from coupler.errors import SceneError
 from coupler.scene import load
 from transfer import Mesh, StructuredGrid
-from transfer.fracture import FACE_TAGS
+from transfer.generators.blocks import FACE_TAGS
 
 CASE = CASES / "small_fracture"
 needs_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")

@@ -30,7 +30,7 @@ def plates(n: int, offset: float):
     """The plates generator's solid and grid for n cells across, the lower face at offset."""
     p = parameters("plates", {"aperture": 1e-3, "length": 2e-3, "cells_across": n, "offset": offset})
     g = GENERATORS["plates"].grid(p)
-    return GENERATORS["plates"].mesh(p), StructuredGrid(g["origin"], g["spacing"], g["shape"])
+    return GENERATORS["plates"].mesh(p).mesh, StructuredGrid(g["origin"], g["spacing"], g["shape"])
 
 
 def test_the_plan_is_one_way_around_a_solid_served_in_process():

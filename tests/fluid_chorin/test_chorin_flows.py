@@ -111,7 +111,7 @@ def test_immersed_plates_follow_the_cubic_law(n_across, offset, low, high):
     p = parameters("plates", {"aperture": w, "length": length, "cells_across": n_across, "offset": offset})
     grid = GENERATORS["plates"].grid(p)
     G = StructuredGrid(grid["origin"], grid["spacing"], grid["shape"])
-    volumes = Transfer.assemble(FunctionSpace(GENERATORS["plates"].mesh(p), "P0"), FunctionSpace(G, "Q0"), "l2").D
+    volumes = Transfer.assemble(FunctionSpace(GENERATORS["plates"].mesh(p).mesh, "P0"), FunctionSpace(G, "Q0"), "l2").D
     config = {"grid": grid, "inlet": {"pressure": dp}, "outlet": {"pressure": 0.0}, "rho": 1000.0, "mu": mu,
               "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-9}
     solver = ChorinSolver(ChorinSpec.from_config(config))

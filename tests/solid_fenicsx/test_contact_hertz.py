@@ -19,8 +19,8 @@ pytest.importorskip("gmsh")
 from nonsmooth.solvers import solve as solve_qp  # noqa: E402
 from solid_fenicsx import Elasticity, read_mesh  # noqa: E402
 from solid_fenicsx.contact import Contact  # noqa: E402
-from solid_fenicsx.contact_hertz import hertz_contact  # noqa: E402
-from solid_fenicsx.contact_meshes import hertz_boundaries, hertz_mesh, hertz_solution  # noqa: E402
+from solid_fenicsx.contact_hertz import hertz_boundaries, hertz_contact, hertz_solution  # noqa: E402
+from transfer.generators.hertz import hertz_mesh  # noqa: E402
 from solid_fenicsx.mortar import ContactSetupError  # noqa: E402
 
 E, NU, R = 1.0e9, 0.3, 1.0
@@ -88,21 +88,35 @@ def test_transformation_of_eq_10_11(hertz):
     contact, _ = hertz
     m, P = contact.mortar, contact.P
     x = np.random.default_rng(0).normal(size=(P.shape[0], 2))
-    u = (P @ x).reshape(-1, 3, 2)
+    u = (P @ x).reshape(-1, 3, 2)[contact.dofs]  # x and the faces' nodes are in input numbering
     jump = u[m.slave.nodes] - np.einsum("sm,mcj->scj", m.T.toarray(), u[m.master.nodes])
+    normal = x[contact.normal_of_node]  # the normal unknown of each slave node
+    assert np.allclose(np.einsum("sc,scj->sj", m.normals, jump), normal, atol=1e-12)
     xs = x.reshape(-1, 3, 2)[m.slave.nodes]
-    assert np.allclose(np.einsum("sc,scj->sj", m.normals, jump), xs[:, 0], atol=1e-12)
     assert np.allclose(np.linalg.norm(jump, axis=1), np.linalg.norm(xs, axis=1), atol=1e-12)
     assert np.allclose(contact.P_inverse @ (P @ x), x, atol=1e-12)
 
 
+def test_tangent_frames_keep_an_axis_normal_in_place():
+    """The normal takes the slot of its largest component; along an axis the frame is the
+    identity up to the normal's sign, so a plane obstacle keeps every component in place."""
+    from solid_fenicsx.contact import tangent_frames
+
+    normals = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.3, -0.9, 0.2]])
+    frames, slot = tangent_frames(normals)
+    assert slot.tolist() == [2, 0, 1]
+    assert np.array_equal(frames[0], np.diag([1.0, 1.0, -1.0])) and np.array_equal(frames[1], np.eye(3))
+    for R, n, k in zip(frames, normals, slot):
+        assert np.allclose(R.T @ R, np.eye(3), atol=1e-15) and np.allclose(R[:, k], n / np.linalg.norm(n))
+
+
 def test_force_balance(hertz):
     contact, state = hertz
-    reaction = contact.reaction("load")
+    reaction = contact.elasticity.boundary_force("load")
     assert state.solution.converged
     assert abs(state.force[2] + reaction[2]) <= 1e-6 * abs(reaction[2])
     assert np.max(np.abs(state.force[:2])) <= 1e-3 * abs(state.force[2])  # symmetric up to the mesh
-    bottom = contact.reaction("block_bottom")
+    bottom = contact.elasticity.boundary_force("block_bottom")
     assert abs(bottom[2] - state.force[2]) <= 1e-6 * abs(bottom[2])
 
 

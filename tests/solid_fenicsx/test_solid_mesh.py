@@ -10,8 +10,8 @@ pytest.importorskip("dolfinx")
 
 from mpi4py import MPI  # noqa: E402
 
-from solid_fenicsx.mesh import (BOX_FACES, SolidMeshError, box_arrays, box_mesh, from_arrays,  # noqa: E402
-                                graded_nodes, read_mesh)
+from solid_fenicsx.mesh import BOX_FACES, SolidMeshError, box_mesh, from_arrays, read_mesh  # noqa: E402
+from transfer.generators.lattice import box_arrays, graded_nodes  # noqa: E402
 
 
 def _count(solid, name):

@@ -12,7 +12,7 @@ pytest.importorskip("dolfinx")
 from mpi4py import MPI  # noqa: E402
 
 from solid_fenicsx import Elasticity, VTUSeries, XDMFSeries, box_mesh, from_arrays  # noqa: E402
-from solid_fenicsx.mesh import box_arrays  # noqa: E402
+from transfer.generators.lattice import box_arrays  # noqa: E402
 
 ROOT = MPI.COMM_WORLD.rank == 0
 

@@ -1,4 +1,5 @@
-"""transfer.fracture: self-affine rough surfaces, matched fracture pairs, the two rock blocks."""
+"""transfer.generators: self-affine rough surfaces, matched fracture pairs, the two rock blocks, the
+registry of case generators."""
 
 from __future__ import annotations
 
@@ -6,8 +7,9 @@ import numpy as np
 import pytest
 
 from transfer import Mesh
-from transfer.fracture import (BLOCK_TAGS, FACE_TAGS, fracture_blocks, fracture_pair, measure_hurst,
-                               node_weights, rough_surface, surface_integral, surface_mean)
+from transfer.generators.blocks import BLOCK_TAGS, FACE_TAGS, fracture_blocks
+from transfer.generators.surfaces import (fracture_pair, measure_hurst, node_weights, rough_surface, surface_integral,
+                                          surface_mean)
 
 SIZE = (1.0, 0.5)
 
@@ -223,16 +225,19 @@ def test_solid_fenicsx_reads_the_tags(blocks, tmp_path):
     assert comm.allreduce(len(lower.facets(str(FACE_TAGS["fracture_lower"])))) == 576
 
 
-def test_write_case_mesh_is_reproducible(tmp_path):
+def test_rough_fracture_generator_is_reproducible(tmp_path):
+    """The same parameters write the same file (cases/*/make_mesh.py regenerate committed meshes)."""
     import meshio
 
-    from transfer.fracture import write_case_mesh
+    from transfer.generators import generate
 
-    params = dict(shape=(8, 4, 2), size=(0.02, 0.01), height=2e-3, aperture=1e-3, min_aperture=0.5e-3,
+    params = dict(shape=[8, 4, 2], size=[0.02, 0.01], height=2e-3, aperture=1e-3, min_aperture=0.5e-3,
                   rms=0.1e-3, hurst=0.8, mismatch_length=5e-3, seed=3)
-    text = write_case_mesh(tmp_path / "a.msh", **params)
-    write_case_mesh(tmp_path / "b.msh", **params)
+    solid = generate("rough_fracture", params)
+    solid.write(tmp_path / "a.msh")
+    generate("rough_fracture", params).write(tmp_path / "b.msh")
     assert (tmp_path / "a.msh").read_bytes() == (tmp_path / "b.msh").read_bytes()
     m = meshio.read(tmp_path / "a.msh")
     assert sum(len(b.data) for b in m.cells if b.type == "tetra") == 2 * 8 * 4 * 2 * 6
-    assert "aperture mean 1.0000 mm" in text
+    assert solid.info["mean_aperture"] == pytest.approx(1e-3, rel=1e-12)
+    assert "mean_aperture: 0.001" in solid.describe() and "face fracture_lower: 64 triangles" in solid.describe()

@@ -1,11 +1,26 @@
 """Case geometry made from parameters: one module per generator, found by :data:`GENERATORS`.
 
-A scene names one in ``[geometry.solid] generator = "NAME"`` with its ``[geometry.solid.parameters]``.
-A generator module defines ``NAME``, ``DESCRIPTION``, ``PARAMETERS`` (``{name: description}``,
-every key it takes), ``DEFAULTS`` (the optional ones' values), ``check(parameters) -> dict``
-(types and ranges; ``ValueError("<key>: <reason>")``), ``mesh(parameters) -> Mesh`` (the solid)
-and, for geometry made for a fluid grid (an immersed-boundary study), ``grid(parameters) ->
+A scene names one in ``[geometry.solid] generator = "NAME"`` with its ``[geometry.solid.parameters]``;
+the solid participant runs it on rank 0, and cases that ship a mesh file make it with the same
+generator (their ``make_mesh.py``). A generator module defines ``NAME``, ``DESCRIPTION``,
+``PARAMETERS`` (``{name: description}``, every key it takes), ``DEFAULTS`` (the optional ones'
+values), ``check(parameters) -> dict`` (types and ranges; ``ValueError("<key>: <reason>")``),
+``mesh(parameters)`` (the solid: a :class:`~transfer.generators.blocks.Block`, tetrahedra with
+named boundary faces), ``FACES`` (``{name: tag}`` of the faces every mesh it makes carries)
+and, optionally, ``cells(parameters)`` (the number of tetrahedra without building the mesh) and,
+for geometry made for a fluid grid (an immersed-boundary study), ``grid(parameters) ->
 {"origin", "spacing", "shape"}``.
+
+- ``rough_fracture``: two rock blocks around a matched rough fracture (small_fracture, fracture_flow)
+- ``fracture_specimen``: the closure specimen, box or cylinder, non-matching fracture faces (paper 4.1)
+- ``rough_block``: a block with a flat top and a rough bottom face (rock_obstacle, paper figure 15)
+- ``hertz``: a half-sphere on a block, gmsh (paper figure 5)
+- ``penny_crack``: the quarter model of a penny-shaped crack (pressurized_fracture)
+- ``plates``: two flat blocks with a gap and the 2D fluid grid made for them (parallel_plates)
+
+The modules without ``NAME`` are their building blocks: :mod:`.surfaces` (self-affine rough
+surfaces), :mod:`.blocks` (:class:`~transfer.generators.blocks.Block`, the blocks around a
+fracture), :mod:`.lattice` (graded lattices).
 """
 
 from __future__ import annotations
@@ -16,7 +31,7 @@ import pkgutil
 
 def _discover() -> dict:
     modules = [importlib.import_module(f"{__name__}.{m.name}") for m in pkgutil.iter_modules(__path__)]
-    return {m.NAME: m for m in sorted(modules, key=lambda m: m.NAME)}
+    return {m.NAME: m for m in sorted(modules, key=lambda m: m.__name__) if hasattr(m, "NAME")}
 
 
 def parameters(name: str, values: dict) -> dict:
@@ -32,6 +47,17 @@ def parameters(name: str, values: dict) -> dict:
     return module.check({**module.DEFAULTS, **values})
 
 
+def generate(name: str, values: dict | None = None):
+    """The mesh of generator `name` with `values` (checked, defaults filled in)."""
+    return GENERATORS[name].mesh(parameters(name, dict(values or {})))
+
+
+def cells(name: str, values: dict) -> int:
+    """How many tetrahedra generator `name` makes with `values` (built only without a formula)."""
+    module, checked = GENERATORS[name], parameters(name, values)
+    return int(module.cells(checked)) if hasattr(module, "cells") else len(module.mesh(checked).cells)
+
+
 def number(parameters: dict, key: str, minimum: float | None = None, below: float | None = None,
            positive: bool = False, integer: bool = False):
     """``parameters[key]`` checked: a number (an integer with `integer`), > 0 with `positive`, in
@@ -45,6 +71,22 @@ def number(parameters: dict, key: str, minimum: float | None = None, below: floa
     if minimum is not None and value < minimum or below is not None and value >= below:
         raise ValueError(f"{key}: must lie in [{minimum}, {below if below is not None else 'inf'}), got {value!r}")
     return value if integer else float(value)
+
+
+def numbers(parameters: dict, key: str, count: int, positive: bool = False, integer: bool = False) -> list:
+    """``parameters[key]`` checked: a list of `count` numbers (integers with `integer`), > 0 with `positive`."""
+    value = parameters[key]
+    if not isinstance(value, (list, tuple)) or len(value) != count:
+        raise ValueError(f"{key}: must be a list of {count} {'integers' if integer else 'numbers'}, got {value!r}")
+    return [number({key: v}, key, positive=positive, integer=integer) for v in value]
+
+
+def choice(parameters: dict, key: str, choices: tuple) -> str:
+    """``parameters[key]`` checked: one of `choices`."""
+    value = parameters[key]
+    if value not in choices:
+        raise ValueError(f"{key}: must be one of {', '.join(map(repr, choices))}, got {value!r}")
+    return value
 
 
 #: generator name -> its module (last: the generators use the helpers above)

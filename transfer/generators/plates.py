@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from transfer.generate import box_tetrahedra
-from transfer.mesh import Mesh
 
 from . import number
+from .blocks import BLOCK_TAGS, Block
 
 NAME = "plates"
 DESCRIPTION = "two flat blocks with a gap of aperture w, and the 2D fluid grid made for them"
@@ -25,6 +25,7 @@ PARAMETERS = {"aperture": "w, the gap between the blocks [m]",
               "offset": "where the lower block's face cuts a grid cell, in cells, in [0, 1) (default 0)",
               "columns": "grid cells along x (default 4)"}
 DEFAULTS = {"offset": 0.0, "columns": 4}
+FACES: dict = {}  # a fixed solid: no named boundary
 
 
 def check(parameters: dict) -> dict:
@@ -49,7 +50,13 @@ def grid(p: dict) -> dict:
             "shape": [p["columns"], p["cells_across"] + 5, 1]}
 
 
-def mesh(p: dict) -> Mesh:
+def cells(p: dict) -> int:
+    return 2 * 6 * 3 * 2 * 1
+
+
+def mesh(p: dict) -> Block:
+    """Cells tagged ``lower_block`` and ``upper_block``; no named faces."""
     lower, upper = (box_tetrahedra((3, 2, 1), lo, hi) for lo, hi in blocks(p))
-    return Mesh(np.vstack([lower.points, upper.points]), np.vstack([lower.cells, upper.cells + lower.num_points]),
-                "tetra", name="plates")
+    tags = np.repeat([BLOCK_TAGS["lower_block"], BLOCK_TAGS["upper_block"]], [lower.num_cells, upper.num_cells])
+    return Block(np.vstack([lower.points, upper.points]), np.vstack([lower.cells, upper.cells + lower.num_points]),
+                 {}, tags, NAME, face_tags={})

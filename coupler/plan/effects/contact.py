@@ -1,34 +1,47 @@
-"""Effect ``contact``: frictionless two-body contact between the faces ``[contact] slave`` and
-``master`` by mortar coupling (paper 2.2, eq. 9-11), solved by the solid participant on the
-transformed system of eq. 10 in load steps."""
+"""Effect ``contact``: frictionless contact of the face ``[contact] slave`` with another body's
+face ``master`` by mortar coupling (paper 2.2, eq. 9-11), or with a rigid plane
+``obstacle`` (eq. 11 with T = 0: the bound is the distance to the plane along its normal;
+paper 4.3), solved by the solid participant on the transformed system of eq. 10 in load
+steps."""
+
+import math
 
 from coupler.errors import SceneError
 from coupler.scene.tables import Table
 
 NAME = "contact"
-DESCRIPTION = "contact between fracture faces (mortar coupling, paper 2.2)"
+DESCRIPTION = "frictionless contact between two faces (mortar coupling, paper 2.2) or with a rigid plane"
 ORDER = 2
 NEEDS = ("elasticity",)  # the bodies in contact deform
 #: nonsmooth solvers of [contact] solver (nonsmooth.solvers)
 CONTACT_SOLVERS = ("active_set", "snes_vi", "multilevel")
+#: keys of the multilevel solver's hierarchy and smoother (paper 2.4)
+MULTILEVEL_KEYS = ("levels", "coarse_shape", "margin", "threads", "smoothing")
 TABLES = {"contact": {
     "slave": "the boundary carrying the contact pressure (dual basis; the finer or curved side)",
-    "master": "the opposite boundary (another body of the same mesh)",
+    "master": "the opposite boundary (another body of the same mesh); or give obstacle",
+    "obstacle": "a rigid plane instead of a master: { plane = [a, b, c, d] } (a x + b y + c z + d = 0, the body "
+                "where it is >= 0) or { normal = [a, b, c], gap = g } (g beyond the slave's nearest point)",
     "solver": f"nonsmooth solver, one of {', '.join(CONTACT_SOLVERS)} (default active_set)",
     "tolerance": "active_set: scaled KKT residual (default 1e-10); snes_vi: relative residual; multilevel: step "
-                 "length [m]",
+                 "length [m] (default 1e-12)",
     "max_iterations": "nonsmooth iterations per load step (default 100)",
     "search_distance": "how far along the slave normal the master is looked for [m] (default: half the slave's "
                        "mean edge); at least the largest gap that may close",
-    "max_normal_angle": "largest angle between paired slave and master faces [deg] (default 45)"}}
+    "max_normal_angle": "largest angle between paired slave and master faces [deg] (default 45)",
+    "levels": "multilevel: levels of the semi-geometric hierarchy, the fine mesh included (default 3)",
+    "coarse_shape": "multilevel: cells per axis of the coarsest grid (default [2, 2, 2])",
+    "margin": "multilevel: enlargement of the grids' box per side, a fraction of the body's size (default 0)",
+    "threads": "multilevel: threads of the projection assembly (default 1)",
+    "smoothing": "multilevel: Gauss-Seidel sweeps before and after each coarse correction (default 3)"}}
 
 
 def parse(scene, data: dict) -> None:
-    """[contact]: the two contact boundaries and the nonsmooth solver."""
+    """[contact]: the contact faces (or the obstacle) and the nonsmooth solver."""
     path, effects, solid = scene.path, scene.effects, scene.solid
     if "contact" not in data:
         raise SceneError(f"{path}: [contact] slave: missing: the effect 'contact' needs a [contact] table "
-                         f"with slave and master boundaries")
+                         f"with slave and master boundaries (or slave and obstacle)")
     t = Table(path, "contact", data["contact"], TABLES["contact"])
     for other in ("flow", "dynamics"):
         if other in effects:
@@ -37,27 +50,79 @@ def parse(scene, data: dict) -> None:
     s = scene.solvers["solid"]
     if s["participant"] != "solid_fenicsx" or s["ranks"] != 1 or s["degree"] != 1:
         raise SceneError(f"{path}: [solvers.solid]: contact needs participant solid_fenicsx, ranks = 1, degree = 1")
-    cfg = {"slave": t.string("slave"), "master": t.string("master"),
-           "solver": t.string("solver", "active_set", CONTACT_SOLVERS),
-           "tolerance": t.number("tolerance", 1e-10, positive=True),
-           "max_iterations": t.integer("max_iterations", 100),
-           "search_distance": t.number("search_distance", None, positive=True),
-           "max_normal_angle": t.number("max_normal_angle", 45.0, positive=True, maximum=90.0)}
+    solver = t.string("solver", "active_set", CONTACT_SOLVERS)
+    cfg = {"slave": t.string("slave"), "solver": solver,
+           "tolerance": t.number("tolerance", 1e-12 if solver == "multilevel" else 1e-10, positive=True),
+           "max_iterations": t.integer("max_iterations", 100)}
+    if ("master" in t.data) == ("obstacle" in t.data):
+        raise t.error("master", "give either master (the other body's face) or obstacle (a rigid plane)")
+    if "obstacle" in t.data:
+        for key in ("search_distance", "max_normal_angle"):
+            if key in t.data:
+                raise t.error(key, "a rigid obstacle needs no search: its gap is the distance to the plane")
+        cfg["obstacle"] = _obstacle(t)
+    else:
+        cfg.update(master=t.string("master"), search_distance=t.number("search_distance", None, positive=True),
+                   max_normal_angle=t.number("max_normal_angle", 45.0, positive=True, maximum=90.0))
+        if cfg["slave"] == cfg["master"]:
+            raise t.error("master", f"the same boundary as slave ({cfg['slave']!r}): contact is between two bodies")
     for key in ("slave", "master"):
-        if cfg[key] not in solid.boundaries:
+        if key in cfg and cfg[key] not in solid.boundaries:
             raise t.error(key, f"unknown boundary {cfg[key]!r}; named boundaries: {', '.join(solid.boundaries)}")
-    if cfg["slave"] == cfg["master"]:
-        raise t.error("master", f"the same boundary as slave ({cfg['slave']!r}): contact is between two bodies")
+    if solver == "multilevel":
+        cfg.update(levels=t.integer("levels", 3, minimum=2), coarse_shape=t.shape("coarse_shape", [2, 2, 2]),
+                   margin=t.number("margin", 0.0, minimum=0.0), threads=t.integer("threads", 1),
+                   smoothing=t.integer("smoothing", 3))
+    else:
+        for key in MULTILEVEL_KEYS:
+            if key in t.data:
+                raise t.error(key, f"only the multilevel solver has it (solver is {solver!r})")
     scene.effect_settings[NAME] = cfg
+
+
+def _obstacle(t: Table) -> dict:
+    """[contact] obstacle: { plane = [a, b, c, d] } or { normal = [a, b, c], gap = g }."""
+    spec = t.data["obstacle"]
+    where = f"{t.path}: [contact] obstacle"
+
+    def numbers(key, count):
+        value = spec.get(key)
+        if (not isinstance(value, list) or len(value) != count or any(
+                isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in value)):
+            raise SceneError(f"{where}: {key} must be a list of {count} finite numbers, got {value!r}")
+        if not any(value[:3]):
+            raise SceneError(f"{where}: {key}: the plane's normal (a, b, c) is zero")
+        return [float(v) for v in value]
+
+    if not isinstance(spec, dict) or set(spec) not in ({"plane"}, {"normal"}, {"normal", "gap"}):
+        raise SceneError(f"{where}: give {{ plane = [a, b, c, d] }} or {{ normal = [a, b, c], gap = g }}, "
+                         f"got {spec!r}")
+    if "plane" in spec:
+        return {"plane": numbers("plane", 4)}
+    gap = spec.get("gap", 0.0)
+    if isinstance(gap, bool) or not isinstance(gap, (int, float)) or not gap >= 0:
+        raise SceneError(f"{where}: gap must be a number >= 0 (the plane's distance beyond the slave), got {gap!r}")
+    return {"normal": numbers("normal", 3), "gap": float(gap)}
 
 
 def plan(scene, plan) -> None:
     c = scene.effect_settings[NAME]
     solid = plan.participant("solid")
     solid.config.update(contact=c, steps=scene.time["steps"])  # loads ramped over the steps
-    plan.tasks.append(f"solid: contact of '{c['slave']}' (slave) on '{c['master']}' (master), eq. 9-11: mortar "
-                      f"projection T = D^-1 B with the dual basis on the slave, {c['solver']} on the transformed "
-                      f"system of eq. 10")
+    solver = c["solver"]
+    if c["solver"] == "multilevel":
+        solver += (f" on {c['levels']} levels (coarsest grid {c['coarse_shape']} cells, margin {c['margin']:g}, "
+                   f"{c['smoothing']} Gauss-Seidel sweeps)")
+    if "obstacle" in c:
+        o = c["obstacle"]
+        plane = (f"the plane {o['plane']} (a x + b y + c z + d = 0)" if "plane" in o else
+                 f"the plane of normal {o['normal']} {o['gap']:g} m beyond it")
+        plan.tasks.append(f"solid: contact of '{c['slave']}' with the rigid obstacle {plane}, eq. 11 with T = 0: the "
+                          f"bound is the distance to the plane along its normal; {solver}")
+    else:
+        plan.tasks.append(f"solid: contact of '{c['slave']}' (slave) on '{c['master']}' (master), eq. 9-11: mortar "
+                          f"projection T = D^-1 B with the dual basis on the slave, {solver} on the transformed "
+                          f"system of eq. 10")
     steps = scene.time["steps"]
-    plan.iteration = (f"contact: {steps} load step{'s' * (steps > 1)} (loads ramped linearly, each step starts "
-                      f"from the last), {c['solver']} on the transformed system of eq. 10 per step")
+    plan.iteration = (f"contact: {steps} load step{'s' * (steps > 1)} (constant loads ramped linearly, those given "
+                      f"per step as given; each step starts from the last), {c['solver']} per step")

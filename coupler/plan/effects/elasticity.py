@@ -8,14 +8,6 @@ ROLES = ("solid",)  # the [solvers.X] tables it needs
 DOMAINS = ("solid",)  # the [geometry.X] tables it needs
 
 
-def parse(scene, data: dict) -> None:
-    """What the solid participant cannot build: generated geometry (a fixed solid only, for now)."""
-    if scene.solid.generator is not None:
-        raise scene.error("geometry.solid", "generator", f"{scene.solid.generator['name']!r}: the elastic solid "
-                                                         f"takes a mesh file or a box; generated geometry is for "
-                                                         f"a fixed solid (effects without 'elasticity')")
-
-
 def geometry_config(solid) -> dict:
     """The solid's geometry as a participant is configured with it: a mesh file, a box or a generator."""
     from pathlib import Path
@@ -27,22 +19,25 @@ def geometry_config(solid) -> dict:
 
 def describe_load(load) -> str:
     where = f" on '{load.boundary}'" if load.boundary else ""
+    value = (", ".join(f"{v:g}" for v in load.value) + " per step") if load.per_step else load.value
+    if load.type == "platen":
+        return (f"platen{where}: rigid, mean normal stress {value} Pa (its displacement found by bracketing, "
+                f"tolerance {load.settings['tolerance']:g})")
     if load.type == "dirichlet":
-        return f"dirichlet{where}: u_{''.join(load.components)} = {load.value:g}"
+        return f"dirichlet{where}: u_{''.join(load.components)} = {value if load.per_step else f'{value:g}'}"
     if load.type in ("pressure", "fluid_pressure"):
         source = " (static fluid pressure, no fluid solver)" if load.type == "fluid_pressure" else ""
-        return f"pressure{where}: {load.value:g} Pa{source}"
-    return f"{load.type}{where}: {load.value}"
+        return f"pressure{where}: {value if load.per_step else f'{value:g}'} Pa{source}"
+    return f"{load.type}{where}: {value}"
 
 
 def solid_config(scene) -> dict:
-    """What the solid participant is configured with: its mesh (a file or a box), named
+    """What the solid participant is configured with: its mesh (a file, a box or a generator), named
     boundaries, material, loads (each with its scene key) and solver settings."""
     solver = scene.solvers["solid"]
     geometry = geometry_config(scene.solid)
-    loads = [{"type": "pressure" if load.type == "fluid_pressure" else load.type, "key": f"[loads.{i}]",
-              "boundary": load.boundary, "value": load.value, "components": load.components}
-             for i, load in enumerate(scene.loads, start=1)]
+    loads = [{"type": load.type, "key": f"[loads.{i}]", "boundary": load.boundary, "value": load.value,
+              "components": load.components, **load.settings} for i, load in enumerate(scene.loads, start=1)]
     config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material, "loads": loads,
               "degree": solver["degree"], "linear_solver": solver["linear_solver"], "rtol": solver["rtol"],
               "max_iterations": solver["max_iterations"], "dynamic": False, "fluid_density": 0.0}

@@ -1,21 +1,39 @@
-"""Meshes of contact problems made with gmsh (Debian's python3-gmsh).
-
-:func:`hertz_mesh`: a half-sphere of radius R (curved face down, touching the
-block at the origin, flat face up at z = R) resting on a block (paper figure 5),
-the two bodies meshed separately (non-matching at the contact face) and graded
-toward the contact point; :func:`hertz_solution`: Hertz theory.
+"""The Hertz contact geometry (paper figure 5), meshed with gmsh (Debian's python3-gmsh): a
+half-sphere of radius R (curved face down, touching the block at the origin, flat face up
+at z = R) resting on a block, the two bodies meshed separately (non-matching at the contact
+face) and graded toward the contact point. :func:`hertz_mesh` writes gmsh's file
+(cases/hertz/make_mesh.py); :func:`mesh` is the generator's (the same mesh as a
+:class:`~transfer.generators.blocks.Block`).
 """
 
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from . import number
+from .blocks import Block
 
 #: gmsh physical surface tags of :func:`hertz_mesh`
 HERTZ_SURFACES = {"load": 1, "sphere": 2, "block_top": 3, "block_bottom": 4, "block_sides": 5}
 #: gmsh physical volume tags (the two bodies)
 HERTZ_VOLUMES = {"half_sphere": 1, "block": 2}
+
+NAME = "hertz"
+DESCRIPTION = "a half-sphere on a block, meshed separately with gmsh (non-matching contact faces)"
+PARAMETERS = {"radius": "R, the half-sphere's radius [m] (default 1)",
+              "half_width": "the block is [-half_width, half_width]^2 x [-depth, 0] [m] (default 1)",
+              "depth": "the block's depth [m] (default 1)",
+              "h_contact": "cell size within refine_radius of the contact point [m] (default 0.04)",
+              "h_far": "cell size from grading_radius on [m] (default 0.3)",
+              "refine_radius": "radius of the finest cells about the contact point [m] (default 0.25)",
+              "grading_radius": "where the cells reach h_far [m] (default 1)",
+              "master_ratio": "the block's cells at the contact are this times the sphere's (default 1)"}
+DEFAULTS = {"radius": 1.0, "half_width": 1.0, "depth": 1.0, "h_contact": 0.04, "h_far": 0.3, "refine_radius": 0.25,
+            "grading_radius": 1.0, "master_ratio": 1.0}
+FACES = dict(HERTZ_SURFACES)
 
 
 def hertz_mesh(path, radius: float = 1.0, half_width: float = 1.0, depth: float = 1.0,
@@ -92,22 +110,28 @@ def hertz_mesh(path, radius: float = 1.0, half_width: float = 1.0, depth: float 
         gmsh.finalize()
 
 
-def hertz_boundaries(radius: float = 1.0, cap: float = 0.3) -> dict:
-    """Predicates for :func:`solid_fenicsx.read_mesh`: ``slave`` = the half-sphere's
-    curved face below z = cap * radius (where contact can happen)."""
-    R = float(radius)
 
-    def slave(x):
-        d = np.sqrt(x[0] ** 2 + x[1] ** 2 + (x[2] - R) ** 2)
-        return (x[2] > 1e-12 * R) & (x[2] < cap * R) & (np.abs(d - R) < 0.05 * R)
-
-    return {"slave": slave}
+def check(p: dict) -> dict:
+    out = {k: number(p, k, positive=True) for k in PARAMETERS}
+    if not out["h_contact"] <= out["h_far"]:
+        raise ValueError(f"h_contact: {out['h_contact']:g} m must not exceed h_far ({out['h_far']:g} m)")
+    return out
 
 
-def hertz_solution(force: float, radius: float, E: float, nu: float) -> dict:
-    """Hertz theory for a sphere on a half-space of the same material:
-    E* = E / (2 (1 - nu^2)), a = (3 F R / (4 E*))^(1/3), p0 = 3 F / (2 pi a^2)."""
-    E_star = E / (2.0 * (1.0 - nu * nu))
-    a = (3.0 * force * radius / (4.0 * E_star)) ** (1.0 / 3.0)
-    return {"E_star": E_star, "a": a, "p0": 3.0 * force / (2.0 * np.pi * a * a),
-            "approach": a * a / radius}
+def mesh(p: dict) -> Block:
+    """:func:`hertz_mesh` with the parameters, read back as a Block with the faces of
+    :data:`HERTZ_SURFACES` and the bodies of :data:`HERTZ_VOLUMES`."""
+    import meshio
+
+    with tempfile.TemporaryDirectory(prefix="varcouple-hertz-") as tmp:
+        path = Path(tmp) / "hertz.msh"
+        hertz_mesh(path, **p)
+        m = meshio.read(path)
+    tags = {kind: [(b.data, np.asarray(m.cell_data["gmsh:physical"][i])) for i, b in enumerate(m.cells)
+                   if b.type == kind] for kind in ("tetra", "triangle")}
+    tets = np.concatenate([data for data, _ in tags["tetra"]])
+    triangles = np.concatenate([data for data, _ in tags["triangle"]])
+    face_tag = np.concatenate([t for _, t in tags["triangle"]])
+    faces = {name: triangles[face_tag == tag] for name, tag in HERTZ_SURFACES.items()}
+    return Block(m.points, tets, faces, np.concatenate([t for _, t in tags["tetra"]]).astype(np.int32),
+                 f"hertz R = {p['radius']:g} m", face_tags=dict(HERTZ_SURFACES), cell_names=dict(HERTZ_VOLUMES))

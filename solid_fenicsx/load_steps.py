@@ -1,0 +1,164 @@
+"""The loads of the solid participant over its steps, and one static load step.
+
+A load's value is constant, ramped over the steps (with contact: at step k of n every
+constant load is at (k + 1) / n of its value, each contact solve starting from the last),
+or given per step (a list, one value per step: no ramp). A ``platen`` load is a rigid
+platen under stress control (:class:`solid_fenicsx.platen.Platen`): one target mean normal
+stress per step, the platen's displacement found by a search of full solves.
+
+A ``fluid_pressure`` load is a pressure -p n; on a contact face it is the static fluid in
+the fracture. It acts on the whole face, so the solve is the effective-stress problem: the
+contact multiplier is the contact stress *beyond* p. That is exactly the problem with the
+fluid on the open part of the faces only (figure 12 of the paper): on the contact set the
+fluid's load on the slave nodes (p D_kk n_k) and its mortar image on the master cancel,
+changing only the normal multiplier there by p D_kk, never the displacement. So this
+formulation needs no iteration on the contact set and its solution is unique (the
+open-part problem admits, besides it, states with contact stress below p, where the fluid
+would wedge the faces open). Reported: the contact pressure as the total normal stress
+in the contact (multiplier / D_kk + p), and each fluid load's force on the open part of
+its face (the whole face's force minus the contact set's p D_kk n_k).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+@dataclass
+class SteppedLoad:
+    """A declared load: the dolfinx value holder and its value over the steps."""
+
+    kind: str
+    name: str | None  # the scene's name of its boundary (None for a body force)
+    boundary: object  # that boundary as the mesh knows it: a name or a tag
+    holder: object  # dolfinx Constant
+    value: np.ndarray  # the full value (ramped with contact)
+    per_step: list | None  # one value per step, or None
+
+    def apply(self, step: int, steps: int, ramp: bool) -> None:
+        if self.per_step is not None:
+            self.holder.value = self.per_step[step]
+        elif ramp:
+            self.holder.value = (step + 1) / steps * self.value
+
+    @property
+    def current(self) -> np.ndarray:
+        return np.array(self.holder.value, dtype=float)
+
+
+def add_loads(elasticity, configs: list[dict], where) -> tuple[list[SteppedLoad], object | None, list]:
+    """Declare the loads of the participant's configuration on `elasticity` (boundary names
+    resolved by `where`): (stepped loads, the platen or None, the platen's stresses)."""
+    from .platen import Platen
+
+    loads, platen, stresses = [], None, []
+    for load in configs:
+        kind, value = load["type"], load.get("value")
+        per_step = value if isinstance(value, list) and kind in ("dirichlet", "pressure", "fluid_pressure") else None
+        first = per_step[0] if per_step is not None else value
+        boundary = where(load["boundary"]) if load.get("boundary") is not None else None
+        if kind == "platen":
+            if platen is not None:
+                raise ValueError(f"{load.get('key', 'a load')}: one platen per solid")
+            platen = Platen(elasticity, boundary, area=load.get("area"), tolerance=load.get("tolerance", 1e-3),
+                            max_solves=load.get("max_iterations", 20))
+            stresses = [float(v) for v in value]  # one per step
+            continue
+        if kind == "dirichlet":
+            holder = elasticity.add_dirichlet(boundary, first, components=[AXES[c] for c in load["components"]])
+        elif kind in ("pressure", "fluid_pressure"):
+            holder = elasticity.add_pressure(boundary, first)
+        elif kind == "traction":
+            holder = elasticity.add_traction(boundary, first)
+        elif kind == "body_force":
+            holder = elasticity.add_body_force(first)
+        else:
+            raise ValueError(f"unknown load type {kind!r}")
+        loads.append(SteppedLoad(kind, load.get("boundary"), boundary, holder,
+                                 np.array(holder.value, dtype=float, copy=True), per_step))
+    return loads, platen, stresses
+
+
+class StaticStep:
+    """One static load step of the solid: the loads set for the step, then one solve, or
+    the platen's search of solves; with contact each solve is the contact QP.
+
+    ``run(step)`` returns the reports (``(solver, converged, iterations, residual,
+    tolerance, detail, history)`` of the step's final inner solves), the figures and, with
+    contact, the slave face's fields (values at the slave nodes)."""
+
+    def __init__(self, elasticity, loads, steps: int, platen=None, stresses=(), contact=None):
+        self.elasticity, self.loads, self.steps = elasticity, loads, int(steps)
+        self.platen, self.stresses, self.contact = platen, list(stresses), contact
+        self.state = None
+        # fluid loads on a contact face: (load, +1 on the slave / -1 on the master)
+        faces = {} if contact is None else {contact.slave_boundary: 1.0, contact.master_boundary: -1.0}
+        self.fluid = [(ld, faces[ld.boundary]) for ld in loads if ld.kind == "fluid_pressure" and ld.boundary in faces]
+
+    def _solve_once(self) -> bool:
+        if self.contact is not None:
+            self.state = self.contact.solve()
+            return self.state.solution.converged
+        self.elasticity.solve_static()
+        return all(r.converged for r in self.elasticity.info.solves)
+
+    def run(self, step: int) -> tuple[list, dict, dict]:
+        before = [load.current for load in self.loads]
+        for load in self.loads:
+            load.apply(step, self.steps, ramp=self.contact is not None)
+        changed = any(not np.array_equal(b, load.current) for b, load in zip(before, self.loads))
+        reports, figures = [], {}
+        if self.platen is not None:
+            closing = max(float(np.nanmin(self.contact.mortar.gap)), 0.0) if self.contact is not None else 0.0
+            result = self.platen.load_to(self.stresses[step], self._solve_once, closing=closing, stale=changed)
+            reports.append(("platen", result.converged, result.solves, result.mismatch, self.platen.tolerance,
+                            f"{result.reason}: {result.stress:.6g} Pa for {result.target:.6g} Pa", ()))
+            figures.update(stress=result.stress, target_stress=result.target, platen_displacement=result.displacement,
+                           platen_force=result.force, platen_solves=result.solves)
+        else:
+            self._solve_once()
+        if self.contact is None:
+            reports[:0] = [(f"{r.solver} {r.what}", r.converged, r.iterations, r.residual, r.tolerance, r.reason, ())
+                           for r in self.elasticity.info.solves]
+            return reports, figures, {}
+        fields, contact_figures, report = self._contact()
+        reports.insert(0, report)
+        figures.update(contact_figures)
+        return reports, figures, fields
+
+    def _contact(self) -> tuple[dict, dict, tuple]:
+        """The last contact solve: its report, figures and slave fields, with the fluid in
+        the contact moved from the fluid's load to the contact stress (module docstring)."""
+        state, contact = self.state, self.contact
+        sol, m = state.solution, contact.mortar
+        on_contact = np.where(state.active, m.weights, 0.0)[:, None] * m.normals  # D_kk n_k on the contact set
+        pressure, force = state.pressure.copy(), state.force.copy()
+        figures = {}
+        for load, side in self.fluid:
+            p = float(load.current)
+            if side > 0:  # the slave's fluid load: part of the contact stress where the faces touch
+                pressure[state.active] += p
+                force -= p * on_contact.sum(axis=0)
+            full = self.elasticity.pressure_resultant(load.boundary, p)
+            open_part = full + side * p * on_contact.sum(axis=0)
+            figures.update({f"fluid_force_{load.name}_{c}": open_part[i] for c, i in AXES.items()})
+        stats = state.summary()
+        figures.update(iterations=sol.iterations, krylov_iterations=sol.krylov_iterations,
+                       seconds=state.seconds["solve"], active_nodes=stats["active_nodes"],
+                       area_fraction=state.area_fraction, max_pressure=float(np.max(pressure, initial=0.0)),
+                       **{f"force_{c}": force[i] for c, i in AXES.items()}, min_gap=stats["min_gap"],
+                       mean_gap=state.mean_gap, closure=contact.initial_mean_gap - state.mean_gap,
+                       dofs=contact.num_dofs)
+        if "asymptotic_rate" in sol.info:
+            figures["asymptotic_rate"] = sol.info["asymptotic_rate"]
+            figures.update({f"dofs_level_{k}": n for k, n in enumerate(sol.info["level_sizes"])})
+        fields = {"contact_pressure": pressure, "gap": np.nan_to_num(state.gap, nan=0.0),
+                  "in_contact": state.active.astype(float), "slave": np.ones(len(m.slave.nodes)),
+                  "mortar_weight": m.weights}
+        report = (f"contact {sol.solver}", sol.converged, sol.iterations, sol.residual, sol.tolerance, sol.reason,
+                  tuple(sol.history))
+        return fields, figures, report
