@@ -56,3 +56,51 @@ def solver_convergence(path: Path, steps: list[dict]) -> bool:
     plt.close(fig)
     return True
 
+
+
+def varying_figures(steps: list[dict]) -> dict[str, list]:
+    """``{"participant.figure": value per step}`` of the figures that change over the steps
+    (NaN where a step lacks one), times left out."""
+    names = sorted({f"{who}.{name}" for s in steps for who, figures in s.get("figures", {}).items()
+                    for name in figures if "seconds" not in name})
+    series = {}
+    for full in names:
+        who, name = full.split(".", 1)
+        values = [s.get("figures", {}).get(who, {}).get(name, np.nan) for s in steps]
+        finite = [v for v in values if np.isfinite(v)]
+        if len(finite) > 1 and np.ptp(finite) > 0:
+            series[full] = values
+    return series
+
+
+def figures_plot(path: Path, steps: list[dict], overlays: dict | None = None) -> bool:
+    """Every figure the participants report that changes over the steps, one panel each
+    against the step (e.g. a closure test's stress, closure and contact area fraction per
+    load step); ``overlays`` ``{"participant.figure": values per step}`` are drawn dashed on
+    their figure's panel (e.g. a check's fitted law). False when no figure changes."""
+    series = varying_figures(steps)
+    if not series:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    columns = min(4, len(series))
+    rows = -(-len(series) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.4 * rows), squeeze=False)
+    x = [s.get("step", k) for k, s in enumerate(steps)]
+    for ax, (name, values) in zip(axes.ravel(), series.items()):
+        ax.plot(x, values, "o-", ms=3)
+        if overlays and name in overlays:
+            ax.plot(x, overlays[name], "k--", lw=1, label="fit")
+            ax.legend(fontsize=7)
+        ax.set_title(name, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.set_xlabel("step", fontsize=7)
+    for ax in axes.ravel()[len(series):]:
+        ax.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return True

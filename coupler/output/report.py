@@ -133,7 +133,9 @@ def _files(out: Path) -> str:
 PLOTS = {"residuals.png": ("Coupling residuals", "The relative interface residual (mass-weighted L2) of every "
                                                  "coupling iteration of each step, and the tolerance."),
          "convergence.png": ("Inner solver convergence", "The criterion of every inner solve that reports its "
-                                                         "history, per iteration of each step.")}
+                                                         "history, per iteration of each step."),
+         "figures.png": ("Figures per step", "Every figure the participants report that changes over the steps "
+                                             "(dashed: the check's fit).")}
 
 
 def write_page(out: Path, summary: dict, pictures: list) -> Path:
