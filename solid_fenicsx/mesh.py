@@ -247,17 +247,7 @@ def read_mesh(path, boundaries: Mapping[str, Predicate] | None = None, tag_key: 
     ``tags``, ``CellEntityIds`` present); gmsh physical names of dimension 2
     name them. Second-order tetrahedra are reduced to their corner vertices.
     """
-    args = {}
-    error = None
-    if comm.rank == root:
-        try:
-            args = _read_on_root(str(path), tag_key)
-        except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
-            error = f"{path}: {exc}"
-    error = comm.bcast(error, root=root)
-    if error:
-        raise SolidMeshError(error)
-    return from_arrays(comm=comm, root=root, boundaries=boundaries, **args)
+    return _from_root(lambda: _read_on_root(str(path), tag_key), str(path), boundaries, comm, root)
 
 
 def generated_mesh(generator: str, parameters: Mapping | None = None,
@@ -267,15 +257,24 @@ def generated_mesh(generator: str, parameters: Mapping | None = None,
     faces as boundaries, distributed; ``boundaries`` add predicates as in :func:`from_arrays`."""
     from transfer.generators import generate
 
+    def build():
+        block = generate(generator, dict(parameters or {}))
+        triangles, tags = block.tagged_triangles()
+        return {"points": block.points, "cells": block.cells, "triangles": triangles, "triangle_tags": tags,
+                "tag_names": block.face_tags}
+
+    return _from_root(build, f"generator {generator!r}", boundaries, comm, root)
+
+
+def _from_root(build, where: str, boundaries, comm, root) -> SolidMesh:
+    """:func:`from_arrays` with the arrays ``build()`` makes on ``root``; its error, prefixed by
+    `where`, raised on every rank."""
     args, error = {}, None
     if comm.rank == root:
         try:
-            block = generate(generator, dict(parameters or {}))
-            triangles, tags = block.tagged_triangles()
-            args = {"points": block.points, "cells": block.cells, "triangles": triangles, "triangle_tags": tags,
-                    "tag_names": block.face_tags}
+            args = build()
         except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
-            error = f"generator {generator!r}: {exc}"
+            error = f"{where}: {exc}"
     error = comm.bcast(error, root=root)
     if error:
         raise SolidMeshError(error)
