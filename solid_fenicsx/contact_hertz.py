@@ -1,7 +1,7 @@
 """The Hertz contact problem (paper 4.1, figure 5) with :class:`Contact`: a half-sphere
 pushed onto a block (:func:`transfer.generators.hertz.hertz_mesh`), compared with
 Hertz theory for the measured contact force. Used by bench/contact.py (the case's own
-comparison: ``[check] kind = "hertz"``, coupler/checks/hertz.py).
+comparison: ``[check] kind = "hertz"``, coupler/checks/hertz.py)."""
 
 from __future__ import annotations
 

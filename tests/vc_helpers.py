@@ -259,10 +259,10 @@ NEEDS_GMSH = pytest.mark.skipif(importlib.util.find_spec("gmsh") is None, reason
 
 
 def hertz_mesh_file(path, **params) -> None:
-    """solid_fenicsx.contact_meshes.hertz_mesh(path, **params) in a child process: gmsh loaded in
+    """transfer.generators.hertz.hertz_mesh(path, **params) in a child process: gmsh loaded in
     the test process makes VTK's later offscreen rendering abort (tests/coupler/test_pictures.py)."""
     import subprocess
     import sys
 
-    code = f"from solid_fenicsx.contact_meshes import hertz_mesh; hertz_mesh({str(path)!r}, **{params!r})"
+    code = f"from transfer.generators.hertz import hertz_mesh; hertz_mesh({str(path)!r}, **{params!r})"
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)

@@ -68,24 +68,14 @@ def test_the_plan_is_one_way_around_a_solid_served_in_process():
     ("aperture = 1.0e-3 ", "apperture = 1.0e-3 ", "[geometry.solid.parameters] apperture: unknown parameter of "
                                                    "generator 'plates'"),
     ('generator = "plates"            # transfer', 'generator = "spheres"  # transfer',
-     "[geometry.solid] generator: unknown value 'spheres'; use one of 'plates'"),
+     "[geometry.solid] generator: unknown value 'spheres'; use one of 'fracture_specimen', 'hertz', "
+     "'penny_crack', 'plates'"),
     ('solid_fraction = "exact"', 'solid_fraction = "mask"', "[flow] solid_fraction: unknown value 'mask'"),
 ])
 def test_what_a_fixed_solid_has_not_is_named(tmp_path, old, new, message):
     with pytest.raises(SceneError) as info:
         load(copy_case(CASE, tmp_path, {old: new}))
     assert "scene.toml: " + message in str(info.value)
-
-
-def test_generated_geometry_is_for_a_fixed_solid(tmp_path):
-    case = copy_case(CASE, tmp_path, {'effects = ["flow"]': 'effects = ["elasticity", "flow"]',
-                                      "[geometry.fluid]": '[geometry.solid.boundaries]\nbottom = "y < 1e-9"\n'
-                                                          '[geometry.fluid]',
-                                      "[check]": '[materials.solid]\nE = 1e9\nnu = 0.3\n[[loads]]\n'
-                                                 'type = "dirichlet"\nboundary = "bottom"\n[check]'})
-    with pytest.raises(SceneError, match=r"scene.toml: \[geometry.solid\] generator: 'plates': the elastic solid "
-                                         r"takes a mesh file or a box"):
-        load(case)
 
 
 def test_a_rigid_solid_serves_its_mesh_and_stays_put():
