@@ -202,34 +202,28 @@ def check(args: argparse.Namespace) -> int:
     have each participant read its part (meshes, boundaries) without solving anything
     (``--quick``: the scene alone)."""
     from coupler import scene as scenes
+    from coupler.plan.plan import make_plan
+    from coupler.run.preflight import check_memory, estimate
 
     scene = scenes.load(args.case)
-    study = scenes.study_module(scene)
     print(f"scene         {scene.path}: valid")
-    if study is not None:
-        for line in study.plan_lines(scene):
-            print(line)
-    else:
-        from coupler.plan.plan import make_plan
-        from coupler.run.preflight import check_memory, estimate
+    plan = make_plan(scene)
+    for line in plan.lines():
+        print(line)
+    if scene.check:
+        from coupler.checks import KINDS
 
-        plan = make_plan(scene)
-        for line in plan.lines():
-            print(line)
-        if scene.check:
-            from coupler.checks import KINDS
+        print(f"check         {scene.check['kind']}: {KINDS[scene.check['kind']].DESCRIPTION} "
+              f"(tolerance {scene.check['tolerance']:g})")
+    estimates = estimate(scene)
+    print("size          " + "; ".join(f"{e.name} {e.cells:,} cells" for e in estimates if e.cells))
+    print(f"memory        {check_memory(scene, estimates)}")
+    if not args.quick:
+        from coupler.run.runner import rehearse
 
-            print(f"check         {scene.check['kind']}: {KINDS[scene.check['kind']].DESCRIPTION} "
-                  f"(tolerance {scene.check['tolerance']:g})")
-        estimates = estimate(scene)
-        print("size          " + "; ".join(f"{e.name} {e.cells:,} cells" for e in estimates if e.cells))
-        print(f"memory        {check_memory(scene, estimates)}")
-        if not args.quick:
-            from coupler.run.runner import rehearse
-
-            for name, mesh in rehearse(scene, plan).items():
-                print(f"configured    {name}: {plan.participant(name).kind} accepts its part "
-                      f"({mesh.num_cells:,} cells, {mesh.num_points:,} points); operators built")
+        for name, mesh in rehearse(scene, plan).items():
+            print(f"configured    {name}: {plan.participant(name).kind} accepts its part "
+                  f"({mesh.num_cells:,} cells, {mesh.num_points:,} points); operators built")
     print(f"output        {scene.output_dir}")
     return 0
 

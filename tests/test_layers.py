@@ -113,15 +113,11 @@ def test_participants_import_only_the_protocol_of_the_coupler():
     assert not wrong, "\n".join(sorted(wrong))
 
 
-#: the studies that still run physics inside the coupler until they are ordinary scenes
-PENDING: set = set()
-
-
 def test_the_coupler_imports_no_participant():
     participants = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin")
     wrong = {f"{a} -> {b}" for a, targets in graph().items() if a.startswith("coupler")
              and not a.startswith("coupler.standins") for b in targets if b.startswith(participants)}
-    assert wrong == PENDING, "\n".join(sorted(wrong ^ PENDING))
+    assert not wrong, "\n".join(sorted(wrong))
 
 
 def test_the_graph_sees_function_level_imports():

@@ -1,9 +1,8 @@
-"""One scene run into its output directory, whatever its kind (a plan or a study): what
+"""One scene run into its output directory: what
 ``varcouple run`` does and what ``varcouple study`` does for each of its runs."""
 
 from __future__ import annotations
 
-from coupler import scene as scenes
 from coupler.errors import CouplerError, NotConverged, RunFailed, SceneError, one_line
 from coupler.protocol.transport import new_run_id
 from coupler.run.outdir import OutputLock, prepare
@@ -15,7 +14,6 @@ def execute(scene, origin: str, log=print) -> dict:
     locked for the run; its summary. A failure once the run started is a :class:`RunFailed`;
     not converging stays :class:`NotConverged` and a scene key found wrong while running a
     :class:`SceneError`."""
-    study = scenes.study_module(scene)
     run_id = new_run_id()
     lock = OutputLock(scene.output_dir, run_id)
     out = prepare(scene.output_dir, origin)
@@ -23,8 +21,6 @@ def execute(scene, origin: str, log=print) -> dict:
         if lock.note:
             log(f"note: {out}: {lock.note}")
         try:
-            if study is not None:
-                return study.run(scene, log=log)
             from coupler.run.runner import run as run_coupled_case
 
             return run_coupled_case(scene, log=log, run_id=run_id)

@@ -1,24 +1,23 @@
 """Scene files: ``cases/NAME/scene.toml`` read with tomllib and validated.
 
-A scene is a case of effects (a ``[physics]`` table, :mod:`coupler.scene.coupled`) or a study
-run inside the coupler (a marker table, :data:`STUDIES`); cases/README.md documents every
-key. Every error names the scene file, the table and key, and the reason.
+A scene is a case of effects (a ``[physics]`` table, :mod:`coupler.scene.coupled`);
+cases/README.md documents every key. Every error names the scene file, the table and key, and the reason.
 """
 
 from __future__ import annotations
 
-import importlib
 import tomllib
 from pathlib import Path
 
 from coupler.errors import SceneError
 
 from .overrides import apply
-from .tables import STUDIES, scene_path
+from .tables import scene_path
+
 
 def load(case, output: str | Path | None = None, overrides: dict | None = None):
     """Read and validate the scene of `case` (a case directory or its scene.toml):
-    a :class:`~coupler.scene.coupled.CoupledScene` or a study's scene.
+    a :class:`~coupler.scene.coupled.CoupledScene`.
     `output` overrides ``[output] directory`` (relative to the working directory); `overrides`
     (``{dotted key: value}``, :mod:`coupler.scene.overrides`) set keys before validation."""
     path, case_dir = scene_path(case)
@@ -31,21 +30,9 @@ def load(case, output: str | Path | None = None, overrides: dict | None = None):
         raise SceneError(f"{path}: cannot read: {exc.strerror or exc}") from None
     for key, value in (overrides or {}).items():
         apply(data, key, value)
-    if "physics" in data:
-        from .coupled import parse
+    if "physics" not in data:
+        hint = ' (a [transfer] table: effects = ["transfer"])' if "transfer" in data else ""
+        raise SceneError(f"{path}: [physics] effects: missing: the effects the scene simulates{hint}")
+    from .coupled import parse
 
-        return parse(path, case_dir, data, output)
-    for marker, module in STUDIES.items():
-        if marker in data:
-            return importlib.import_module(module).parse(path, case_dir, data, output)
-    hint = ' (a [transfer] table: effects = ["transfer"])' if "transfer" in data else ""
-    raise SceneError(f"{path}: [physics] effects: missing: the effects the scene simulates{hint}; or a study's "
-                     f"{', '.join(f'[{m}]' for m in STUDIES)} table")
-
-
-def study_module(scene):
-    """The module of a study scene (one of :data:`STUDIES`), or None for coupled scenes."""
-    module = type(scene).__module__
-    return importlib.import_module(module) if module in STUDIES.values() else None
-
-
+    return parse(path, case_dir, data, output)

@@ -13,14 +13,6 @@ from coupler.errors import SceneError
 
 SCENE_FILE = "scene.toml"
 
-# Scenes that are studies run inside the coupler process (no participants), recognised by
-# a marker table: marker -> module. Each module provides ``parse(path, case_dir, data,
-# output)`` -> a scene with ``path`` and ``output_dir``, ``plan_lines(scene)`` -> the plan
-# as text (``varcouple check``) and ``run(scene, log)`` -> the summary dict (a failed
-# ``[check]`` is ``summary["check"]["passed"] == False``).
-STUDIES = {
-}
-
 
 def scene_path(case) -> tuple[Path, Path]:
     case = Path(case)

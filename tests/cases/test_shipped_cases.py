@@ -58,8 +58,6 @@ def honest(summary: dict) -> None:
     """summary.json's status and converged flags agree with every inner solve it reports."""
     assert summary["status"] == "completed", summary.get("error")
     for step in summary.get("steps", []):
-        if not isinstance(step.get("solves"), dict):  # a study's step (no participant reports)
-            continue
         final = [r for reports in step["solves"].values() for r in reports]
         inner = all(r["converged"] or r["accepted"] for r in final)
         assert step["inner_converged"] == inner and step["converged"] == (inner and step["coupling_converged"])

@@ -1,1 +1,0 @@
-"""Scenes run inside the coupler process (obstacle, closure)."""
