@@ -23,6 +23,11 @@ inner CG reaches its iteration limit, the last iterate is returned unconverged
 (``reason`` with the set changes of the last iterations); it raises
 :class:`NonsmoothSolveError` only for a matrix that is not SPD, NaN, or a Krylov
 breakdown.
+
+The same iteration runs on a :class:`~nonsmooth.distributed.DistributedQP` (MPI AIJ
+matrices): the sets and iterates are then local parts, every decision (residual, set
+changes, cycles, the monotone mode's worst half) is taken on values reduced over the
+communicator, so all ranks stop together, and the inner CG + GAMG is distributed.
 """
 
 from __future__ import annotations
@@ -31,8 +36,10 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
+from mpi4py import MPI
 from petsc4py import PETSc
 
+from .distributed import DistributedQP
 from .petsc import configure_cg_amg, converged_reason, near_nullspace, petsc_matrix, petsc_vector
 from .problem import BoundConstrainedQP, NonsmoothSolveError, Solution
 
@@ -47,83 +54,137 @@ def _fixed_system(A: sp.csr_matrix, b: np.ndarray, diag: np.ndarray, active: np.
     return sp.csr_matrix(K), rhs
 
 
+class _Serial:
+    """The serial QP's algebra for the solver: scipy products, sequential PETSc inner
+    systems (a :class:`~nonsmooth.distributed.DistributedQP` provides the same methods)."""
+
+    comm = MPI.COMM_SELF
+
+    def __init__(self, qp: BoundConstrainedQP):
+        self.qp = qp
+
+    def diagonal(self) -> np.ndarray:
+        return self.qp.A.diagonal()
+
+    def finite(self) -> bool:
+        return bool(np.all(np.isfinite(self.qp.b)) and np.all(np.isfinite(self.qp.A.data)))
+
+    def fixed_system(self, active, value, diag) -> tuple[PETSc.Mat, PETSc.Vec]:
+        K, rhs = _fixed_system(self.qp.A, self.qp.b, diag, active, value)
+        return petsc_matrix(K, self.qp.block_size), petsc_vector(rhs)
+
+    @staticmethod
+    def vector(values) -> PETSc.Vec:
+        return petsc_vector(values)
+
+
 class _Sets:
-    """The active sets as one int8 array: -1 at lower, +1 at upper, 0 inactive."""
+    """The active sets as one int8 array: -1 at lower, +1 at upper, 0 inactive (the local
+    part on several ranks; the worst half of :meth:`monotone` is chosen over all ranks)."""
 
     @staticmethod
     def predict(qp, x, lam, dinv, tol):
         y = x + lam * dinv
-        s = np.zeros(qp.size, np.int8)
+        s = np.zeros(len(x), np.int8)
         s[y > qp.upper + tol] = 1
         s[y < qp.lower - tol] = -1
         s[qp.lower == qp.upper] = 1  # fixed components are always at their bound
         return s
 
     @staticmethod
-    def monotone(qp, s, x, lam, dinv, tol):
+    def monotone(qp, s, x, lam, dinv, tol, comm):
         """Add every violated bound; drop wrong-sign multipliers only when
         nothing is violated, the worst half of them."""
         new = s.copy()
         free = s == 0
         new[free & (x > qp.upper + tol)] = 1
         new[free & (x < qp.lower - tol)] = -1
-        if np.any(new != s):
+        if comm.allreduce(bool(np.any(new != s)), op=MPI.LOR):
             return new
         wrong = np.flatnonzero(((s == 1) & (lam * dinv < -tol)) | ((s == -1) & (lam * dinv > tol)))
         wrong = wrong[qp.lower[wrong] != qp.upper[wrong]]
-        if wrong.size:
-            worst = wrong[np.argsort(-np.abs(lam[wrong] * dinv[wrong]))][: max(1, wrong.size // 2)]
-            new[worst] = 0
+        size = np.abs(lam[wrong] * dinv[wrong])
+        sizes = comm.allgather(size) if comm.size > 1 else [size]
+        everywhere = np.concatenate(sizes)
+        if everywhere.size:
+            chosen = np.argsort(-everywhere)[: max(1, everywhere.size // 2)] - sum(len(v) for v in sizes[:comm.rank])
+            new[wrong[chosen[(chosen >= 0) & (chosen < len(wrong))]]] = 0
         return new
 
 
-def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, tol: float = 1e-10,
+class _SetHistory:
+    """The active sets of every iteration: a set seen before (a cycle) is one that every
+    rank's local part has seen at the same iteration."""
+
+    def __init__(self, comm):
+        self.comm, self.keys = comm, []
+
+    def add(self, sets: np.ndarray) -> None:
+        self.keys.append(sets.tobytes())
+
+    def __contains__(self, sets: np.ndarray) -> bool:
+        key = sets.tobytes()
+        same = np.array([k == key for k in self.keys], np.int8)
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, same, op=MPI.MIN)
+        return bool(same.any())
+
+
+def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | None = None, *, tol: float = 1e-10,
                      max_iter: int = 100, ksp_rtol: float = 1e-12, ksp_max_it: int = 2000,
                      amg: str = "gamg") -> Solution:
     """Solve the QP by the primal-dual active set method with CG + GAMG inner solves.
 
+    qp : serial (scipy) or distributed (:class:`~nonsmooth.distributed.DistributedQP`: ``x0``
+        and the returned ``x`` and ``active`` are then the local parts)
     amg : ``"gamg"`` (with the near-nullspace) or ``"hypre"``, see :func:`nonsmooth.petsc.configure_cg_amg`
     tol : on the natural residual scaled by diag(A), relative to max(|x|, |finite bounds|)
-    x0 : start (e.g. the previous load step); projected onto the bounds
+    x0 : start (e.g. the previous load step); projected onto the bounds. The first active
+        sets are predicted from it (``x0 + lam / diag(A)`` against the bounds): at the
+        previous solution with the previous loads they are its active sets, with changed
+        loads those sets moved by the change of the multiplier (a warm start of both).
     ``iterations`` counts active-set iterations (one linear solve each),
     ``history`` the relative scaled natural residual after each, ``info["changes"]``
     the number of components whose set changed before each solve.
     """
     start = time.perf_counter()
-    n = qp.size
-    A, b = qp.A, qp.b
-    diag = A.diagonal()
-    if np.any(diag <= 0):
-        raise NonsmoothSolveError(f"A has {int(np.sum(diag <= 0))} non-positive diagonal entries: not SPD")
+    algebra = qp if isinstance(qp, DistributedQP) else _Serial(qp)
+    comm = algebra.comm
+    diag = algebra.diagonal()
+    nonpositive = comm.allreduce(int(np.sum(diag <= 0)))
+    if nonpositive:
+        raise NonsmoothSolveError(f"A has {nonpositive} non-positive diagonal entries: not SPD")
     dinv = 1.0 / diag
-    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(A.data))):
+    if not algebra.finite():
         raise NonsmoothSolveError("the problem contains NaN or inf")
     finite = np.concatenate([qp.lower[np.isfinite(qp.lower)], qp.upper[np.isfinite(qp.upper)]])
-    x = qp.project(np.zeros(n) if x0 is None else np.asarray(x0, float).copy())
+    bound_scale = comm.allreduce(float(np.max(np.abs(finite), initial=0.0)), op=MPI.MAX)
+    x = qp.project(np.zeros(len(qp.lower)) if x0 is None else np.asarray(x0, float).copy())
     bound = np.where(qp.lower == qp.upper, qp.lower, 0.0)
 
     def scale(x):
-        return max(np.max(np.abs(x), initial=0.0), np.max(np.abs(finite), initial=0.0), np.finfo(float).tiny)
+        return max(comm.allreduce(float(np.max(np.abs(x), initial=0.0)), op=MPI.MAX), bound_scale,
+                   np.finfo(float).tiny)
 
     nns = near_nullspace(qp.near_nullspace)
-    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    ksp = PETSc.KSP().create(comm)
     configure_cg_amg(ksp, ksp_rtol, max_it=ksp_max_it, amg=amg)
     ksp.setInitialGuessNonzero(True)
 
-    lam = b - A @ x
+    lam = qp.multiplier(x)
     sets = _Sets.predict(qp, x, lam, dinv, tol * scale(x))
-    seen = {sets.tobytes(): 0}
+    seen = _SetHistory(comm)
+    seen.add(sets)
     history, changes, krylov = [], [], 0
     monotone_from, converged, reason = None, False, ""
     try:
         for it in range(1, max_iter + 1):
             value = np.where(sets == 1, qp.upper, np.where(sets == -1, qp.lower, bound))
-            K, rhs = _fixed_system(A, b, diag, sets != 0, value)
-            M = petsc_matrix(K, qp.block_size)
+            M, bv = algebra.fixed_system(sets != 0, value, diag)
             if nns is not None:
                 M.setNearNullSpace(nns)
             ksp.setOperators(M)
-            xv, bv = petsc_vector(np.where(sets != 0, value, x)), petsc_vector(rhs)
+            xv = algebra.vector(np.where(sets != 0, value, x))
             ksp.solve(bv, xv)
             inner = ksp.getConvergedReason()
             krylov += ksp.getIterationNumber()
@@ -133,11 +194,12 @@ def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, to
             x = xv.getArray().copy()
             for obj in (M, xv, bv):
                 obj.destroy()
-            if not np.all(np.isfinite(x)):
+            if not comm.allreduce(bool(np.all(np.isfinite(x))), op=MPI.LAND):
                 raise NonsmoothSolveError(f"active set iteration {it}: the linear solve returned NaN/inf")
-            lam = b - A @ x
+            lam = qp.multiplier(x)
             lam[sets == 0] = 0.0  # zero up to the Krylov tolerance
-            history.append(float(np.max(np.abs(x - qp.project(x + lam * dinv)), initial=0.0)) / scale(x))
+            residual = comm.allreduce(float(np.max(np.abs(x - qp.project(x + lam * dinv)), initial=0.0)), op=MPI.MAX)
+            history.append(residual / scale(x))
             tol_abs = tol * scale(x)
             if inner < 0:
                 reason = (f"the inner CG + {amg.upper()} reached its {ksp_max_it} iterations at active set "
@@ -146,17 +208,15 @@ def solve_active_set(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, to
             if monotone_from is None:
                 new = _Sets.predict(qp, x, lam, dinv, tol_abs)
             else:
-                new = _Sets.monotone(qp, sets, x, lam, dinv, tol_abs)
-            changes.append(int(np.count_nonzero(new != sets)))
+                new = _Sets.monotone(qp, sets, x, lam, dinv, tol_abs, comm)
+            changes.append(comm.allreduce(int(np.count_nonzero(new != sets))))
             if changes[-1] == 0 or history[-1] <= tol:
                 converged, reason = True, "active sets repeat" if changes[-1] == 0 else "criterion below the tolerance"
                 break
-            key = new.tobytes()
-            if key in seen and monotone_from is None:
-                monotone_from = it  # a cycle: the sets of iteration seen[key] came back
-                new = _Sets.monotone(qp, sets, x, lam, dinv, tol_abs)
-                key = new.tobytes()
-            seen[key] = it
+            if new in seen and monotone_from is None:
+                monotone_from = it  # a cycle: the sets of an earlier iteration came back
+                new = _Sets.monotone(qp, sets, x, lam, dinv, tol_abs, comm)
+            seen.add(new)
             sets = new
         else:
             reason = (f"iteration limit; set changes in the last iterations {changes[-5:]}"

@@ -26,34 +26,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from mpi4py import MPI
 from scipy.sparse.csgraph import connected_components
 
 from nonsmooth import BoundConstrainedQP, Solution
 from nonsmooth import solvers as nonsmooth_solvers
+from nonsmooth.distributed import DistributedQP
 from nonsmooth.obstacle import rigid_body_modes as body_modes
 
-from .mortar import ContactSetupError, Mortar, boundary_face, mortar
+from .contact_mpi import DistributedTransform
+from .mortar import ContactSetupError, Mortar, boundary_face, mortar, tangent_frames
 from .obstacle import Plane
-
-
-def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(k, 3, 3) orthonormal frames and (k,) the column of each that is its normal n: the
-    normal takes the place of its largest component, the tangents are the other two axes
-    made orthogonal to it (Gram-Schmidt), so a normal along a coordinate axis leaves the
-    components where they are (only the normal's sign may flip)."""
-    n = normals / np.linalg.norm(normals, axis=1)[:, None]
-    slot = np.argmax(np.abs(n), axis=1)
-    frames = np.zeros((len(n), 3, 3))
-    frames[np.arange(len(n)), :, slot] = n
-    for shift in (1, 2):
-        column = (slot + shift) % 3
-        t = np.zeros_like(n)
-        t[np.arange(len(n)), column] = 1.0
-        for done in range(shift):  # against the normal and the tangents already made
-            prev = frames[np.arange(len(n)), :, (slot + done) % 3]
-            t -= np.einsum("ij,ij->i", t, prev)[:, None] * prev
-        frames[np.arange(len(n)), :, column] = t / np.linalg.norm(t, axis=1)[:, None]
-    return frames, slot
 
 
 def transformation(m: Mortar, num_dofs: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
@@ -148,8 +131,11 @@ class Contact:
     def __init__(self, elasticity, slave, master=None, solver: str = "active_set",
                  search_distance: float | None = None, max_normal_angle: float = 45.0, obstacle=None,
                  near_nullspace: bool = False, **options):
-        if elasticity.mesh.comm.size > 1:
-            raise ContactSetupError("contact runs on one process (the transformed system is assembled in scipy)")
+        comm = elasticity.mesh.comm
+        if comm.size > 1 and (solver != "active_set" or near_nullspace):
+            raise ContactSetupError(f"contact on {comm.size} ranks: solver {solver!r}"
+                                    f"{' with near_nullspace' if near_nullspace else ''} assembles serial matrices; "
+                                    f"use solver 'active_set' (without near_nullspace) or one rank")
         if (master is None) == (obstacle is None):
             raise ContactSetupError("contact needs either a master face or an obstacle, not both")
         nonsmooth_solvers.get(solver)  # unknown names fail here, before any assembly
@@ -158,43 +144,30 @@ class Contact:
         self.slave_boundary, self.master_boundary = slave, master
         V = elasticity.V
         self.solver, self.options, self.near_nullspace = solver, options, near_nullspace
-        self.num_dofs = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
-        n = self.num_dofs // 3
-        self.ids = elasticity.vertices.dof_input_ids(V)[:n]  # input vertex id of each dof block
-        self.dofs = np.empty(n, np.int64)
-        self.dofs[self.ids] = np.arange(n)  # dof block of each input vertex
+        self.num_dofs = V.dofmap.index_map.size_global * V.dofmap.index_map_bs
         vio = elasticity.vertices
-        self.points = np.empty((n, 3))  # the input coordinates (dolfinx's dof coordinates differ by round-off)
-        self.points[vio.input_ids] = elasticity.mesh.geometry.x[:, :3]
-        slave_face = boundary_face(elasticity.solid, V, slave, name=f"slave:{slave}", numbering=self.ids,
-                                   points=self.points)
+        self.ids = vio.dof_input_ids(V)  # input vertex id of each local dof block (owned, then ghosts)
+        coordinates = vio.dof_points(V)
+        faces = {"numbering": self.ids, "coordinates": coordinates}
+        slave_face = boundary_face(elasticity.solid, V, slave, name=f"slave:{slave}", **faces)
         if obstacle is not None:
             self.mortar = Plane.from_config(obstacle, slave_face).coupling(slave_face)
         else:
-            master_face = boundary_face(elasticity.solid, V, master, name=f"master:{master}", numbering=self.ids,
-                                        points=self.points)
+            master_face = boundary_face(elasticity.solid, V, master, name=f"master:{master}", **faces)
             self.mortar = mortar(slave_face, master_face, search_distance, max_normal_angle)
         m = self.mortar
         if not m.covered.any():
             raise ContactSetupError(f"no slave node of {slave!r} faces the master {master!r} within the search "
                                     f"distance and normal angle: nothing can come into contact")
-        O, Q = transformation(m, self.num_dofs)
-        block = (3 * self.ids[:, None] + np.arange(3)).ravel()
-        Pi = sp.csr_matrix((np.ones(self.num_dofs), (block, np.arange(self.num_dofs))), (self.num_dofs,) * 2)
-        self.P = sp.csr_matrix(Pi.T @ O @ Q)  # u (dof numbering) = P x
-        # O = I + N with N^2 = 0 (slave rows, master columns): O^-1 = 2 I - O
-        self.to_x = sp.csr_matrix(Q.T @ (2 * sp.identity(self.num_dofs, format="csr") - O))  # input numbering u -> x
-        self.P_inverse = sp.csr_matrix(self.to_x @ Pi)
         fixed = np.asarray(elasticity.dirichlet_dofs, np.int64)
-        self.fixed_dofs, self.fixed = fixed, 3 * self.ids[fixed // 3] + fixed % 3
-        on_slave = np.intersect1d(self.fixed // 3, m.slave.nodes)
-        if on_slave.size:
-            raise ContactSetupError(f"{on_slave.size} slave contact nodes of {slave!r} carry Dirichlet conditions; "
+        on_slave = comm.allreduce(np.intersect1d(self.ids[fixed // 3], m.slave.nodes).size)
+        if on_slave:
+            raise ContactSetupError(f"{on_slave} slave contact nodes of {slave!r} carry Dirichlet conditions; "
                                     f"constrain the master side or move the Dirichlet boundary")
-        _, slot = tangent_frames(m.normals)
-        self.normal_dofs = (3 * m.slave.nodes + slot)[m.covered]
-        self.normal_of_node = 3 * m.slave.nodes + slot  # the normal unknown of every slave node
-        self.x: np.ndarray | None = None  # the last transformed solution (next step's start)
+        self.distributed = DistributedTransform(elasticity, self.ids, m, fixed) if comm.size > 1 else None
+        if self.distributed is None:
+            self._serial_transformation(coordinates, fixed)
+        self.x: np.ndarray | None = None  # the last transformed solution (the next solve's start)
         self._nullspace = None
         if solver == "multilevel" and "hierarchy" not in options:
             keys = ("levels", "coarse_shape", "margin", "threads")
@@ -202,13 +175,42 @@ class Contact:
         self.initial_mean_gap = self.mean(m.gap)
         self.setup_seconds = time.perf_counter() - t0
 
+    def _serial_transformation(self, coordinates: np.ndarray, fixed: np.ndarray) -> None:
+        """P = Pi^T O Q (u in dof numbering = P x, x in input numbering), its inverse and the
+        Dirichlet components of x, in scipy (one rank)."""
+        n = len(self.ids)
+        self.dofs = np.empty(n, np.int64)
+        self.dofs[self.ids] = np.arange(n)  # dof block of each input vertex
+        self.points = coordinates[self.dofs]  # by input vertex id
+        m = self.mortar
+        O, Q = transformation(m, self.num_dofs)
+        block = (3 * self.ids[:, None] + np.arange(3)).ravel()
+        Pi = sp.csr_matrix((np.ones(self.num_dofs), (block, np.arange(self.num_dofs))), (self.num_dofs,) * 2)
+        self.P = sp.csr_matrix(Pi.T @ O @ Q)  # u (dof numbering) = P x
+        # O = I + N with N^2 = 0 (slave rows, master columns): O^-1 = 2 I - O
+        self.to_x = sp.csr_matrix(Q.T @ (2 * sp.identity(self.num_dofs, format="csr") - O))  # input numbering u -> x
+        self.P_inverse = sp.csr_matrix(self.to_x @ Pi)
+        self.fixed_dofs, self.fixed = fixed, 3 * self.ids[fixed // 3] + fixed % 3
+        _, slot = tangent_frames(m.normals)
+        self.normal_dofs = (3 * m.slave.nodes + slot)[m.covered]
+        self.normal_of_node = 3 * m.slave.nodes + slot  # the normal unknown of every slave node
+
     def mean(self, values: np.ndarray) -> float:
         """The mean of slave-node values over the covered part of the slave face (weighted by D_kk)."""
         m = self.mortar
         return float(np.sum(m.weights[m.covered] * values[m.covered]) / np.sum(m.weights[m.covered]))
 
-    def problem(self) -> BoundConstrainedQP:
-        """The transformed QP of eq. 10-11 with the current loads."""
+    def slave_dofs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The local block dofs (owned and ghost) on the slave face and their slave node index."""
+        nodes = self.mortar.slave.nodes
+        at = np.searchsorted(nodes, self.ids).clip(max=len(nodes) - 1)
+        local = np.flatnonzero(nodes[at] == self.ids)
+        return local, at[local]
+
+    def problem(self) -> BoundConstrainedQP | DistributedQP:
+        """The transformed QP of eq. 10-11 with the current loads (distributed on several ranks)."""
+        if self.distributed is not None:
+            return self.distributed.problem()
         K, F = self.elasticity.static_system()
         indptr, indices, data = K.getValuesCSR()
         Ks = sp.csr_matrix((data, indices, indptr), shape=(self.num_dofs,) * 2)
@@ -249,21 +251,29 @@ class Contact:
         sol = nonsmooth_solvers.solve(qp, self.solver, x0=self.x, **self.options)
         t2 = time.perf_counter()
         self.x = sol.x
-        u = self.P @ sol.x
-        self.elasticity.u.x.array[: self.num_dofs] = u
+        owned = self.elasticity.V.dofmap.index_map.size_local * 3
+        u = self.P @ sol.x if self.distributed is None else self.distributed.displacement(sol.x)
+        self.elasticity.u.x.array[:owned] = u
         self.elasticity.u.x.scatter_forward()
         m = self.mortar
         gap = np.full(len(m.slave.nodes), np.nan)
-        gap[m.covered] = m.gap[m.covered] - sol.x[self.normal_dofs]
-        tol = 1e-9 * max(np.max(np.abs(u), initial=0.0), np.nanmax(np.abs(m.gap), initial=0.0), 1e-300)
+        gap[m.covered] = m.gap[m.covered] - self._at_normals(sol.x)[m.covered]
+        largest = self.elasticity.mesh.comm.allreduce(np.max(np.abs(u), initial=0.0), op=MPI.MAX)
+        tol = 1e-9 * max(largest, np.nanmax(np.abs(m.gap), initial=0.0), 1e-300)
         active = np.zeros(len(m.slave.nodes), bool)
         active[m.covered] = gap[m.covered] <= tol
         # the nodal contact force: the multiplier at the normal dof of a closed node, zero at an open
         # one (where b - A x is only the Krylov error); the pressure its dual-basis coefficient
         force_n = np.zeros(len(m.slave.nodes))
-        force_n[active] = np.maximum(qp.multiplier(sol.x)[self.normal_of_node[active]], 0.0)
+        force_n[active] = np.maximum(self._at_normals(qp.multiplier(sol.x))[active], 0.0)
         pressure = np.divide(force_n, m.weights, out=np.zeros_like(force_n), where=active)
         force = -(force_n[:, None] * m.normals).sum(axis=0)  # the master pushes the slave along -n
         area = float(m.weights[active].sum() / m.weights[m.covered].sum())
         return ContactState(u, pressure, gap, active, force, area, self.mean(gap), sol,
                             {"assemble": t1 - t0, "solve": t2 - t1, "setup": self.setup_seconds})
+
+    def _at_normals(self, values: np.ndarray) -> np.ndarray:
+        """(slave nodes,) an x-vector at the normal unknown of every slave node (on every rank)."""
+        if self.distributed is not None:
+            return self.distributed.at_normals(values)
+        return values[self.normal_of_node]

@@ -61,7 +61,7 @@ class Face:
 
 
 def vertex_dofs(V) -> np.ndarray:
-    """Block dof index of each mesh vertex of a P1 vector space (serial)."""
+    """Block dof index of each local mesh vertex (owned and ghost) of a P1 vector space."""
     mesh = V.mesh
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim, 0)
@@ -73,16 +73,20 @@ def vertex_dofs(V) -> np.ndarray:
 
 
 def boundary_face(solid, V, boundary, name: str | None = None, numbering: np.ndarray | None = None,
-                  points: np.ndarray | None = None) -> Face:
+                  coordinates: np.ndarray | None = None) -> Face:
     """The facets of a named boundary as an outward-oriented :class:`Face`, its nodes in dof
-    numbering or, with ``numbering`` (block dof -> node id) and ``points`` (the coordinates
-    of each node id), in that one."""
+    numbering or, with ``numbering`` (local block dof -> node id) and ``coordinates`` (the
+    coordinates of each local block dof), in that one. Collective: on several ranks each
+    rank contributes the facets it owns and every rank receives the whole face (a contact
+    face is a surface, small beside the volume), its triangles in rank order."""
     if V.ufl_element().degree() != 1:
         raise ContactSetupError("contact needs P1 displacements (degree 1)")
     mesh = V.mesh
+    comm = mesh.comm
     tdim = mesh.topology.dim
     facets = solid.facets(boundary)
-    if len(facets) == 0:
+    facets = facets[facets < mesh.topology.index_map(tdim - 1).size_local]  # each facet on one rank
+    if comm.allreduce(len(facets)) == 0:
         raise ContactSetupError(f"contact boundary {boundary!r} has no facets")
     for a, b in ((tdim - 1, 0), (tdim - 1, tdim), (tdim, 0)):
         mesh.topology.create_connectivity(a, b)
@@ -90,18 +94,41 @@ def boundary_face(solid, V, boundary, name: str | None = None, numbering: np.nda
     f2c = mesh.topology.connectivity(tdim - 1, tdim)
     c2v = mesh.topology.connectivity(tdim, 0)
     vdofs = vertex_dofs(V)
-    coords = V.tabulate_dof_coordinates()
-    tri = np.array([f2v.links(f) for f in facets], np.int64)
+    dof_coordinates = V.tabulate_dof_coordinates()
+    tri = np.array([f2v.links(f) for f in facets], np.int64).reshape(-1, 3)
     opposite = np.array([np.setdiff1d(c2v.links(f2c.links(f)[0]), f2v.links(f))[0] for f in facets], np.int64)
     tri, opposite = vdofs[tri], vdofs[opposite]
-    p = coords[tri]
+    p = dof_coordinates[tri]
     normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    inward = np.einsum("ij,ij->i", normal, coords[opposite] - p[:, 0]) > 0
+    inward = np.einsum("ij,ij->i", normal, dof_coordinates[opposite] - p[:, 0]) > 0
     tri[inward] = tri[inward][:, [0, 2, 1]]
     if numbering is None:
-        numbering, points = np.arange(len(coords)), coords
-    nodes, local = np.unique(np.asarray(numbering)[tri], return_inverse=True)
-    return Face(name or str(boundary), nodes, local.reshape(-1, 3), points[nodes])
+        numbering, coordinates = np.arange(len(dof_coordinates)), dof_coordinates
+    ids, xyz = np.asarray(numbering)[tri], np.asarray(coordinates)[tri]
+    if comm.size > 1:
+        ids, xyz = np.concatenate(comm.allgather(ids)), np.concatenate(comm.allgather(xyz))
+    nodes, first, local = np.unique(ids, return_index=True, return_inverse=True)
+    return Face(name or str(boundary), nodes, local.reshape(-1, 3), xyz.reshape(-1, 3)[first])
+
+
+def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 3, 3) orthonormal frames and (k,) the column of each that is its normal n: the
+    normal takes the place of its largest component, the tangents are the other two axes
+    made orthogonal to it (Gram-Schmidt), so a normal along a coordinate axis leaves the
+    components where they are (only the normal's sign may flip)."""
+    n = normals / np.linalg.norm(normals, axis=1)[:, None]
+    slot = np.argmax(np.abs(n), axis=1)
+    frames = np.zeros((len(n), 3, 3))
+    frames[np.arange(len(n)), :, slot] = n
+    for shift in (1, 2):
+        column = (slot + shift) % 3
+        t = np.zeros_like(n)
+        t[np.arange(len(n)), column] = 1.0
+        for done in range(shift):  # against the normal and the tangents already made
+            prev = frames[np.arange(len(n)), :, (slot + done) % 3]
+            t -= np.einsum("ij,ij->i", t, prev)[:, None] * prev
+        frames[np.arange(len(n)), :, column] = t / np.linalg.norm(t, axis=1)[:, None]
+    return frames, slot
 
 
 @dataclass

@@ -238,11 +238,11 @@ class SolidParticipant(Participant):
         if not values:
             return {}
         W = dolfinx.fem.FunctionSpace(self.solver.mesh, ("Lagrange", 1))  # same vertex dofs as the P1 vectors
-        dofs = self.contact.dofs[self.contact.mortar.slave.nodes]
+        dofs, at = self.contact.slave_dofs()  # the local dofs on the slave face (the values: the whole face)
         fields = {}
         for name, v in values.items():
             fields[name] = dolfinx.fem.Function(W)
-            fields[name].x.array[dofs] = v
+            fields[name].x.array[dofs] = v[at]
         return fields
 
     def save_state(self, window):

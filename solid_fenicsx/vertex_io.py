@@ -62,6 +62,13 @@ class VertexIO:
         out[self._node_to_dof(V)] = self.input_ids
         return out
 
+    def dof_points(self, V) -> np.ndarray:
+        """The input coordinates of each local block dof of a P1 space V (owned and ghost):
+        the mesh's geometry, not dolfinx's dof coordinates (those differ by round-off)."""
+        out = np.empty((V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, 3))
+        out[self._node_to_dof(V)] = self.solid.mesh.geometry.x[:, :3]
+        return out
+
     def _as_p1(self, f: dolfinx.fem.Function) -> dolfinx.fem.Function:
         V = f.function_space
         element = V.ufl_element()
