@@ -42,6 +42,23 @@ class DistributedQP:
         if bad:
             raise ValueError(f"empty feasible set: lower > upper at {bad} components")
 
+    @classmethod
+    def from_serial(cls, qp, comm: MPI.Comm) -> "DistributedQP":
+        """The serial :class:`~nonsmooth.problem.BoundConstrainedQP` `qp` (the same on every
+        rank) with its rows split over `comm` in PETSc's default layout (whole blocks)."""
+        n, bs = qp.size, qp.block_size
+        blocks = PETSc.Vec().createMPI((PETSc.DECIDE, n // bs), comm=comm).getOwnershipRange()
+        start, stop = bs * blocks[0], bs * blocks[1]
+        rows = qp.A[start:stop]
+        rows.sort_indices()
+        A = PETSc.Mat().createAIJ(((stop - start, n), (stop - start, n)), bsize=bs, comm=comm,
+                                  csr=(rows.indptr.astype(PETSc.IntType), rows.indices.astype(PETSc.IntType),
+                                       rows.data))
+        A.assemble()
+        b = A.createVecLeft()
+        b.getArray()[:] = qp.b[start:stop]
+        return cls(A, b, qp.lower[start:stop], qp.upper[start:stop], block_size=bs)
+
     @property
     def size(self) -> int:
         return self.A.getSize()[0]

@@ -13,8 +13,9 @@ inputs (``pressure`` at the vertices, applied on the wetted boundary; with confi
 ``traction = "full"`` the vector ``traction`` instead) and returns the displacement,
 velocity and von Mises stress at the vertices, in the numbering of ``geometry``; it
 reports every inner solve (``report_solve``: the linear solve, the contact QP, the
-platen's search, converged or not) and the step's figures (``report_figures``: contact,
-platen, fluid forces) and, with contact, the vertex fields
+platen's search, converged or not; each contact solve starts from the latest one, that of
+the previous load step, platen trial or coupling iteration) and the step's figures
+(``report_figures``: contact, platen, fluid forces) and, with contact, the vertex fields
 ``contact_pressure`` (exactly 0 off contact), ``gap``, ``in_contact``, ``slave`` and
 ``mortar_weight`` (D_kk of eq. 9's dual basis; zero off the slave face), so that
 ``sum(contact_pressure * mortar_weight)`` is the normal contact force. ``configure``
@@ -248,8 +249,7 @@ class SolidParticipant(Participant):
     def save_state(self, window):
         platen = self.static.platen if self.static is not None else None
         self.states[int(window)] = {"solid": self.solver.save_state(),
-                                    "platen": platen.save_state() if platen else None,
-                                    "contact": None if self.contact is None else self.contact.x}
+                                    "platen": platen.save_state() if platen else None}
         for w in [w for w in self.states if w < int(window) - 1]:
             del self.states[w]
 
@@ -258,5 +258,5 @@ class SolidParticipant(Participant):
         self.solver.restore_state(state["solid"])
         if state["platen"] is not None:
             self.static.platen.restore_state(state["platen"])
-        if self.contact is not None:
-            self.contact.x = state["contact"]
+        # not the contact's x: it is only the start of the next contact solve (warm start), and
+        # the latest solution (the previous coupling iteration's) is the closest one

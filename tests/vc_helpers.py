@@ -266,3 +266,22 @@ def hertz_mesh_file(path, **params) -> None:
 
     code = f"from transfer.generators.hertz import hertz_mesh; hertz_mesh({str(path)!r}, **{params!r})"
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+
+
+def run_mpi(script, ranks: int, *args, timeout: float = 300):
+    """``mpirun -n ranks python script args`` from the project root (Open MPI allowed to run as
+    root, one thread per rank); its stdout's last line parsed as JSON. A failed run fails the test
+    with the end of its stderr."""
+    import json
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1",
+               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    cmd = [shutil.which("mpirun") or "mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, str(script),
+           *map(str, args)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])

@@ -116,6 +116,25 @@ def test_contact_fields_are_zero_off_contact_and_balance_the_load():
     assert p.contact.elasticity.boundary_force("load")[2] == pytest.approx(-force[2], rel=1e-9)  # 3.7e-12 measured
 
 
+def test_a_coupling_iteration_starts_from_the_previous_contact_solution():
+    """restore_state (before every coupling iteration after the first) keeps the contact's
+    start: the second iteration of a window with the same inputs starts at the first's
+    solution and needs one active-set iteration (from the window's start it took 5)."""
+    from solid_fenicsx.participant import SolidParticipant
+
+    p = SolidParticipant()
+    p.comm, p.rank = None, 0
+    p.configure(make_plan(load(HERTZ)).participant("solid").config)
+    p.save_state(0)
+    first = [p.advance(0, 0, 0.0, 1.0, {}), *p.take_reports()]
+    p.restore_state(0)
+    second = [p.advance(0, 1, 0.0, 1.0, {}), *p.take_reports()]
+    (cold,), (warm,) = first[1], second[1]
+    assert cold.iterations >= 3 and warm.iterations == 1 and warm.converged
+    assert second[2]["force_z"] == pytest.approx(first[2]["force_z"], rel=1e-9)
+    assert np.allclose(second[0]["displacement"].data, first[0]["displacement"].data, rtol=0, atol=1e-9 * 0.02)
+
+
 def test_an_unconverged_contact_solve_is_reported():
     """[contact] max_iterations = 1: the step returns its (finite) iterate and reports the
     active-set solve unconverged, its criterion above the tolerance."""
