@@ -16,7 +16,8 @@ solved by any solver of :mod:`nonsmooth.solvers`. Dirichlet dofs become fixed
 components (lower = upper). The multiplier ``b - A x`` at a normal component is
 the nodal contact force; divided by ``D_kk`` it is the contact pressure, the
 coefficient of the dual-basis multiplier. Tangential components are free
-(frictionless). Serial: one process.
+(frictionless). On several MPI ranks the faces and the mortar coupling are gathered on every
+rank and the system stays distributed (:mod:`solid_fenicsx.contact_mpi`).
 """
 
 from __future__ import annotations
@@ -105,7 +106,7 @@ class ContactState:
 
 
 class Contact:
-    """Frictionless contact on an :class:`Elasticity` (P1, serial): two bodies of one mesh
+    """Frictionless contact on an :class:`Elasticity` (P1): two bodies of one mesh
     (mortar, a ``master`` face) or one body and a rigid plane (``obstacle``).
 
     elasticity : the solid with its loads and Dirichlet conditions
@@ -118,14 +119,19 @@ class Contact:
         solver's hierarchy is built from ``levels``, ``coarse_shape``, ``margin``, ``threads``)
     search_distance, max_normal_angle : of the mortar segmentation
         (:func:`solid_fenicsx.mortar.mortar`)
-    near_nullspace : give the solver the rigid body modes of each body (transformed).
+    near_nullspace : give the solver the rigid body modes of each body (transformed; one rank).
         Off by default: measured on the Hertz case (6.5k dofs), GAMG with them took
         2.5-6 s per active-set solve against 0.85 s without (block size 3 only)
 
     The unknowns x of the QP are numbered like the mesh's input vertices (the order of the
     generator's or the file's points, whatever dolfinx's own numbering), so that
     order-dependent solvers (Gauss-Seidel sweeps of the multilevel method) do the same
-    work for the same mesh.
+    work for the same mesh. On several ranks (solver ``active_set`` only) each rank holds
+    the x of the vertices it owns, in that order; ``x`` and ``ContactState.u`` are then the
+    local parts, the slave-face arrays of :class:`ContactState` whole on every rank.
+
+    Each solve starts from the last solution ``x`` (a warm start: the active sets the
+    solver predicts at it are the last ones, moved by the change of the loads).
     """
 
     def __init__(self, elasticity, slave, master=None, solver: str = "active_set",
