@@ -3,11 +3,7 @@ second simulation), and the block compression on two MPI ranks."""
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
@@ -18,7 +14,7 @@ pytest.importorskip("dolfinx")
 from mpi4py import MPI  # noqa: E402
 
 from solid_fenicsx.cases import block_compression, penny_crack, sneddon_opening  # noqa: E402
-from vc_helpers import ROOT
+from vc_helpers import run_mpi
 
 
 
@@ -61,13 +57,8 @@ def test_block_compression_two_ranks(tmp_path):
             np.save(sys.argv[1], u)
             print(json.dumps({"error": r.error, "size": MPI.COMM_WORLD.size, "triangles": len(tris)}))
     """))
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     out = tmp_path / "u.npy"
-    cmd = [_mpirun(), "-n", "2", "--oversubscribe", sys.executable, str(script), str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    result = run_mpi(script, 2, out, timeout=120)
     assert result["size"] == 2
     assert result["error"] < 1e-6
     serial = block_compression(E=1e9, nu=0.3, p=1e6, shape=(4, 6, 5), size=(1.0, 2.0, 1.5), rtol=1e-12)
