@@ -107,11 +107,29 @@ def test_a_renderer_that_fails_says_why(tmp_path):
         pictures.render(tmp_path, ["elasticity"])
 
 
-def test_a_run_renders_its_pictures_and_a_report_a_browser_loads(tmp_path, monkeypatch, capsys):
+def browse(page_path: Path) -> dict:
+    """Load `page_path` in headless chromium: console problems, images [complete, width, alt],
+    the body's text and the links' targets."""
     if shutil.which("chromium") is None:
         pytest.fail("chromium is not installed: scripts/install.sh installs it (the report page test needs it)")
     from playwright.sync_api import sync_playwright
 
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
+        page = browser.new_page()
+        problems = []
+        page.on("console", lambda m: problems.append(m.text) if m.type in ("error", "warning") else None)
+        page.on("pageerror", lambda e: problems.append(str(e)))
+        page.goto(page_path.as_uri())
+        seen = {"problems": problems,
+                "images": page.evaluate("Array.from(document.images).map(i => [i.complete, i.naturalWidth, i.alt])"),
+                "text": page.inner_text("body"),
+                "links": page.evaluate("Array.from(document.links).map(a => a.href)")}
+        browser.close()
+    return seen
+
+
+def test_a_run_renders_its_pictures_and_a_report_a_browser_loads(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("VARCOUPLE_PICTURES", "1")
     case = copy_case(CASES / "small_fracture", tmp_path, {"steps = 2": "steps = 1"})
     out = tmp_path / "out"
@@ -122,19 +140,26 @@ def test_a_run_renders_its_pictures_and_a_report_a_browser_loads(tmp_path, monke
     assert summary["phases_seconds"]["pictures"] > 0
     for name in summary["pictures"]:
         not_blank(out / name)
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
-        page = browser.new_page()
-        problems = []
-        page.on("console", lambda m: problems.append(m.text) if m.type in ("error", "warning") else None)
-        page.on("pageerror", lambda e: problems.append(str(e)))
-        page.goto((out / "index.html").as_uri())
-        images = page.evaluate("Array.from(document.images).map(i => [i.complete, i.naturalWidth, i.alt])")
-        text = page.inner_text("body")
-        browser.close()
-    assert not problems, problems
+    seen = browse(out / "index.html")
+    assert not seen["problems"], seen["problems"]
+    images = seen["images"]
     assert len(images) == 5 and all(done and width > 0 for done, width, _ in images), images  # 4 + residuals
-    assert "completed" in text and "pressure_trace" in text and "simpleFoam" in text
+    assert "completed" in seen["text"] and "pressure_trace" in seen["text"] and "simpleFoam" in seen["text"]
+
+
+def test_a_study_page_links_its_runs_and_a_browser_loads_it(tmp_path, capsys):
+    out = tmp_path / "study"
+    code = main(["study", str(CASES / "standin_flow"), "--vary", 'coupling.acceleration=["aitken","iqn-ils"]',
+                 "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    seen = browse(out / "index.html")
+    assert not seen["problems"], seen["problems"]
+    assert len(seen["images"]) == 1 and seen["images"][0][0] and seen["images"][0][1] > 0  # the study's plot
+    runs = [link for link in seen["links"] if link.endswith("/index.html")]
+    assert len(runs) == 2 and all(Path(link.removeprefix("file://")).is_file() for link in runs), seen["links"]
+    for link in runs:  # each run's own page loads too
+        run = browse(Path(link.removeprefix("file://")))
+        assert not run["problems"] and "completed" in run["text"], run
 
 
 def test_the_report_of_a_failed_run_says_so(tmp_path):
