@@ -11,7 +11,7 @@ displacements. The active set method is also run with BoomerAMG (the AMG SNES VI
 use: GAMG fails inside vinewtonrsls in PETSc 3.18), to tell the method's share of the
 speed-up from the AMG's.
 
-Goals (issue 5): active-set iterations per load step that do not grow with refinement
+Goals: active-set iterations per load step that do not grow with refinement
 (finest level's largest count at most the coarsest's + 1); time to solution at least 2x
 below SNES VI at the finest level (both problems).
 

@@ -1,11 +1,11 @@
-"""FSI benchmark (issue 4): wall time per phase (fluid, solid, transfer incl. the geometry
+"""FSI benchmark: wall time per phase (fluid, solid, transfer incl. the geometry
 update of the two-way coupling, messaging) and coupling iterations per step for constant
 relaxation, Aitken and IQN-ILS, on a coupled case (default cases/fracture_flow). Each
 accelerator runs the case once through ``varcouple run`` into a temporary directory, with the
 coupling tolerance set to ``--tolerance`` (default 1e-6, the issue's); ``--summary FILE``
 instead only reports one existing run's summary.json.
 
-Goals (issue 4), each reported PASS/MISS per run: transfer + messaging under 5 % of the wall
+Goals, each reported PASS/MISS per run: transfer + messaging under 5 % of the wall
 time; IQN-ILS under 6 coupling iterations in every step.
 
 Two more sections (skip them with ``--no-parallel``, ``--no-soft``):

@@ -7,7 +7,7 @@ zenoh query/reply, decode). Transports: loopback TCP (shared memory disabled on 
 sides) and zenoh's shared-memory transport. ``one_way``: the echo replies without
 arrays, so the time is one crossing of the array plus a tiny reply.
 
-Goal (issue 3): a 10^6-double field (8 MB) crosses in under 10 ms one way, a round trip
+Goal: a 10^6-double field (8 MB) crosses in under 10 ms one way, a round trip
 in under 20 ms.
 
     python bench/messaging.py [--quick] [-o bench/results/messaging.json]

@@ -1,4 +1,4 @@
-"""Nonsmooth multilevel benchmark (issue 6, paper section 4.3, figure 14 left): the cube of
+"""Nonsmooth multilevel benchmark (paper section 4.3, figure 14 left): the cube of
 cases/cube_obstacle_large on 2 to 5 levels (lattices of 6, 13, 25, 51 cells per axis, the
 scene's solid participant configured in this process), solved by the truncated nonsmooth
 multigrid on the semi-geometric hierarchy, by the primal-dual active set method with CG + GAMG

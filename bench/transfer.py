@@ -54,7 +54,7 @@ DEFAULT_OUTPUT = ROOT / "bench" / "results" / "transfer.json"
 #: libsupermesh's parallel_supermesh + B on one rank
 GOAL_END_TO_END_RATIO = 5.0
 
-#: goals of issue #2
+#: the transfer goals
 GOAL_TETS_PER_SECOND = 50_000
 GOAL_MASS_RATIO = 50.0
 #: not measured here: quoted from the issue

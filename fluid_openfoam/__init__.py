@@ -1,4 +1,4 @@
-"""The OpenFOAM fluid participant (issue 4): a structured-grid incompressible flow solved
+"""The OpenFOAM fluid participant: a structured-grid incompressible flow solved
 by Debian's stock OpenFOAM v1912 binaries (no headers, no wmake), with the rock immersed
 by volume penalization driven by a ``solid`` volume-fraction field.
 

@@ -108,8 +108,8 @@ def tune_malloc(mmap_threshold: int = 256 * 2**20, trim_threshold: int = 512 * 2
 
     Every message is copied a few times (encode, zenoh, receive); with glibc's defaults a
     buffer of more than a few MB is a fresh ``mmap`` each time and the copy into it pays
-    a page fault per 4 kB: on these machines an 8 MB round trip took 20-32 ms instead of
-    12 ms, an 80 MB copy 58 ms instead of 16 ms. Allocations below ``mmap_threshold``
+    a page fault per 4 kB, which dominates the copy (bench/messaging.py measures it).
+    Allocations below ``mmap_threshold``
     come from the heap, and up to ``trim_threshold`` bytes of freed heap are kept for
     reuse. Set ``VARCOUPLE_MALLOC_TUNING=0`` to leave malloc alone. Returns whether the
     settings were applied (glibc only).

@@ -1,4 +1,4 @@
-"""Added mass (issue 4): cases/added_mass_heavy (rock-to-water density ratio 2.6) and
+"""Added mass: cases/added_mass_heavy (rock-to-water density ratio 2.6) and
 cases/added_mass_light (ratio 1.1, a harder rock, a shorter step). A rock block under a water
 channel is loaded suddenly by the channel's pressure; the moving top face must push the water
 out of the channel's ends, so the fluid's pressure answers its acceleration with an added mass

@@ -1,4 +1,4 @@
-"""Stability and hard cases of the coupled fracture flow (issue 4, "Stability and hard cases").
+"""Stability and hard cases of the coupled fracture flow ("Stability and hard cases").
 
 Each hard case is a variant of cases/small_fracture (scene text replaced in a tmp copy) run
 through ``varcouple run``. Each must either converge, with finite output fields, or stop with

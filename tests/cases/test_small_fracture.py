@@ -1,6 +1,6 @@
 """cases/small_fracture: flow through a rough fracture between two rock blocks, coupled two
 ways (the fluid sees the deformed blocks in every coupling iteration), and the acceleration
-on a soft rock (issue 4)."""
+on a soft rock."""
 
 from __future__ import annotations
 

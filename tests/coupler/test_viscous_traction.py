@@ -1,4 +1,4 @@
-"""The viscous part of the fluid's traction on the rock (issue 4, Steps 2-3; coupler/viscous.py,
+"""The viscous part of the fluid's traction on the rock (Steps 2-3; coupler/viscous.py,
 ``[coupling] traction = "full"``): plane Poiseuille flow between immersed plates, analytical on
 the grid and computed by OpenFOAM, against the wall shear ``tau_w = (dp/L) w / 2``; convergence
 under refinement; the force balance (shear on both walls = pressure drop x cross-section);

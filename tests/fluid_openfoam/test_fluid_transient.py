@@ -1,7 +1,7 @@
 """The transient OpenFOAM fluid (pimpleFoam over one coupling step, restarted from the step's
 start) and the solid velocity applied per solid body (fluid_openfoam/zones.py), against
 analytical solutions of a body moved impulsively in an incompressible fluid: the fluid's
-pressure is the added mass of the moving wall (issue 4)."""
+pressure is the added mass of the moving wall."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Semi-geometric hierarchy and truncated nonsmooth multigrid (issue 6, paper section 2.4).
+"""Semi-geometric hierarchy and truncated nonsmooth multigrid (paper section 2.4).
 
 The multilevel solution is compared with independent solvers (primal-dual active
 set with AMG, and a dense bounded least-squares solve), never with itself."""
