@@ -102,10 +102,8 @@ class Decomposition:
         """``mpirun -np N <solver> -parallel ...`` for a solver command line, to run with the
         environment of :func:`fluid_openfoam.solver.openfoam_env` (Open MPI's settings,
         :mod:`coupler.mpi_env`: shared memory, loopback wire-up, messaging layer ob1). The
-        solver is relaunched every coupling iteration, so start-up counts; measured here
-        (one simpleFoam iteration on 512 cells, median of 7, load average ~1): 2 ranks 0.18 s,
-        as with ob1 alone before the loopback settings (0.185 s), 0.39 s when Open MPI chooses
-        its messaging layer at every start-up (``OMPI_MCA_pml=""``); serial about 0.1 s."""
+        solver is relaunched every coupling iteration, so start-up counts: fixing the messaging
+        layer (ob1) halves the start-up against letting Open MPI choose it at every launch."""
         return ["mpirun", "-np", str(self.ranks), "--oversubscribe", command[0], "-parallel", *command[1:]]
 
     @property

@@ -12,8 +12,8 @@ too (with the first bad cell).
 
 simpleFoam's time directories are pseudo-time iteration counts (``deltaT 1``); it writes only
 at its end (``writeControl runTime`` with the interval equal to the iteration budget, or
-earlier when ``residualControl`` is met). Measured on these machines: about 0.1 s start-up
-per launch on small grids.
+earlier when ``residualControl`` is met). Each launch pays OpenFOAM's start-up, which
+matters on small grids.
 """
 
 from __future__ import annotations

@@ -120,8 +120,8 @@ class Contact:
     search_distance, max_normal_angle : of the mortar segmentation
         (:func:`solid_fenicsx.mortar.mortar`)
     near_nullspace : give the solver the rigid body modes of each body (transformed; one rank).
-        Off by default: measured on the Hertz case (6.5k dofs), GAMG with them took
-        2.5-6 s per active-set solve against 0.85 s without (block size 3 only)
+        Off by default: on the Hertz case GAMG with them was slower per active-set solve
+        than without (block size 3 only)
 
     The unknowns x of the QP are numbered like the mesh's input vertices (the order of the
     generator's or the file's points, whatever dolfinx's own numbering), so that
