@@ -337,7 +337,7 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
     if "generator" in t.data:
         if mesh is not None or box_keys:
             raise t.error("generator", "give one of a mesh file, the box keys (lower, upper, shape) or a generator")
-        generator = _generator(t)
+        generator = _generator(t, case_dir)
         faces = dict(getattr(GENERATORS[generator["name"]], "FACES", {}))
         return SolidGeometry(mesh=None, box=None, boundaries={**faces, **_boundaries(path, t, None, faces)},
                              generator=generator)
@@ -360,12 +360,16 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
     return SolidGeometry(mesh=mesh, box=box, boundaries=boundaries)
 
 
-def _generator(t: Table) -> dict:
-    """``[geometry.solid] generator`` and its checked ``parameters`` (transfer.generators)."""
+def _generator(t: Table, case_dir) -> dict:
+    """``[geometry.solid] generator`` and its checked ``parameters`` (transfer.generators); the
+    parameters its module lists in ``FILES`` name files relative to the case directory."""
     name = t.string("generator", choices=tuple(GENERATORS))
     values = t.data.get("parameters", {})
     if not isinstance(values, dict):
         raise t.error("parameters", f"must be a table of the generator's parameters, got {values!r}")
+    files = getattr(GENERATORS[name], "FILES", ())
+    values = {k: str((Path(case_dir) / v).resolve()) if k in files and isinstance(v, str) and v else v
+              for k, v in values.items()}
     try:
         return {"name": name, "parameters": parameters(name, values)}
     except ValueError as exc:

@@ -7,12 +7,15 @@ generator (their ``make_mesh.py``). A generator module defines ``NAME``, ``DESCR
 values), ``check(parameters) -> dict`` (types and ranges; ``ValueError("<key>: <reason>")``),
 ``mesh(parameters)`` (the solid: a :class:`~transfer.generators.blocks.Block`, tetrahedra with
 named boundary faces), ``FACES`` (``{name: tag}`` of the faces every mesh it makes carries)
-and, optionally, ``cells(parameters)`` (the number of tetrahedra without building the mesh) and,
-for geometry made for a fluid grid (an immersed-boundary study), ``grid(parameters) ->
-{"origin", "spacing", "shape"}``.
+and, optionally, ``FILES`` (the parameters that name files: the scene gives them relative to the
+case directory and resolves them), ``cells(parameters)`` (the number of tetrahedra without
+building the mesh) and, for geometry made for a fluid grid (an immersed-boundary study),
+``grid(parameters) -> {"origin", "spacing", "shape"}``.
 
 - ``rough_fracture``: two rock blocks around a matched rough fracture (small_fracture, fracture_flow)
 - ``fracture_specimen``: the closure specimen, box or cylinder, non-matching fracture faces (paper 4.1)
+- ``measured_fracture``: two blocks around a measured fracture, the faces from height maps (.npz or
+  XYZ files named relative to the case directory: the parameters in the module's ``FILES``)
 - ``rough_block``: a block with a flat top and a rough bottom face (rock_obstacle, paper figure 15)
 - ``hertz``: a half-sphere on a block, gmsh (paper figure 5)
 - ``penny_crack``: the quarter model of a penny-shaped crack (pressurized_fracture)
@@ -20,7 +23,7 @@ for geometry made for a fluid grid (an immersed-boundary study), ``grid(paramete
 
 The modules without ``NAME`` are their building blocks: :mod:`.surfaces` (self-affine rough
 surfaces), :mod:`.blocks` (:class:`~transfer.generators.blocks.Block`, the blocks around a
-fracture), :mod:`.lattice` (graded lattices).
+fracture), :mod:`.lattice` (graded lattices), :mod:`.height_maps` (height map files).
 """
 
 from __future__ import annotations

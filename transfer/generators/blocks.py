@@ -227,7 +227,8 @@ def _combine(a: Block, b: Block, name="solid") -> Block:
                  np.concatenate([a.cell_tags, b.cell_tags]), name=name)
 
 
-def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, grading=1.0) -> FractureBlocks:
+def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, grading=1.0,
+                    bottom=None) -> FractureBlocks:
     """Two tetrahedral rock blocks with a rough fracture between them.
 
     Parameters
@@ -238,10 +239,11 @@ def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, g
     heights : (lower, upper) node-grid surfaces of shape (nx+1, ny+1), e.g. from
         :func:`fracture_pair` (parallel plates: ``(np.zeros(n), np.full(n, w))``)
     top : z of the upper block's top; default ``surface_mean(upper) + height``
+    bottom : z of the lower block's bottom; default ``-height`` (a lower face of zero mean)
     grading : ratio of successive layer thicknesses away from the fracture (1: uniform;
         > 1: thin layers at the fracture)
 
-    The lower block spans ``z = -height`` .. lower(x, y) (faces ``bottom``, ``fracture_lower``),
+    The lower block spans ``z = bottom`` .. lower(x, y) (faces ``bottom``, ``fracture_lower``),
     the upper block upper(x, y) .. ``top`` (faces ``fracture_upper``, ``top``); both have
     the sides ``xmin, xmax, ymin, ymax``. Raises ValueError if a surface does not lie strictly
     between the bottom and the top, and :class:`transfer.MeshError` on a bad cell.
@@ -256,7 +258,7 @@ def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, g
             raise ValueError(f"{which} heights contain NaN or inf")
     if np.any(upper < lower):
         raise ValueError(f"the surfaces cross: upper - lower down to {np.min(upper - lower):.3g}")
-    bottom = -float(height)
+    bottom = -float(height) if bottom is None else float(bottom)
     top = surface_mean(upper, size) + float(height) if top is None else float(top)
     if not np.all(lower > bottom):
         raise ValueError(f"the lower surface reaches below the bottom z = {bottom:g} (min {lower.min():.3g}); "
@@ -272,3 +274,19 @@ def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, g
     up = _block(xs, ys, upper, np.full_like(upper, top), nz, grading, False,
                 sides + ("fracture_upper", "top"), BLOCK_TAGS["upper_block"], "upper_block")
     return FractureBlocks(low, up, _combine(low, up), (lower, upper), size, (float(origin[0]), float(origin[1])))
+
+
+def mortar_blocks(shape, size, height, heights, ratio, origin=(0.0, 0.0), top=None, bottom=None) -> Block:
+    """Two blocks around a fracture with non-matching faces, for mortar contact: the lower
+    block on the (nx, ny, nz) lattice, the upper on one ``ratio`` times coarser in x and y
+    (its face the upper heights at every ratio-th node; ratio divides nx and ny), both in one
+    mesh (the upper block's points follow the lower's). ``top`` defaults to the mean of the
+    full upper surface plus ``height``; the other arguments as in :func:`fracture_blocks`."""
+    nx, ny, nz = (int(n) for n in shape)
+    lower, upper = (np.asarray(h, float) for h in heights)
+    if top is None:
+        top = surface_mean(upper, size) + float(height)
+    fine = fracture_blocks((nx, ny, nz), size, height, (lower, upper), origin, top=top, bottom=bottom).lower
+    coarse = fracture_blocks((nx // ratio, ny // ratio, nz), size, height, (lower[::ratio, ::ratio],
+                             upper[::ratio, ::ratio]), origin, top=top, bottom=bottom).upper
+    return _combine(fine, coarse)

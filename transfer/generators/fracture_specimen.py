@@ -12,8 +12,8 @@ import numpy as np
 
 from ..mesh import Mesh
 from . import choice, number, numbers
-from .blocks import FACE_TAGS, Block, fracture_blocks
-from .surfaces import fracture_pair, surface_mean
+from .blocks import FACE_TAGS, Block, mortar_blocks
+from .surfaces import fracture_pair
 
 NAME = "fracture_specimen"
 DESCRIPTION = "the closure specimen: two blocks around a rough fracture, box or cylinder, non-matching faces"
@@ -76,21 +76,13 @@ def mesh(p: dict) -> Block:
     lower, upper = fracture_pair((nx, ny), square, aperture=p["aperture"], hurst=p["hurst"], rms=p["rms"],
                                  mismatch_length=p["mismatch_length"], seed=p["seed"],
                                  min_aperture=p["min_aperture"], periodic=False)
-    top = surface_mean(upper, square) + height
-    fine = fracture_blocks((nx, ny, nz), square, height, (lower, upper), top=top).lower
-    coarse = fracture_blocks((nx // r, ny // r, nz), square, height, (lower[::r, ::r], upper[::r, ::r]), top=top).upper
-    offset = len(fine.points)
-    points = np.concatenate([fine.points, coarse.points])
-    tets = np.concatenate([fine.cells, coarse.cells + offset])
+    block = mortar_blocks((nx, ny, nz), square, height, (lower, upper), r)
+    points = block.points.copy()
     if shape == "cylinder":
         half = size / 2
         x, y = square_to_disc(points[:, 0] / half - 1, points[:, 1] / half - 1)
         points[:, 0], points[:, 1] = half * (1 + x), half * (1 + y)
-        Mesh(points, tets, "tetra", name=f"cylindrical specimen {[nx, ny, nz]}")  # raises on a bad cell
-    faces = {}
-    for block, shift in ((fine, 0), (coarse, offset)):
-        for name, triangles in block.faces.items():
-            faces[name] = np.concatenate([faces[name], triangles + shift]) if name in faces else triangles + shift
+        Mesh(points, block.cells, "tetra", name=f"cylindrical specimen {[nx, ny, nz]}")  # raises on a bad cell
     area = size ** 2 if shape == "box" else np.pi * (size / 2) ** 2
-    return Block(points, tets, faces, np.concatenate([fine.cell_tags, coarse.cell_tags]), f"{shape} specimen",
+    return Block(points, block.cells, block.faces, block.cell_tags, f"{shape} specimen",
                  info={"cross_section": float(area), "max_initial_aperture": float((upper - lower).max())})
