@@ -12,6 +12,7 @@ import pytest
 
 from transfer.generators import GENERATORS, cells, generate, parameters
 from transfer.generators.fracture_specimen import square_to_disc
+from vc_helpers import CASES
 
 
 ROUGH = {"shape": [6, 4, 2], "size": [0.03, 0.02], "height": 0.005, "aperture": 1e-3, "min_aperture": 5e-4,
@@ -23,6 +24,8 @@ ROUGH = {"shape": [6, 4, 2], "size": [0.03, 0.02], "height": 0.005, "aperture": 
     ("fracture_specimen", {"lattice": [8, 8, 3], "shape": "box"}),
     ("fracture_specimen", {"lattice": [8, 8, 3], "shape": "cylinder", "size": 0.122}),
     ("rough_block", {"cells": [8, 8, 3], "size": [0.05, 0.05, 0.02], "rms": 5e-4}),
+    ("measured_fracture", {"surfaces": str(CASES / "measured_fracture" / "surfaces.npz"), "height": 0.04,
+                           "coarsen": 4, "ratio": 2, "layers": 2}),
     ("penny_crack", {"extent": 2.0, "h_tip": 0.02}),
 ])
 def test_a_generator_makes_its_faces_and_the_cells_it_counts(name, values):

@@ -72,13 +72,13 @@ def _axis(values: np.ndarray, name: str, path) -> tuple[float, float, np.ndarray
     distinct = np.unique(values)
     if len(distinct) < 2:
         raise ValueError(f"{path}: every point has the same {name} = {distinct[0]:g}: not a 2D grid")
-    step = (distinct[-1] - distinct[0]) / (len(distinct) - 1)
+    step = float(np.median(np.diff(distinct)))  # a stray value does not move it
     index = np.rint((values - distinct[0]) / step).astype(np.int64)
     off = np.abs(values - (distinct[0] + index * step))
     if off.max() > GRID_TOLERANCE * step:
         k = int(np.argmax(off))
-        raise ValueError(f"{path}: not a regular grid: {name} = {values[k]:.9g} (line of point {k + 1}) lies "
-                         f"{off[k]:.3g} m off the grid of spacing {step:.9g} m from {distinct[0]:.9g}")
+        raise ValueError(f"{path}: not a regular grid: {name} = {values[k]:.9g} (point {k + 1} of the file) lies "
+                         f"{off[k]:.3g} m off the grid of spacing {step:.9g} m from {distinct[0]:.9g} m")
     return float(distinct[0]), float(step), index
 
 

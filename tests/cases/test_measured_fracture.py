@@ -1,0 +1,55 @@
+"""cases/measured_fracture: a closure test whose fracture faces are height maps. The scene's
+map files are found relative to the case directory, a bad map is one line naming the scene
+file, the parameter and the reason, and the XYZ form of the shipped map runs a contact step
+whose platen force is the contact force."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cli_helpers import assert_clean_error, run_cli
+from transfer.generators.height_maps import read_npz, write_xyz
+from vc_helpers import CASES, copy_case
+
+
+def test_check_finds_the_map_beside_the_scene(capsys, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)  # not the case directory
+    code, out, _ = run_cli(capsys, "check", "--quick", CASES / "measured_fracture")
+    assert code == 0
+    assert "contact of 'fracture_lower' (slave) on 'fracture_upper' (master)" in out and "3 load steps" in out
+
+
+@pytest.mark.parametrize("broken, words", [
+    (lambda case: np.savez(case / "surfaces.npz", **{k: v for k, v in np.load(CASES / "measured_fracture" /
+                                                                               "surfaces.npz").items() if k != "upper"}),
+     ["[geometry.solid.parameters] surfaces:", "surfaces.npz has no array 'upper' (it holds: lower, spacing)"]),
+    (lambda case: (case / "surfaces.npz").unlink(), ["[geometry.solid.parameters] surfaces: no file", "surfaces.npz"]),
+])
+def test_a_bad_map_is_one_line_naming_the_scene_and_key(capsys, tmp_path, broken, words):
+    case = copy_case(CASES / "measured_fracture", tmp_path)
+    broken(case)
+    code, _, err = run_cli(capsys, "check", "--quick", case)
+    assert_clean_error(code, err, str(case / "scene.toml"), *words)
+
+
+def test_the_xyz_map_closes_under_the_platen(capsys, tmp_path):
+    case = copy_case(CASES / "measured_fracture", tmp_path, {
+        'surfaces = "surfaces.npz"': 'lower = "faces/lower.xyz"\nupper = "faces/upper.xyz"',
+        "stress = [1.0e6, 5.0e6, 20.0e6]": "stress = [5.0e6]"})
+    (lower, upper), spacing = read_npz(case / "surfaces.npz")
+    (case / "faces").mkdir()
+    write_xyz(case / "faces" / "lower.xyz", lower, spacing)
+    write_xyz(case / "faces" / "upper.xyz", upper, spacing)
+    (case / "surfaces.npz").unlink()
+    code, _, err = run_cli(capsys, "run", case, "-o", tmp_path / "out")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    (step,) = summary["steps"]
+    figures = step["figures"]["solid"]
+    assert abs(figures["stress"] / 5e6 - 1) <= 5e-3 and 0 < figures["area_fraction"] < 1
+    assert figures["platen_force"] == pytest.approx(-figures["force_z"], rel=1e-9)  # the contact carries the load
+    assert figures["platen_force"] == pytest.approx(figures["stress"] * 0.01, rel=1e-12)
+    assert figures["min_gap"] >= -1e-15 and 0 < figures["closure"] < 2e-4 + 1e-4
