@@ -68,7 +68,7 @@ def test_the_plan_is_one_way_around_a_solid_served_in_process():
     ("aperture = 1.0e-3 ", "apperture = 1.0e-3 ", "[geometry.solid.parameters] apperture: unknown parameter of "
                                                    "generator 'plates'"),
     ('generator = "plates"            # transfer', 'generator = "spheres"  # transfer',
-     "[geometry.solid] generator: unknown value 'spheres'; use one of 'fracture_specimen', 'hertz', "
+     "[geometry.solid] generator: unknown value 'spheres'; use one of 'fracture_specimen', 'hertz', 'measured_fracture', "
      "'penny_crack', 'plates'"),
     ('solid_fraction = "exact"', 'solid_fraction = "mask"', "[flow] solid_fraction: unknown value 'mask'"),
 ])
