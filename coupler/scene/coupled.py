@@ -17,7 +17,8 @@ from pathlib import Path
 from coupler import checks
 from coupler.errors import SceneError
 from coupler.protocol.transport import check_endpoint
-from coupler.scene.tables import _REQUIRED, Table, output_directory
+from coupler.protocol.settings import REQUIRED
+from coupler.scene.tables import Table, output_directory
 from coupler.protocol.expressions import check_expression
 from transfer.generators import GENERATORS, parameters
 from transfer.grid import BOX_FACES
@@ -259,8 +260,8 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
 
     time = Table(path, "time", data.get("time", {}), TABLES["time"])
     stepped = any(getattr(RULES[e], "TIME_STEPS", False) for e in effects)  # dynamics, flow: dt and steps given
-    time_cfg = {"dt": time.number("dt", default=_REQUIRED if stepped else 1.0, positive=True),
-                "steps": time.integer("steps", default=_REQUIRED if stepped else max(per_step, default=1))}
+    time_cfg = {"dt": time.number("dt", default=REQUIRED if stepped else 1.0, positive=True),
+                "steps": time.integer("steps", default=REQUIRED if stepped else max(per_step, default=1))}
     _check_steps(path, loads, time_cfg["steps"], "steps" in time.data)
 
     coupling = Table(path, "coupling", data.get("coupling", {}), TABLES["coupling"])

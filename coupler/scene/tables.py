@@ -6,10 +6,11 @@ the scene file, the table and key, and the reason::
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from coupler.errors import SceneError
+from coupler.protocol.settings import (REQUIRED, Invalid, check_boolean, check_integer, check_number, check_numbers,
+                                       check_shape, check_string, check_strings, check_vector)
 
 SCENE_FILE = "scene.toml"
 
@@ -24,9 +25,6 @@ def scene_path(case) -> tuple[Path, Path]:
     if not path.is_file():
         raise SceneError(f"{case}: no {SCENE_FILE} in the case directory")
     return path, case
-
-
-_REQUIRED = object()
 
 
 class Table:
@@ -50,81 +48,41 @@ class Table:
     def _value(self, key, default):
         if key in self.data:
             return self.data[key]
-        if default is _REQUIRED:
+        if default is REQUIRED:
             raise self.error(key, f"missing ({self.keys[key]})")
         return default
 
-    def string(self, key, default=_REQUIRED, choices=None):
+    def _checked(self, key, default, check, *args, optional=False):
+        """The value of `key` (or `default`) through one of the checks of
+        :mod:`coupler.protocol.settings`; with `optional`, None stays None."""
         value = self._value(key, default)
-        if value is None:
+        if value is None and optional:
             return None
-        if not isinstance(value, str) or not value.strip():
-            raise self.error(key, f"must be a non-empty string, got {value!r}")
-        if choices is not None and value not in choices:
-            raise self.error(key, f"unknown value {value!r}; use one of {', '.join(map(repr, choices))}")
-        return value
+        try:
+            return check(value, *args)
+        except Invalid as exc:
+            raise self.error(key, str(exc)) from None
 
-    def number(self, key, default=_REQUIRED, positive=False, minimum=None, maximum=None):
-        value = self._value(key, default)
-        if value is None:
-            return None
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(key, f"must be a number, got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise self.error(key, f"must be a finite number, got {value!r}")
-        if positive and not value > 0:
-            raise self.error(key, f"must be positive, got {value!r}")
-        if minimum is not None and value < minimum or maximum is not None and value > maximum:
-            raise self.error(key, f"must lie in [{minimum}, {maximum}], got {value!r}")
-        return value
+    def string(self, key, default=REQUIRED, choices=None):
+        return self._checked(key, default, check_string, choices, optional=True)
 
-    def integer(self, key, default=_REQUIRED, minimum=1):
-        value = self._value(key, default)
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-            raise self.error(key, f"must be an integer >= {minimum}, got {value!r}")
-        return value
+    def number(self, key, default=REQUIRED, positive=False, minimum=None, maximum=None):
+        return self._checked(key, default, check_number, positive, minimum, maximum, optional=True)
 
-    def vector(self, key, default=_REQUIRED, length=3):
-        value = self._value(key, default)
-        if value is None:
-            return None
-        if (not isinstance(value, list) or len(value) != length
-                or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in value)):
-            raise self.error(key, f"must be a list of {length} finite numbers, got {value!r}")
-        return [float(v) for v in value]
+    def integer(self, key, default=REQUIRED, minimum=1):
+        return self._checked(key, default, check_integer, minimum)
 
-    def shape(self, key, default=_REQUIRED):
+    def vector(self, key, default=REQUIRED, length=3):
+        return self._checked(key, default, check_vector, length, optional=True)
+
+    def shape(self, key, default=REQUIRED):
         """Cells per axis: a list of 3 positive integers."""
-        value = self._value(key, default)
-        if not isinstance(value, list) or len(value) != 3 or any(
-                isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in value):
-            raise self.error(key, f"must be a list of 3 positive integers, got {value!r}")
-        return list(value)
+        return self._checked(key, default, check_shape)
 
-    def numbers(self, key, default=_REQUIRED, integer=False, positive=False, minimum=None, below=None,
+    def numbers(self, key, default=REQUIRED, integer=False, positive=False, minimum=None, below=None,
                 increasing=False, within=None):
-        """A list of numbers (integers with `integer`), distinct, in [minimum, below) (and > 0 with
-        `positive`); with `increasing` strictly increasing; with `within` each one of those values
-        (may then be empty)."""
-        value = self._value(key, default)
-        kind = int if integer else (int, float)
-        if (not isinstance(value, list) or not value and within is None
-                or any(isinstance(v, bool) or not isinstance(v, kind) or not math.isfinite(v) for v in value)):
-            raise self.error(key, f"must be a {'non-empty ' * (within is None)}list of "
-                                  f"{'integers' if integer else 'finite numbers'}, got {value!r}")
-        if value and (minimum is not None and min(value) < minimum or below is not None and max(value) >= below):
-            raise self.error(key, f"values must lie in [{minimum}, {below if below is not None else 'inf'}), "
-                                  f"got {value!r}")
-        if positive and value and not min(value) > 0:
-            raise self.error(key, f"values must be positive, got {value!r}")
-        if len(set(value)) != len(value):
-            raise self.error(key, f"a value is listed twice in {value!r}")
-        if increasing and any(b <= a for a, b in zip(value, value[1:])):
-            raise self.error(key, f"must be increasing, got {value!r}")
-        if within is not None and any(v not in within for v in value):
-            raise self.error(key, f"{value!r}: every value must be one of {list(within)!r}")
-        return list(value) if integer else [float(v) for v in value]
+        """A list of numbers (:func:`coupler.protocol.settings.check_numbers`)."""
+        return self._checked(key, default, check_numbers, integer, positive, minimum, below, increasing, within)
 
     def file(self, key, case_dir: Path) -> Path:
         """A file named relative to the case directory, which must exist."""
@@ -136,22 +94,11 @@ class Table:
             raise self.error(key, f"{name!r} is not a file")
         return file
 
-    def strings(self, key, default=_REQUIRED, choices=None):
-        value = self._value(key, default)
-        if not isinstance(value, list) or any(not isinstance(v, str) for v in value):
-            raise self.error(key, f"must be a list of strings, got {value!r}")
-        for v in value:
-            if choices is not None and v not in choices:
-                raise self.error(key, f"unknown value {v!r}; use one of {', '.join(map(repr, choices))}")
-        if len(set(value)) != len(value):
-            raise self.error(key, f"a value is listed twice in {value!r}")
-        return list(value)
+    def strings(self, key, default=REQUIRED, choices=None):
+        return self._checked(key, default, check_strings, choices)
 
-    def boolean(self, key, default=_REQUIRED):
-        value = self._value(key, default)
-        if not isinstance(value, bool):
-            raise self.error(key, f"must be true or false, got {value!r}")
-        return value
+    def boolean(self, key, default=REQUIRED):
+        return self._checked(key, default, check_boolean)
 
 
 def output_directory(case_dir: Path, out: Table, output) -> Path:
