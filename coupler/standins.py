@@ -3,14 +3,17 @@ the real solvers, so that tests exercise the coupler, the messaging and solver s
 without dolfinx or OpenFOAM.
 
 ``python -m coupler.standins KIND --run-id R --name NAME --connect ENDPOINT`` (or
-``--kind KIND`` anywhere, as :class:`coupler.launch.Launcher` extra arguments) with KIND:
+``--kind KIND`` anywhere, as :class:`coupler.launch.Launcher` extra arguments) with KIND
+below. Their settings (``pressure``, ``feedback``, ``unconverged``; ``stiffness``; ``reply``,
+``delay``, ``fail``) are declared once, with their defaults, in :data:`REPLAY_FLUID`,
+:data:`SPRING_SOLID` and :data:`ECHO`.
 
 ``replay_fluid``
     Serves prescribed fields on a structured grid. Config::
 
         {"grid": {"origin": [x, y, z], "spacing": [hx, hy, hz], "shape": [nx, ny, nz]},
          "location": "points",          # or "cells": Q1 (grid points) or Q0 (cells) fields
-         "pressure": 1.0e6,             # uniform pressure (Pa), default 0
+         "pressure": 1.0e6,             # uniform pressure (Pa)
          "velocity": [0, 0, 0],         # uniform velocity (m/s), default 0
          "npz": "path.npz"}             # optional: arrays "pressure" (W, n) and/or
                                         # "velocity" (W, n, 3), row w served in window w
@@ -22,26 +25,26 @@ without dolfinx or OpenFOAM.
 
     Grid points and cells are numbered x fastest (as :class:`transfer.StructuredGrid`).
     Accepts ``solid_velocity`` and ``solid_fraction`` (checked for their size). With
-    ``"feedback": c`` (Pa s/m, default 0) the served pressure reacts to the solid:
+    ``"feedback": c`` (Pa s/m) the served pressure reacts to the solid:
     ``p = pressure - c * <v_z>``, ``<v_z>`` the fraction-weighted mean of the solid
     velocity's z component: a linear fixed point whose gain the coupling tests set
     (above 1 the plain iteration diverges, IQN-ILS still converges).
 
 ``spring_solid``
-    A linear spring at every point of a point set: ``displacement = traction / k`` and
+    A linear spring at every point of a point set: ``displacement = traction / stiffness`` and
     ``velocity = (displacement - displacement at the start of the window) / dt``. Config::
 
         {"points": [[x, y, z], ...]}    # or
         {"box": {"lower": [...], "upper": [...], "shape": [nx, ny, nz]}}  # (nx+1)(ny+1)(nz+1) points
-        "k": 1.0e9                      # stiffness (Pa/m), default 1
+        "stiffness": 1.0e9              # Pa/m
 
     ``save_state``/``restore_state`` keep the displacement per window, so repeating a
     window after ``restore_state`` gives identical fields.
 
 ``echo``
     Returns its inputs unchanged (for benchmarks and tests). Config: ``{"reply": "same"}``
-    (default) or ``"empty"`` (reply without arrays: one-way timing), ``"delay": s``
-    (sleep in ``advance``), ``"fail": "message"`` (``advance`` raises it).
+    or ``"empty"`` (reply without arrays: one-way timing), ``"delay": s`` (sleep in
+    ``advance``), ``"fail": "message"`` (``advance`` raises it).
 
 Participants that solve nothing, which the runner serves in its own process
 (:mod:`coupler.run.local`):
@@ -71,9 +74,34 @@ import time
 import numpy as np
 
 from coupler.protocol.participant import Participant, main
+from coupler.protocol.settings import ParticipantSpec, Setting, Settings
 from coupler.protocol.wire import Field
 
 log = logging.getLogger("varcouple.standins")
+
+# The stand-ins' declarations (entry points of pyproject.toml, cases/README.md's reference)
+_MODULE = "coupler.standins"
+SPRING_SOLID = ParticipantSpec(
+    kind="spring_solid", module=_MODULE, role="solid", arguments=("--kind", "spring_solid"),
+    description="stand-in: a linear spring at every vertex, displacement = traction / stiffness",
+    settings=Settings(Setting("stiffness", "number", "spring stiffness", positive=True, unit="Pa/m")))
+REPLAY_FLUID = ParticipantSpec(
+    kind="replay_fluid", module=_MODULE, role="fluid", arguments=("--kind", "replay_fluid"),
+    description="stand-in: prescribed pressure and velocity on the grid (ignores [flow])",
+    settings=Settings(
+        Setting("pressure", "number", "uniform pressure served", default=0.0, unit="Pa"),
+        Setting("feedback", "number", "the served pressure drops by this times the fraction-weighted mean solid "
+                "velocity (z): a fixed point whose gain tests choose", default=0.0, unit="Pa s/m"),
+        Setting("unconverged", "integers", "time steps in which it reports an unconverged solve (tests of the "
+                "coupler's handling)", default=[], minimum=0)))
+ECHO = ParticipantSpec(
+    kind="echo", module=_MODULE, role=None, arguments=("--kind", "echo"),
+    description="returns its inputs (benchmarks and tests of the messaging; no scene role)",
+    settings=Settings(
+        Setting("reply", "string", "same: the inputs; empty: a reply without arrays (one-way timing)",
+                default="same", choices=("same", "empty")),
+        Setting("delay", "number", "sleep in advance", default=0.0, minimum=0.0, unit="s"),
+        Setting("fail", "string", "advance raises this message", default=None)))
 
 
 def _vec3(value, what) -> np.ndarray:
@@ -86,7 +114,7 @@ def _vec3(value, what) -> np.ndarray:
 class ReplayFluid(Participant):
     """Prescribed pressure and velocity on a structured grid (see module doc)."""
 
-    kind = "replay_fluid"
+    kind = REPLAY_FLUID.kind
 
     def __init__(self):
         self.grid = None
@@ -111,10 +139,11 @@ class ReplayFluid(Participant):
         if self.location not in ("points", "cells"):
             raise ValueError(f"location must be 'points' or 'cells', got {self.location!r}")
         self.n = int(np.prod([s + 1 for s in shape]) if self.location == "points" else np.prod(shape))
-        self.pressure = np.full(self.n, float(config.get("pressure", 0.0)))
-        self.feedback = float(config.get("feedback", 0.0))
+        settings = REPLAY_FLUID.configuration(config)
+        self.pressure = np.full(self.n, settings["pressure"])
+        self.feedback = settings["feedback"]
         self.velocity = np.tile(_vec3(config.get("velocity", [0, 0, 0]), "velocity"), (self.n, 1))
-        self.unconverged = {int(w) for w in config.get("unconverged", [])}
+        self.unconverged = set(settings["unconverged"])
         self.replay = {}
         if config.get("npz"):
             with np.load(config["npz"]) as data:
@@ -161,13 +190,13 @@ class ReplayFluid(Participant):
 
 
 class SpringSolid(Participant):
-    """Linear springs on a point set: displacement = traction / k (see module doc)."""
+    """Linear springs on a point set: displacement = traction / stiffness (see module doc)."""
 
-    kind = "spring_solid"
+    kind = SPRING_SOLID.kind
 
     def __init__(self):
         self.points = self.tets = None
-        self.k = 1.0
+        self.stiffness = None
         self.displacement = self.start = None
         self.checkpoints: dict[int, np.ndarray] = {}
 
@@ -191,13 +220,10 @@ class SpringSolid(Participant):
             raise ValueError("spring_solid needs config 'points' or 'box'")
         if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
             raise ValueError(f"points must be finite, of shape (n, 3), got {pts.shape}")
-        k = float(config.get("k", 1.0))
-        if not np.isfinite(k) or k <= 0:
-            raise ValueError(f"stiffness k must be positive, got {config.get('k')!r}")
-        self.points, self.k = pts, k
+        self.points, self.stiffness = pts, SPRING_SOLID.configuration(config)["stiffness"]
         self.displacement = np.zeros_like(pts)
         self.checkpoints = {}
-        log.info("spring_solid: %d points, k = %g", len(pts), k)
+        log.info("spring_solid: %d points, stiffness %g Pa/m", len(pts), self.stiffness)
 
     def geometry(self):
         if self.points is None:
@@ -228,7 +254,7 @@ class SpringSolid(Participant):
             raise ValueError(f"dt must be positive, got {dt!r}")
         if iteration == 0 or self.start is None:
             self.start = self.displacement.copy()  # the state the window starts from
-        d = traction / self.k
+        d = traction / self.stiffness
         v = (d - self.start) / dt
         self.displacement = d
         return {"displacement": Field("displacement", d, "m"), "velocity": Field("velocity", v, "m/s")}
@@ -247,28 +273,26 @@ class SpringSolid(Participant):
 class Echo(Participant):
     """Returns its inputs (see module doc)."""
 
-    kind = "echo"
+    kind = ECHO.kind
 
     def __init__(self):
-        self.config = {}
+        self.config = ECHO.configuration({})  # the defaults: advance works unconfigured
 
     def announce(self) -> dict:
         return {"kind": self.kind, "provides": ["*"], "accepts": ["*"]}
 
     def configure(self, config: dict) -> None:
-        if config.get("reply", "same") not in ("same", "empty"):
-            raise ValueError(f"echo: reply must be 'same' or 'empty', got {config.get('reply')!r}")
-        self.config = dict(config)
+        self.config = ECHO.configuration(config)
 
     def geometry(self):
         return {}, None
 
     def advance(self, window, iteration, t, dt, inputs):
-        if self.config.get("delay"):
-            time.sleep(float(self.config["delay"]))
-        if self.config.get("fail"):
-            raise RuntimeError(str(self.config["fail"]))
-        return {} if self.config.get("reply") == "empty" else inputs
+        if self.config["delay"]:
+            time.sleep(self.config["delay"])
+        if self.config["fail"]:
+            raise RuntimeError(self.config["fail"])
+        return {} if self.config["reply"] == "empty" else inputs
 
     def save_state(self, window):
         pass

@@ -1,20 +1,30 @@
-"""The settings of the Chorin fluid participant (``[solvers.fluid] participant = "chorin"``):
-their defaults and choices, in one place (the scene and :mod:`fluid_chorin.spec` read them)."""
+"""The Chorin fluid participant's settings, declared once (``[solvers.fluid]`` with
+``participant = "chorin"``; cases/README.md's reference is generated from it). Imports no
+solver: the coupler reads it to validate scenes (entry point ``varcouple.participants``)."""
 
-from transfer.penalization import PENALIZATIONS  # noqa: F401 (how solid fractions become drag)
+from coupler.protocol.penalization import PENALIZATION
+from coupler.protocol.settings import ParticipantSpec, Setting, Settings
 
 #: pressure Poisson solvers (:mod:`fluid_chorin.poisson`)
 POISSON_METHODS = ("auto", "direct", "gamg")
 
-#: key -> default; ``drag`` None: :func:`transfer.penalization.default_drag`
-DEFAULTS = {
-    "penalization": "wall",        # solid fractions -> drag (transfer/penalization.py)
-    "penalization_exponent": 2.0,  # of penalization "power"
-    "drag": None,                  # maximum drag [1/s]
-    "max_iterations": 20000,       # pseudo-time steps per advance (steady)
-    "tolerance": 1.0e-7,           # steady: relative change per pseudo-time step; transient: per outer iteration
-    "substeps": 1,                 # transient: at least this many time steps per coupling step
-    "outer_correctors": 50,        # transient: outer iterations per time step at most
-    "cfl": 0.5,                    # Courant number of the explicit convection
-    "poisson": "auto",             # pressure solver: "direct" (Cholesky), "gamg" (CG + GAMG), "auto" (by size)
-}
+PARTICIPANT = ParticipantSpec(
+    kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",),
+    memory=(120 * 2**20, 2000),
+    description="incompressible flow on the structured grid by Chorin's projection on a staggered grid, in memory, "
+                "the solid immersed by volume penalization towards its velocity cell by cell",
+    settings=Settings(
+        Setting("ranks", "integer", "one process (no grid slabs over MPI ranks yet)", default=1, minimum=1,
+                maximum=1)) + PENALIZATION + Settings(
+        Setting("max_iterations", "integer", "pseudo-time steps per coupling iteration at most", default=20000,
+                minimum=1),
+        Setting("tolerance", "number", "the relative change of velocity and pressure in one pseudo-time step (with "
+                "dynamics: in one outer iteration) that ends the solve", default=1e-7, positive=True),
+        Setting("substeps", "integer", "with dynamics: at least this many time steps per coupling step (more when "
+                "the explicit stability bound asks)", default=1, minimum=1),
+        Setting("outer_correctors", "integer", "with dynamics: predictor-projection outer iterations per time step "
+                "at most", default=50, minimum=1),
+        Setting("cfl", "number", "Courant number of the explicit convection", default=0.5, positive=True,
+                maximum=1.0),
+        Setting("poisson", "string", "the pressure solver: auto (PETSc's sparse Cholesky up to 30000 cells, CG + "
+                "GAMG beyond), direct, gamg", default="auto", choices=POISSON_METHODS)))

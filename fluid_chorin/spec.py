@@ -4,12 +4,12 @@
      "location": "cells",
      "rho": 1000.0, "mu": 1.0e-3,          # kg/m^3, Pa s
      "inlet": ..., "outlet": ..., "walls": ..., "boundaries": {...},   # coupler/protocol/fluid_faces.py
-     "penalization": "wall", "penalization_exponent": 2.0, "drag": null,
-     "max_iterations": 20000, "tolerance": 1e-7, "cfl": 0.5, "poisson": "auto",
-     "transient": false, "dt": 1.0, "substeps": 1, "outer_correctors": 50}
+     "transient": false, "dt": 1.0,
+     ...}                                  # the settings of fluid_chorin/settings.py
 
-Defaults: :data:`fluid_chorin.settings.DEFAULTS`. The flow rule
-(:func:`coupler.plan.effects.flow.fluid_config`) fills these keys from the scene.
+The settings (penalization, drag, max_iterations, tolerance, cfl, poisson, substeps, ...), their
+meaning, defaults and bounds: :data:`fluid_chorin.settings.PARTICIPANT`, which also checks them
+here. The flow rule (:func:`coupler.plan.effects.flow.fluid_config`) fills these keys from the scene.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from coupler.protocol.fluid_faces import face_conditions
 from transfer.grid import BOX_FACES, StructuredGrid
 from transfer.penalization import default_drag
 
-from .settings import DEFAULTS, PENALIZATIONS, POISSON_METHODS
+from .settings import PARTICIPANT
 
 
 @dataclass
@@ -65,32 +65,18 @@ class ChorinSpec:
             raise ValueError("fluid config needs 'grid' = {origin, spacing, shape}")
         grid = StructuredGrid(g.get("origin"), g.get("spacing"), g.get("shape"))
         faces = face_conditions(config)
-        value = {k: config.get(k, d) if config.get(k) is not None else d for k, d in DEFAULTS.items()}
+        settings = PARTICIPANT.configuration(config)
+        del settings["ranks"]  # one process: nothing of the solver depends on it
         spec = cls(grid, faces, rho=float(config.get("rho", 1000.0)), mu=float(config.get("mu", 1.0e-3)),
-                   penalization=str(value["penalization"]),
-                   penalization_exponent=float(value["penalization_exponent"]),
-                   drag=None if value["drag"] is None else float(value["drag"]),
-                   max_iterations=int(value["max_iterations"]), tolerance=float(value["tolerance"]),
-                   cfl=float(value["cfl"]), transient=bool(config.get("transient", False)),
-                   dt=float(config.get("dt", 1.0)), substeps=int(value["substeps"]),
-                   outer_correctors=int(value["outer_correctors"]), poisson=str(value["poisson"]))
+                   transient=bool(config.get("transient", False)), dt=float(config.get("dt", 1.0)), **settings)
         spec.check()
         return spec
 
     def check(self) -> None:
-        if self.penalization not in PENALIZATIONS:
-            raise ValueError(f"penalization must be one of {', '.join(PENALIZATIONS)}, got {self.penalization!r}")
-        if self.poisson not in POISSON_METHODS:
-            raise ValueError(f"poisson must be one of {', '.join(POISSON_METHODS)}, got {self.poisson!r}")
         if self.rho <= 0 or self.mu <= 0:
             raise ValueError(f"rho and mu must be positive, got {self.rho}, {self.mu}")
-        if self.dt <= 0 or self.substeps < 1 or self.outer_correctors < 1 or self.max_iterations < 1:
-            raise ValueError(f"dt must be positive and substeps, outer_correctors, max_iterations at least 1, got "
-                             f"{self.dt}, {self.substeps}, {self.outer_correctors}, {self.max_iterations}")
-        if not (self.tolerance > 0 and 0 < self.cfl <= 1):
-            raise ValueError(f"tolerance must be positive and cfl in (0, 1], got {self.tolerance}, {self.cfl}")
-        if self.drag is not None and not self.drag > 0:
-            raise ValueError(f"drag must be positive, got {self.drag}")
+        if self.dt <= 0:
+            raise ValueError(f"dt must be positive, got {self.dt}")
         for d, (a, b) in enumerate(zip(BOX_FACES[::2], BOX_FACES[1::2])):
             ea, eb = self.faces[a]["kind"] == "empty", self.faces[b]["kind"] == "empty"
             if ea != eb or (ea and self.grid.shape[d] != 1):

@@ -43,7 +43,7 @@ from coupler.protocol.fluid_faces import face_conditions
 from transfer.grid import BOX_FACES
 from transfer.penalization import default_drag
 
-from .settings import DECOMPOSITIONS, PENALIZATIONS, SOLID_VELOCITIES
+from .settings import PARTICIPANT
 
 # vertex numbering of the block: 0 (x0,y0,z0) 1 (x1,y0,z0) 2 (x1,y1,z0) 3 (x0,y1,z0), 4-7 at z1
 _FACE_VERTS = {"xmin": (0, 4, 7, 3), "xmax": (2, 6, 5, 1), "ymin": (1, 5, 4, 0),
@@ -102,24 +102,27 @@ class Grid:
 
 @dataclass
 class CaseSpec:
+    """The case: grid, face conditions, fluid, time step and the participant's settings
+    (:data:`fluid_openfoam.settings.PARTICIPANT`: their meaning and defaults)."""
+
     grid: Grid
     faces: dict[str, dict]
+    drag: float | None                 # 1/s, see module doc (None: the default of drag_value)
+    penalization: str                  # how fractions become drag, see transfer/penalization.py
+    penalization_exponent: float       # for penalization "power"
+    max_iterations: int                # simpleFoam iterations per advance
+    tolerance: float                   # residualControl for p and U
+    substeps: int                      # pimpleFoam time steps per coupling step
+    outer_correctors: int              # PIMPLE outer iterations per time step at most
+    solid_velocity: str                # "bodies": one velocity source per solid body (zones.py); "none"
+    ranks: int                         # MPI ranks of the solver (decomposed case, parallel.py)
+    decomposition: str                 # decomposePar method with ranks > 1
     rho: float = 1000.0
     mu: float = 1.0e-3
-    drag: float | None = None          # 1/s, see module doc
     drag_table: list | None = None     # [[fraction, D], ...] overriding the linear table
-    penalization: str = "wall"         # how fractions become drag, see transfer/penalization.py
-    penalization_exponent: float = 2.0  # for penalization "power"
-    max_iterations: int = 2000         # simpleFoam iterations per advance
-    tolerance: float = 1.0e-7          # residualControl for p and U
     dt: float = 1.0                    # coupling time step [s]
     transient: bool = False            # pimpleFoam over each coupling step (else simpleFoam)
-    substeps: int = 1                  # pimpleFoam time steps per coupling step
-    outer_correctors: int = 50         # PIMPLE outer iterations per time step at most
-    solid_velocity: str = "bodies"     # "bodies": one velocity source per solid body (zones.py); "none"
     write_binary: bool = True
-    ranks: int = 1                     # MPI ranks of the solver (decomposed case, parallel.py)
-    decomposition: str = "simple"      # decomposePar method with ranks > 1 (settings.DECOMPOSITIONS)
 
     @property
     def nu(self) -> float:
@@ -151,32 +154,16 @@ class CaseSpec:
             ea, eb = faces[a]["kind"] == "empty", faces[b]["kind"] == "empty"
             if ea != eb or (ea and grid.shape[d] != 1):
                 raise ValueError(f"'empty' needs both {a} and {b} and one cell in that direction")
-        spec = cls(grid, faces,
+        settings = PARTICIPANT.configuration(config)
+        del settings["keep_case"]  # the coupler's: it gives case_dir then
+        spec = cls(grid, faces, **settings,
                    rho=float(config.get("rho", 1000.0)), mu=float(config.get("mu", 1.0e-3)),
-                   drag=config.get("drag"), drag_table=config.get("drag_table"),
-                   max_iterations=int(config.get("max_iterations", 2000)),
-                   tolerance=float(config.get("tolerance", 1.0e-7)),
-                   dt=float(config.get("dt", 1.0)),
-                   transient=bool(config.get("transient", False)),
-                   substeps=int(config.get("substeps", 1)),
-                   outer_correctors=int(config.get("outer_correctors", 50)),
-                   solid_velocity=str(config.get("solid_velocity", "bodies")),
-                   penalization=str(config.get("penalization", "wall")),
-                   penalization_exponent=float(config.get("penalization_exponent", 2.0)),
-                   ranks=int(config.get("ranks", 1)), decomposition=str(config.get("decomposition", "simple")))
-        if spec.ranks < 1 or spec.decomposition not in DECOMPOSITIONS:
-            raise ValueError(f"ranks must be at least 1 and decomposition one of {', '.join(DECOMPOSITIONS)}, "
-                             f"got {spec.ranks}, {spec.decomposition!r}")
-        if spec.penalization not in PENALIZATIONS:
-            raise ValueError(f"penalization must be one of {', '.join(PENALIZATIONS)}, got {spec.penalization!r}")
+                   drag_table=config.get("drag_table"), dt=float(config.get("dt", 1.0)),
+                   transient=bool(config.get("transient", False)))
         if spec.drag_table is not None and spec.penalization != "linear":
             raise ValueError("drag_table applies to the fraction itself: it needs penalization 'linear'")
-        if spec.solid_velocity not in SOLID_VELOCITIES:
-            raise ValueError(f"solid_velocity must be one of {', '.join(SOLID_VELOCITIES)}, got "
-                             f"{spec.solid_velocity!r}")
-        if spec.dt <= 0 or spec.substeps < 1 or spec.outer_correctors < 1:
-            raise ValueError(f"dt must be positive and substeps, outer_correctors at least 1, got "
-                             f"{spec.dt}, {spec.substeps}, {spec.outer_correctors}")
+        if spec.dt <= 0:
+            raise ValueError(f"dt must be positive, got {spec.dt}")
         if spec.rho <= 0 or spec.mu <= 0:
             raise ValueError(f"rho and mu must be positive, got {spec.rho}, {spec.mu}")
         return spec

@@ -9,19 +9,16 @@ Config (the fluid's part of the scene; same grid conventions as
      "inlet": {"velocity": [1, 0, 0]},    # xmin, or {"pressure": Pa}
      "outlet": {"pressure": 0.0},         # xmax, Pa
      "walls": "wall",                     # other faces; "boundaries": {face: cond} overrides
-     "drag": null,                        # 1/s, maximum penalization (default: see case.py)
-     "penalization": "wall",              # fractions -> drag: "wall" (sub-cell wall position,
-                                          # second order for grid-aligned walls), "linear"
-                                          # (stock table of the fraction), "power"; transfer/penalization.py
-     "max_iterations": 2000, "tolerance": 1e-7,   # simpleFoam per advance
-     "case_dir": null}                    # kept; default: a temporary directory, removed on
+     "case_dir": null,                    # kept; default: a temporary directory, removed on
                                           # every exit (the launcher removes it after SIGKILL)
+     ...}                                 # the settings of fluid_openfoam/settings.py
 
 From a scene, the flow rule (:func:`coupler.plan.effects.flow.fluid_config`) fills these keys: ``rho``, ``mu``
 from ``[materials.fluid]``; ``inlet``, ``outlet``, ``walls``, ``boundaries`` from ``[flow]``
-(inlet_velocity / inlet_pressure, outlet_pressure, walls, faces); ``penalization``,
-``penalization_exponent``, ``drag``, ``max_iterations``, ``tolerance`` from ``[solvers.fluid]``
-(cases/README.md).
+(inlet_velocity / inlet_pressure, outlet_pressure, walls, faces); ``dt``, ``transient`` from
+``[time]`` and ``dynamics``; and every key of ``[solvers.fluid]`` as the participant declares it
+(:data:`fluid_openfoam.settings.PARTICIPANT`: penalization, drag, max_iterations, tolerance, ...,
+with their defaults; cases/README.md).
 
 Transient (``"transient": true``, from a scene with ``dynamics``): each ``advance(t, dt)``
 runs pimpleFoam from the state at ``t`` (the window's start, restored by the coupler for

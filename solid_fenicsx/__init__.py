@@ -20,17 +20,34 @@ control); frictionless contact (paper 2.2, eq. 7-11): :mod:`.mortar` (contact fa
 normals, ``T = D^-1 B`` with the dual basis, weighted gap), :mod:`.obstacle` (a rigid plane,
 T = 0), :mod:`.contact` (the transformed system of eq. 10 as a bound-constrained QP, pressure),
 :mod:`.contact_hertz` (the Hertz case and its theory). Case geometry comes from
-:mod:`transfer.generators`.
+:mod:`transfer.generators`. :mod:`.settings`: the participant's declared settings, read by the
+coupler without dolfinx.
 """
 
-from .constitutive import LockingWarning, Material
-from .elasticity import Elasticity, evaluate
-from .linear_solver import LinearSolve, LinearSolveError, SolverOptions
-from .mesh import SolidMesh, SolidMeshError, box_mesh, from_arrays, read_mesh
-from .output import VTUSeries, XDMFSeries
-from .timestepping import Scheme, make_scheme
-from .vertex_io import VertexIO, write_vtu
+import importlib
 
-__all__ = ["Elasticity", "LinearSolve", "LinearSolveError", "LockingWarning", "Material", "Scheme", "SolidMesh",
-           "SolidMeshError", "SolverOptions", "VTUSeries", "VertexIO", "XDMFSeries", "box_mesh", "evaluate",
-           "from_arrays", "make_scheme", "read_mesh", "write_vtu"]
+#: public name -> the module that defines it, imported on first use (PEP 562): reading the
+#: participant's settings (:mod:`.settings`) imports no dolfinx
+_EXPORTS = {
+    "LockingWarning": ".constitutive", "Material": ".constitutive",
+    "Elasticity": ".elasticity", "evaluate": ".elasticity",
+    "LinearSolve": ".linear_solver", "LinearSolveError": ".linear_solver", "SolverOptions": ".linear_solver",
+    "SolidMesh": ".mesh", "SolidMeshError": ".mesh", "box_mesh": ".mesh", "from_arrays": ".mesh",
+    "read_mesh": ".mesh",
+    "VTUSeries": ".output", "XDMFSeries": ".output",
+    "Scheme": ".timestepping", "make_scheme": ".timestepping",
+    "VertexIO": ".vertex_io", "write_vtu": ".vertex_io",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_EXPORTS[name], __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})

@@ -39,6 +39,7 @@ from coupler.protocol.expressions import evaluate_expression
 from .elasticity import Elasticity
 from .load_steps import StaticStep, add_loads
 from .mesh import BOX_FACES, SolidMeshError, exterior_midpoints, from_arrays, generated_mesh, read_mesh
+from .settings import PARTICIPANT
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -94,7 +95,7 @@ def _boundary_uses(config: dict) -> list[tuple[str, str | int]]:
 class SolidParticipant(Participant):
     """Linear elasticity on dolfinx (see :mod:`solid_fenicsx.elasticity`)."""
 
-    kind = "solid_fenicsx"
+    kind = PARTICIPANT.kind
 
     def __init__(self):
         self.solver: Elasticity | None = None
@@ -137,13 +138,12 @@ class SolidParticipant(Participant):
             if solid.comm.allreduce(len(solid.facets(tags.get(name, name)))) == 0:
                 why = _why_empty(solid, name, config.get("boundaries", {}).get(name), boundaries.get(name))
                 raise SolidMeshError(f"{key} boundary {name!r}: selects no facet of the mesh ({why})")
-        material = config["material"]
+        material, settings = config["material"], PARTICIPANT.configuration(config)
         self.dynamic = bool(config.get("dynamic"))
         s = Elasticity(solid, E=material["E"], nu=material["nu"], density=material.get("density", 0.0),
-                       degree=int(config.get("degree", 1)), scheme="newmark" if self.dynamic else None,
+                       degree=settings["degree"], scheme="newmark" if self.dynamic else None,
                        fluid_density=float(config.get("fluid_density", 0.0)),
-                       solver=config.get("linear_solver", "cg"), rtol=float(config.get("rtol", 1e-10)),
-                       max_it=int(config.get("max_iterations", 1000)))
+                       solver=settings["linear_solver"], rtol=settings["rtol"], max_it=settings["max_iterations"])
 
         def where(name):
             return tags.get(name, name)

@@ -21,6 +21,11 @@ LAYERS = {
 }
 #: participants may import these parts of the coupler, and nothing else of it
 PARTICIPANT_MAY_IMPORT = ("coupler.errors", "coupler.protocol")
+#: the participants' packages (the stand-ins are a module of the coupler)
+PARTICIPANT_PACKAGES = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin")
+#: a participant's settings module (its declaration, read by the coupler) imports only these
+#: (the declarations and the penalization keys every grid fluid shares)
+SETTINGS_MAY_IMPORT = {"coupler.errors", "coupler.protocol.settings", "coupler.protocol.penalization"}
 
 
 def modules() -> dict[str, ast.Module]:
@@ -107,17 +112,43 @@ def test_every_import_goes_to_the_same_or_a_lower_layer():
 
 
 def test_participants_import_only_the_protocol_of_the_coupler():
-    participants = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin", "coupler.standins")
+    participants = (*PARTICIPANT_PACKAGES, "coupler.standins")
     wrong = [f"{a} -> {b}" for a, targets in graph().items() if a.startswith(participants) for b in targets
              if b.startswith("coupler") and not b.startswith(PARTICIPANT_MAY_IMPORT + participants)]
     assert not wrong, "\n".join(sorted(wrong))
 
 
-def test_the_coupler_imports_no_participant():
-    participants = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin")
+def settings_module(module: str) -> bool:
+    """A participant package's light settings module (``solid_fenicsx.settings``)."""
+    return module in {f"{p}.settings" for p in PARTICIPANT_PACKAGES}
+
+
+def test_the_coupler_imports_no_participant_but_its_settings():
     wrong = {f"{a} -> {b}" for a, targets in graph().items() if a.startswith("coupler")
-             and not a.startswith("coupler.standins") for b in targets if b.startswith(participants)}
+             and not a.startswith("coupler.standins") for b in targets
+             if b.startswith(PARTICIPANT_PACKAGES) and not settings_module(b)}
     assert not wrong, "\n".join(sorted(wrong))
+
+
+def test_a_settings_module_imports_only_the_protocol_settings():
+    """What the coupler reads of a participant pulls in no solver: its settings module imports
+    the declarations' module and nothing else of the project (tests/coupler/test_participants.py
+    checks the third-party side in a fresh interpreter)."""
+    g = graph()
+    found = sorted(m for m in g if settings_module(m))
+    assert found == ["fluid_chorin.settings", "fluid_openfoam.settings", "solid_fenicsx.settings"]
+    wrong = {f"{m} -> {b}" for m in found for b in g[m] if b not in SETTINGS_MAY_IMPORT}
+    assert not wrong, "\n".join(sorted(wrong))
+    assert g["coupler.protocol.settings"] <= {"coupler.errors"}
+    assert g["coupler.protocol.penalization"] <= {"coupler.protocol.settings", "transfer.penalization"}
+
+
+def test_the_scanner_sees_a_participant_import_other_than_settings():
+    """The rule above is not vacuous: an import of a participant's solver module from the
+    coupler would be flagged, an import of its settings module would not."""
+    tree = ast.parse("from fluid_openfoam.settings import PARTICIPANT\nfrom fluid_openfoam.case import CaseSpec\n")
+    found = imports("coupler.scene.x", ROOT / "coupler" / "scene" / "x.py", tree, modules())
+    assert {b for b in found if not settings_module(b)} == {"fluid_openfoam.case"}
 
 
 def test_the_graph_sees_function_level_imports():

@@ -48,10 +48,11 @@ def default_drag(nu: float, h_min: float, u_ref: float = 0.0, rate: float = 0.0)
     return 1.0e4 * max(nu / h_min ** 2, rate, u_ref / h_min)
 
 
-def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str = "wall",
-                  exponent: float = 2.0) -> np.ndarray:
+def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str,
+                  exponent: float | None = None) -> np.ndarray:
     """The field ``T`` in [0, 1] (written as ``solid``) for the table ``[(0, 0), (1, d_max)]``.
-    ``fraction`` is per cell, x fastest; ``shape`` (nx, ny, nz) and ``spacing`` of the grid."""
+    ``fraction`` is per cell, x fastest; ``shape`` (nx, ny, nz) and ``spacing`` of the grid;
+    ``mode`` and ``exponent`` (of ``"power"``) as the participant's settings declare them."""
     f = np.clip(np.asarray(fraction, dtype=np.float64).reshape(-1), 0.0, 1.0)
     if mode == "linear":
         return f

@@ -27,11 +27,20 @@ class PlannedParticipant:
     config: dict = field(default_factory=dict)
     allow_unconverged: bool = False  # its unconverged inner solves accepted on purpose
     in_process: bool = False
+    arguments: list[str] = field(default_factory=list)  # after the protocol's own (the stand-ins' --kind KIND)
+
+    @classmethod
+    def of(cls, solver, config: dict) -> "PlannedParticipant":
+        """The participant of a scene's validated ``[solvers.X]`` (:class:`coupler.scene.participants.Solver`)."""
+        spec = solver.spec
+        return cls(solver.role, spec.kind, spec.module, solver.processes, config, solver.allow_unconverged,
+                   arguments=list(spec.arguments))
 
     def describe(self) -> str:
         if self.in_process:
             return f"{self.name}: {self.kind} (served in the coupler's process)"
-        return f"{self.name}: {self.kind} (python -m {self.module}, {self.ranks} rank{'s' * (self.ranks > 1)})"
+        command = " ".join(["python -m", self.module, *self.arguments])
+        return f"{self.name}: {self.kind} ({command}, {self.ranks} rank{'s' * (self.ranks > 1)})"
 
 
 @dataclass
@@ -119,4 +128,5 @@ def make_plan(scene) -> Plan:
     for name, rule in RULES.items():
         if name in scene.effects:
             rule.plan(scene, plan)
+    plan.notes += [note for solver in scene.solvers.values() for note in solver.notes]
     return plan

@@ -71,6 +71,8 @@ def check_integer(value, minimum=None, maximum=None, choices=None) -> int:
     """An integer (not bool) in [minimum, maximum], one of `choices` when given."""
     if (isinstance(value, bool) or not isinstance(value, int) or minimum is not None and value < minimum
             or maximum is not None and value > maximum):
+        if minimum is not None and minimum == maximum and not isinstance(value, bool) and isinstance(value, int):
+            raise Invalid(f"must be {minimum}, got {value!r}")
         bounds = (f" in [{minimum}, {maximum}]" if minimum is not None and maximum is not None else
                   f" >= {minimum}" if minimum is not None else f" <= {maximum}" if maximum is not None else "")
         raise Invalid(f"must be an integer{bounds}, got {value!r}")
@@ -322,7 +324,8 @@ class ParticipantSpec:
     ``kind``: the name a scene gives (``[solvers.X] participant``); ``module``: started as
     ``python -m module`` with ``arguments`` after the protocol's own; ``role``: the
     ``[solvers.X]`` it can fill (``"solid"``, ``"fluid"``; None: none, a test participant);
-    ``settings``: its keys; ``memory``: (bytes per MPI rank, bytes per cell) of its peak
+    ``settings``: its keys; ``needs``: the scene tables it cannot run without (``"flow"``: the
+    grid's boundary conditions); ``memory``: (bytes per MPI rank, bytes per cell) of its peak
     resident memory, for the coupler's estimate before a run. A participant that declares the
     key ``ranks`` is one process that runs its own solver on that many MPI ranks (the coupler
     does not start it with ``mpirun -n``); otherwise the coupler starts it on ``ranks`` MPI
@@ -334,6 +337,7 @@ class ParticipantSpec:
     description: str
     settings: Settings = field(default_factory=Settings)
     arguments: tuple[str, ...] = ()
+    needs: tuple[str, ...] = ()
     memory: tuple[int, int] = (50 * 2**20, 100)
 
     @property

@@ -3,12 +3,9 @@ each participant accepts its part (``varcouple check``, and ``varcouple run`` be
 first step).
 
 Sizes come from the scene (box and grid shapes) or from reading the mesh files; memory is
-estimated per participant from per-cell costs measured on these machines (peak resident
-memory, Debian 12, 2 cores)::
-
-    OpenFOAM (blockMesh, simpleFoam):  64k cells 188 MB, 512k cells 735 MB  -> 150 MB + 1.4 kB/cell
-    dolfinx P1 elasticity, CG+GAMG:   25k tets 130 MB, 197k tets 298 MB   -> 120 MB + 1.0 kB/tet
-    coupler (operators, fields):      about 2 kB per solid tet + 0.3 kB per fluid cell
+estimated per participant from the per-rank and per-cell costs it declares
+(:attr:`coupler.protocol.settings.ParticipantSpec.memory`, measured peak resident memory), and
+for the coupler (operators, fields) about 2 kB per solid tet + 0.3 kB per fluid cell.
 
 A scene whose estimate exceeds the memory available (the smallest of the machine's
 MemAvailable, the cgroup's memory.max, the address-space limit and ``[resources]
@@ -28,9 +25,8 @@ from pathlib import Path
 from coupler.errors import SceneError
 
 MB = 2**20
-#: (fixed bytes, bytes per cell) of each participant kind; see the module docstring
-COSTS = {"openfoam": (150 * MB, 1400), "chorin": (120 * MB, 2000), "solid_fenicsx": (120 * MB, 1000), "coupler_solid": (100 * MB, 2000),
-         "coupler_fluid": (0, 300), "replay_fluid": (50 * MB, 100), "spring_solid": (50 * MB, 100)}
+#: (fixed bytes, bytes per cell) of the coupler's part for the solid and for the fluid
+COSTS = {"coupler_solid": (100 * MB, 2000), "coupler_fluid": (0, 300)}
 
 
 @dataclass
@@ -106,9 +102,9 @@ def estimate(scene) -> list[Estimate]:
         if solid_cfg is None:  # a fixed solid, served in the coupler
             out.append(Estimate("solid", tets, 0, key))
         else:
-            fixed, per = COSTS[solid_cfg["participant"]]
-            degree_factor = 5 if solid_cfg.get("degree", 1) == 2 else 1
-            out.append(Estimate("solid", tets, fixed * solid_cfg["ranks"] + per * degree_factor * tets, key))
+            fixed, per = solid_cfg.spec.memory
+            degree_factor = 5 if solid_cfg.settings.get("degree") == 2 else 1
+            out.append(Estimate("solid", tets, fixed * solid_cfg.ranks + per * degree_factor * tets, key))
         coupler += COSTS["coupler_solid"][1] * tets
     for name in scene.effects:  # meshes an effect serves in the coupler (mesh files of a transfer)
         for part, cells, key in getattr(RULES[name], "in_process_cells", lambda scene: [])(scene):
@@ -118,9 +114,8 @@ def estimate(scene) -> list[Estimate]:
         fluid_cfg = scene.solvers["fluid"]
         g = scene.fluid.shape
         cells, key = g[0] * g[1] * g[2], f"{scene.path}: [geometry.fluid] shape"
-        fixed, per = COSTS[fluid_cfg["participant"]]
-        ranks = fluid_cfg.get("solver_ranks", fluid_cfg["ranks"])
-        out.append(Estimate("fluid", cells, fixed * ranks + per * cells, key))
+        fixed, per = fluid_cfg.spec.memory
+        out.append(Estimate("fluid", cells, fixed * fluid_cfg.ranks + per * cells, key))
         coupler += COSTS["coupler_fluid"][1] * cells
     out.append(Estimate("coupler", 0, coupler, f"{scene.path}: [geometry]"))
     return out

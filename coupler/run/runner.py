@@ -215,8 +215,7 @@ class Run:
                 self.clients[p.name] = LocalClient(p.name, served_in_process(p, self.run_id))
                 self.log(f"serving {p.name}: {p.kind} in this process")
                 continue
-            extra = ["--kind", p.kind] if p.module == "coupler.standins" else []
-            self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=extra)
+            self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=p.arguments)
             self.clients[p.name] = self.session.client(
                 p.name, timeout=timeout, process_check=lambda name=p.name: self.launcher.check(name))
             self.log(f"started {p.name}: {p.kind} ({p.ranks} rank{'s' * (p.ranks > 1)}), log in "

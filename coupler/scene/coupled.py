@@ -18,26 +18,18 @@ from coupler import checks
 from coupler.errors import SceneError
 from coupler.protocol.transport import check_endpoint
 from coupler.protocol.settings import REQUIRED
+from coupler.scene.participants import Solver, read_solver
 from coupler.scene.tables import Table, output_directory
 from coupler.protocol.expressions import check_expression
 from transfer.generators import GENERATORS, parameters
 from transfer.grid import BOX_FACES
 
-#: participant kinds -> the module started as ``python -m MODULE``
-SOLID_PARTICIPANTS = {"solid_fenicsx": "solid_fenicsx", "spring_solid": "coupler.standins"}
-FLUID_PARTICIPANTS = {"openfoam": "fluid_openfoam", "chorin": "fluid_chorin", "replay_fluid": "coupler.standins"}
 LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure", "platen")
 #: loads whose value may be a list, one value per step
 STEPPED_LOADS = ("dirichlet", "pressure", "fluid_pressure")
 ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 #: [coupling] traction: the fluid's pressure only, or its full stress with the viscous part (coupler/viscous.py)
 TRACTIONS = ("pressure", "full")
-#: how the openfoam participant turns solid fractions into drag (transfer/penalization.py)
-PENALIZATIONS = ("wall", "linear", "power")
-#: pressure solvers of the chorin fluid (fluid_chorin/poisson.py)
-POISSON_METHODS = ("auto", "direct", "gamg")
-#: decomposePar methods of a parallel openfoam fluid (fluid_openfoam/parallel.py)
-DECOMPOSITIONS = ("simple",)  # scotch: only a dummy library in Debian's OpenFOAM v1912
 
 #: environment variable giving the default of ``[output] pictures`` (the tests set it to 0)
 PICTURES_VAR = "VARCOUPLE_PICTURES"
@@ -87,7 +79,7 @@ class CoupledScene:
     material: dict  # E, nu, density
     fluid_material: dict  # density, viscosity (water if the scene gives none)
     loads: list[Load]
-    solvers: dict  # "solid": {...}, "fluid": {...}
+    solvers: dict[str, Solver]  # role ("solid", "fluid") -> its [solvers.X], validated through its participant
     time: dict  # dt, steps
     coupling: dict
     messaging: dict
@@ -155,37 +147,6 @@ LOAD_KEYS = {"type": f"one of {', '.join(LOAD_TYPES)}", "boundary": "a named bou
              "tolerance": "platen: relative tolerance on each target stress (default 1e-3)",
              "area": "platen: the area the mean stress is taken over [m^2] (default: the boundary's, projected)",
              "max_iterations": "platen: solves per step to find the platen's displacement (default 20)"}
-SOLVER_KEYS = {"participant": "which participant runs this part", "ranks": "MPI ranks (default 1)",
-               "degree": "polynomial degree (solid: 1 or 2)", "linear_solver": "cg (CG + GAMG) or lu",
-               "rtol": "relative tolerance of the linear solver", "stiffness": "spring_solid: spring stiffness",
-               "pressure": "replay_fluid: uniform pressure served",
-               "feedback": "replay_fluid: pressure drop per unit mean solid velocity [Pa s/m]",
-               "unconverged": "replay_fluid: time steps in which it reports an unconverged solve (for tests)",
-               "penalization": f"openfoam, chorin: solid fractions -> drag, one of {', '.join(PENALIZATIONS)}",
-               "penalization_exponent": "openfoam, chorin: exponent of penalization 'power'",
-               "drag": "openfoam, chorin: maximum penalization drag [1/s] (default 1e4 x the fastest cell rate)",
-               "cfl": "chorin: Courant number of the explicit convection (default 0.5)",
-               "poisson": f"chorin: pressure solver, one of {', '.join(POISSON_METHODS)} (default auto: Cholesky "
-                          f"up to 30000 cells, CG + GAMG beyond)",
-               "decomposition": f"openfoam with ranks > 1: decomposePar method, one of {', '.join(DECOMPOSITIONS)}",
-               "max_iterations": "openfoam: simpleFoam iterations per coupling iteration (default 2000); "
-                                 "chorin: pseudo-time steps per coupling iteration (default 20000); "
-                                 "solid_fenicsx: Krylov iterations per solve (default 1000)",
-               "tolerance": "openfoam: simpleFoam (PIMPLE with dynamics) residual tolerance (p and U); chorin: "
-                            "relative change of velocity and pressure per pseudo-time step (per outer iteration "
-                            "with dynamics)",
-               "substeps": "openfoam with dynamics: pimpleFoam time steps per coupling step (default 1); chorin: "
-                           "at least this many time steps (more if the explicit stability bound asks)",
-               "outer_correctors": "openfoam, chorin with dynamics: outer iterations per time step at most "
-                                   "(default 50)",
-               "solid_velocity": "openfoam: 'bodies' (each solid body moves rigidly with its wetted layer's mean "
-                                 "velocity, default) or 'none' (penalized towards rest)",
-               "allow_unconverged": "accept this participant's unconverged inner solves on purpose (e.g. a "
-                                    "deliberately capped steady solve; default false: the run stops with "
-                                    "status not_converged); summary.json lists what was accepted",
-               "keep_case": "openfoam: keep the OpenFOAM case in <output>/logs/fluid_case for inspection "
-                            "(default false: a temporary directory, removed when the run ends)"}
-
 
 def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
     """Validate the tables of a coupled scene (already read from TOML): the tables every scene
@@ -248,15 +209,14 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     solvers = Table(path, "solvers", data.get("solvers", {}), TABLES["solvers"])
     solver_cfg = {}
     if "solid" in roles:
-        solver_cfg["solid"] = _solver(path, "solid", solvers.data.get("solid", {}), SOLID_PARTICIPANTS,
-                                      "solid_fenicsx")
+        solver_cfg["solid"] = read_solver(path, "solid", solvers.data.get("solid", {}))
     elif "solid" in solvers.data:
         raise solvers.error("solid", f"no effect of {effects!r} needs a solid participant (a fixed solid is "
                                      f"served by the coupler)")
     if any("fluid" in getattr(RULES[e], "ROLES", ()) for e in effects):
         if fluid is None:
             raise geometry.error("fluid", "missing: the scene asks for 'flow' but has no fluid domain (a grid)")
-        solver_cfg["fluid"] = _solver(path, "fluid", solvers.data.get("fluid", {}), FLUID_PARTICIPANTS, "openfoam")
+        solver_cfg["fluid"] = read_solver(path, "fluid", solvers.data.get("fluid", {}))
 
     time = Table(path, "time", data.get("time", {}), TABLES["time"])
     stepped = any(getattr(RULES[e], "TIME_STEPS", False) for e in effects)  # dynamics, flow: dt and steps given
@@ -276,7 +236,7 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                     "traction": coupling.string("traction", "pressure", TRACTIONS)}
     if coupling_cfg["traction"] == "full" and "flow" not in effects:
         raise coupling.error("traction", "'full' (the viscous stress of a flow) needs the effect 'flow'")
-    solid_kind = solver_cfg.get("solid", {}).get("participant", "a fixed solid")
+    solid_kind = solver_cfg["solid"].kind if "solid" in solver_cfg else "a fixed solid"
     if coupling_cfg["traction"] == "full" and solid_kind != "solid_fenicsx":
         raise coupling.error("traction", f"'full' needs a solid with a wetted surface (solid_fenicsx), got "
                                          f"{solid_kind!r}")
@@ -502,56 +462,3 @@ def _check_steps(path, loads: list[Load], steps: int, given: bool) -> None:
             raise SceneError(f"{path}: [loads.{i}] {key}: {len(load.value)} values, one per step, but {origin} "
                              f"{steps} step{'s' * (steps > 1)}")
 
-
-def _solver(path, part, data, participants, default) -> dict:
-    t = Table(path, f"solvers.{part}", data, SOLVER_KEYS)
-    cfg = {"participant": t.string("participant", default, tuple(participants)),
-           "ranks": t.integer("ranks", 1), "allow_unconverged": t.boolean("allow_unconverged", False)}
-    cfg["module"] = participants[cfg["participant"]]
-    if part == "solid":
-        cfg["degree"] = t.integer("degree", 1)
-        if cfg["degree"] > 2:
-            raise t.error("degree", f"must be 1 or 2, got {cfg['degree']}")
-        cfg["linear_solver"] = t.string("linear_solver", "cg", ("cg", "lu"))
-        cfg["rtol"] = t.number("rtol", 1e-10, positive=True)
-        cfg["max_iterations"] = t.integer("max_iterations", 1000)
-        if cfg["participant"] == "spring_solid":
-            cfg["stiffness"] = t.number("stiffness", positive=True)
-    if part == "fluid" and cfg["participant"] == "replay_fluid":
-        cfg["pressure"] = t.number("pressure", 0.0)
-        cfg["feedback"] = t.number("feedback", 0.0)
-        cfg["unconverged"] = t.numbers("unconverged", [], integer=True, minimum=0, within=None) \
-            if "unconverged" in t.data else []
-    if part == "fluid" and cfg["participant"] == "openfoam":
-        # one participant process; the solver runs decomposed on `ranks` MPI ranks (fluid_openfoam/parallel.py)
-        cfg["solver_ranks"], cfg["ranks"] = cfg["ranks"], 1
-        cfg["decomposition"] = t.string("decomposition", "simple", DECOMPOSITIONS)
-        if "decomposition" in t.data and cfg["solver_ranks"] == 1:
-            raise t.error("decomposition", "applies to a parallel fluid (ranks > 1) only")
-        cfg["penalization"] = t.string("penalization", "wall", PENALIZATIONS)
-        cfg["penalization_exponent"] = t.number("penalization_exponent", 2.0, positive=True)
-        if "penalization_exponent" in t.data and cfg["penalization"] != "power":
-            raise t.error("penalization_exponent", "applies to penalization = \"power\" only")
-        cfg["drag"] = t.number("drag", None, positive=True)
-        cfg["max_iterations"] = t.integer("max_iterations", 2000)
-        cfg["tolerance"] = t.number("tolerance", 1e-7, positive=True)
-        cfg["substeps"] = t.integer("substeps", 1)
-        cfg["outer_correctors"] = t.integer("outer_correctors", 50)
-        cfg["solid_velocity"] = t.string("solid_velocity", "bodies", ("bodies", "none"))
-        cfg["keep_case"] = t.boolean("keep_case", False)
-    if part == "fluid" and cfg["participant"] == "chorin":
-        # types and choices checked here; a key the scene leaves out is None: the default of
-        # fluid_chorin/settings.py, which the participant fills in
-        if cfg["ranks"] != 1:
-            raise t.error("ranks", "the chorin fluid runs on one process (no grid slabs over MPI ranks yet)")
-        cfg["penalization"] = t.string("penalization", None, PENALIZATIONS)
-        cfg["penalization_exponent"] = t.number("penalization_exponent", None, positive=True)
-        if "penalization_exponent" in t.data and cfg["penalization"] != "power":
-            raise t.error("penalization_exponent", "applies to penalization = \"power\" only")
-        cfg["drag"] = t.number("drag", None, positive=True)
-        cfg["tolerance"] = t.number("tolerance", None, positive=True)
-        cfg["cfl"] = t.number("cfl", None, positive=True, maximum=1.0)
-        for key in ("max_iterations", "substeps", "outer_correctors"):
-            cfg[key] = t.integer(key) if key in t.data else None
-        cfg["poisson"] = t.string("poisson", None, POISSON_METHODS)
-    return cfg

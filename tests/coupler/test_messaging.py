@@ -24,7 +24,7 @@ from coupler.run.launch import Launcher, descendants
 from coupler.run.client import CouplerSession, ParticipantClient
 from coupler.protocol.wire import Field
 
-BOX = {"box": {"lower": [0, 0, 0], "upper": [1, 2, 3], "shape": [3, 4, 5]}, "k": 4.0}
+BOX = {"box": {"lower": [0, 0, 0], "upper": [1, 2, 3], "shape": [3, 4, 5]}, "stiffness": 4.0}
 N_BOX = 4 * 5 * 6
 
 

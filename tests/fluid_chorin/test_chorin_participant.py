@@ -94,13 +94,12 @@ def test_the_scene_selects_chorin_and_checks_its_keys(tmp_path):
     plan = make_plan(load(case))
     fluid = plan.participant("fluid")
     assert fluid.kind == "chorin" and fluid.module == "fluid_chorin"
-    assert fluid.config["cfl"] == 0.4 and fluid.config["tolerance"] == 1e-7 and fluid.config["poisson"] is None
+    assert fluid.config["cfl"] == 0.4 and fluid.config["tolerance"] == 1e-7 and fluid.config["poisson"] == "auto"
     assert fluid.config["inlet"] == {"velocity": [0.01, 0.0, 0.0]} and fluid.config["transient"] is False
     assert "Chorin projection in pseudo-time" in plan.iteration
     for old, new, match in (('penalization = "wall"', 'poisson = "lu"', r"\[solvers.fluid\] poisson: unknown value"),
                             ('penalization = "wall"', "cfl = 2.0", r"\[solvers.fluid\] cfl: must lie in"),
-                            ('penalization = "wall"', "ranks = 2", r"\[solvers.fluid\] ranks: the chorin fluid runs "
-                                                                   r"on one process")):
+                            ('penalization = "wall"', "ranks = 2", r"\[solvers.fluid\] ranks: must be 1, got 2$")):
         bad = copy_case(CASES / "small_fracture", tmp_path / new.split()[0], {**CHORIN, old: new})
         with pytest.raises(SceneError, match=match):
             load(bad)

@@ -34,9 +34,9 @@ def test_simple_split_cuts_fewest_faces():
 
 def test_bad_ranks_or_method_are_rejected():
     grid = {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [4, 2, 2]}
-    with pytest.raises(ValueError, match="decomposition one of simple, got 2, 'scotch'"):
+    with pytest.raises(ValueError, match="decomposition: unknown value 'scotch'; use one of 'simple'"):
         CaseSpec.from_config({"grid": grid, "ranks": 2, "decomposition": "scotch"})
-    with pytest.raises(ValueError, match="ranks must be at least 1"):
+    with pytest.raises(ValueError, match="ranks: must be an integer >= 1, got 0"):
         CaseSpec.from_config({"grid": grid, "ranks": 0})
 
 

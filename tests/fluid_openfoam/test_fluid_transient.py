@@ -70,9 +70,9 @@ def test_a_body_slides_along_a_closed_grid_face_and_moves_through_an_open_one():
 
 def test_transient_keys_are_checked():
     grid = {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [2, 2, 2]}
-    with pytest.raises(ValueError, match="solid_velocity must be one of bodies, none"):
+    with pytest.raises(ValueError, match="solid_velocity: unknown value 'cells'; use one of 'bodies', 'none'"):
         CaseSpec.from_config({"grid": grid, "solid_velocity": "cells"})
-    with pytest.raises(ValueError, match="substeps, outer_correctors at least 1"):
+    with pytest.raises(ValueError, match="substeps: must be an integer >= 1, got 0"):
         CaseSpec.from_config({"grid": grid, "transient": True, "substeps": 0})
     spec = CaseSpec.from_config({"grid": grid, "transient": True, "dt": 0.1, "substeps": 4})
     assert spec.time_step == pytest.approx(0.025)

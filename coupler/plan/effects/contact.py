@@ -48,11 +48,11 @@ def parse(scene, data: dict) -> None:
             raise SceneError(f"{path}: [physics] effects: 'contact' with '{other}' is not supported "
                              f"(contact is static: load steps over [time] steps)")
     s = scene.solvers["solid"]
-    if s["participant"] != "solid_fenicsx" or s["degree"] != 1:
+    if s.kind != "solid_fenicsx" or s.settings["degree"] != 1:
         raise SceneError(f"{path}: [solvers.solid]: contact needs participant solid_fenicsx, degree = 1")
     solver = t.string("solver", "active_set", CONTACT_SOLVERS)
-    if s["ranks"] > 1 and solver != "active_set":
-        raise SceneError(f"{path}: [solvers.solid] ranks: {s['ranks']} ranks need [contact] solver = 'active_set' "
+    if s.ranks > 1 and solver != "active_set":
+        raise SceneError(f"{path}: [solvers.solid] ranks: {s.ranks} ranks need [contact] solver = 'active_set' "
                          f"(the only one on distributed matrices; {solver!r} runs on one rank)")
     cfg = {"slave": t.string("slave"), "solver": solver,
            "tolerance": t.number("tolerance", 1e-12 if solver == "multilevel" else 1e-10, positive=True),

@@ -33,29 +33,23 @@ def describe_load(load) -> str:
 
 def solid_config(scene) -> dict:
     """What the solid participant is configured with: its mesh (a file, a box or a generator), named
-    boundaries, material, loads (each with its scene key) and solver settings."""
-    solver = scene.solvers["solid"]
-    geometry = geometry_config(scene.solid)
+    boundaries, material, loads (each with its scene key) and its validated ``[solvers.solid]``
+    settings."""
     loads = [{"type": load.type, "key": f"[loads.{i}]", "boundary": load.boundary, "value": load.value,
               "components": load.components, **load.settings} for i, load in enumerate(scene.loads, start=1)]
-    config = {**geometry, "boundaries": scene.solid.boundaries, "material": scene.material, "loads": loads,
-              "degree": solver["degree"], "linear_solver": solver["linear_solver"], "rtol": solver["rtol"],
-              "max_iterations": solver["max_iterations"], "dynamic": False, "fluid_density": 0.0}
-    if solver["participant"] == "spring_solid":
-        config["k"] = solver["stiffness"]
-    return config
+    return {**geometry_config(scene.solid), "boundaries": scene.solid.boundaries, "material": scene.material,
+            "loads": loads, **scene.solvers["solid"].settings, "dynamic": False, "fluid_density": 0.0}
 
 
 def plan(scene, plan) -> None:
     from coupler.plan.plan import PlannedParticipant
 
     solver = scene.solvers["solid"]
-    plan.participants.append(PlannedParticipant("solid", solver["participant"], solver["module"], solver["ranks"],
-                                                solid_config(scene), solver["allow_unconverged"]))
+    plan.participants.append(PlannedParticipant.of(solver, solid_config(scene)))
     plan.loads += [describe_load(load) for load in scene.loads]
     steps = scene.time["steps"]
     plan.iteration = "static: one solve" if steps == 1 else \
         f"{steps} time steps of {scene.time['dt']:g} s, one solve per step"
-    if scene.material["nu"] > 0.49 and solver.get("degree", 1) == 1:
+    if scene.material["nu"] > 0.49 and solver.settings.get("degree") == 1:
         plan.notes.append(f"nu = {scene.material['nu']:g} is nearly incompressible: P1 tetrahedra lock; "
                           f"use [solvers.solid] degree = 2")

@@ -65,9 +65,9 @@ def parse(scene, data: dict) -> None:
                              f"{', '.join(scene.solid.boundaries)}")
     if "flow" in data:
         scene.effect_settings[NAME] = _boundary_conditions(path, data["flow"], scene.fluid)
-    elif scene.solvers["fluid"]["participant"] in ("openfoam", "chorin"):
-        raise SceneError(f"{path}: [flow] inlet_velocity: missing: the {scene.solvers['fluid']['participant']} "
-                         f"fluid needs a [flow] table with "
+    elif NAME in scene.solvers["fluid"].spec.needs:
+        raise SceneError(f"{path}: [flow] inlet_velocity: missing: the {scene.solvers['fluid'].kind} fluid needs a "
+                         f"[flow] table with "
                          f"inlet_velocity = [u, v, w] or inlet_pressure = p (Pa)")
 
 
@@ -116,33 +116,22 @@ def _boundary_conditions(path, data, fluid) -> dict:
             "solid_fraction": t.string("solid_fraction", "exact", FRACTIONS)}
 
 
-
-
 def fluid_config(scene) -> dict:
-    """What the fluid participant is configured with: its grid, the fluid, the boundary
-    conditions ([flow]) and its solver settings."""
-    solver = scene.solvers["fluid"]
+    """What the fluid participant is configured with: its grid, the fluid, the time step, the
+    boundary conditions ([flow]) and its validated ``[solvers.fluid]`` settings (with
+    ``keep_case``, the case directory in the output's logs)."""
+    from pathlib import Path
+
+    settings = scene.solvers["fluid"].settings
     g = scene.fluid
     config = {"grid": {"origin": g.origin, "spacing": g.spacing, "shape": g.shape}, "location": "cells",
-              "rho": scene.fluid_material["density"], "mu": scene.fluid_material["viscosity"]}
-    if solver["participant"] == "replay_fluid":
-        config.update(pressure=solver["pressure"], feedback=solver["feedback"], unconverged=solver["unconverged"])
-    if solver["participant"] == "openfoam":
-        from pathlib import Path
-
-        config.update({k: solver[k] for k in ("penalization", "penalization_exponent", "drag", "max_iterations",
-                                              "tolerance", "decomposition", "substeps", "outer_correctors",
-                                              "solid_velocity")}, ranks=solver["solver_ranks"])
-        if solver["keep_case"]:
-            config["case_dir"] = str((Path(scene.output_dir) / "logs" / "fluid_case").resolve())
-    if solver["participant"] == "chorin":
-        config.update({k: solver[k] for k in ("penalization", "penalization_exponent", "drag", "max_iterations",
-                                              "tolerance", "substeps", "outer_correctors", "cfl", "poisson")})
-    if solver["participant"] in ("openfoam", "chorin"):
-        config.update(transient="dynamics" in scene.effects, dt=scene.time["dt"])
-        f = scene.effect_settings.get(NAME)
-        if f:
-            config.update(inlet=f["inlet"], outlet=f["outlet"], walls=f["walls"], boundaries=dict(f["faces"]))
+              "rho": scene.fluid_material["density"], "mu": scene.fluid_material["viscosity"],
+              "transient": "dynamics" in scene.effects, "dt": scene.time["dt"], **settings}
+    if settings.get("keep_case"):
+        config["case_dir"] = str((Path(scene.output_dir) / "logs" / "fluid_case").resolve())
+    f = scene.effect_settings.get(NAME)
+    if f:
+        config.update(inlet=f["inlet"], outlet=f["outlet"], walls=f["walls"], boundaries=dict(f["faces"]))
     return config
 
 
@@ -159,8 +148,7 @@ def plan(scene, plan) -> None:
     else:
         plan.participants.append(PlannedParticipant("solid", "rigid_solid", "coupler.standins", 1,
                                                     geometry_config(scene.solid), in_process=True))
-    plan.participants.append(PlannedParticipant("fluid", solver["participant"], solver["module"], solver["ranks"],
-                                                fluid_config(scene), solver["allow_unconverged"]))
+    plan.participants.append(PlannedParticipant.of(solver, fluid_config(scene)))
     dynamic = "dynamics" in scene.effects
     if elastic:
         _loading(scene, plan)
@@ -176,21 +164,22 @@ def plan(scene, plan) -> None:
                                        "solid_velocity", "6",
                                        description=f"P1 (solid mesh) -> Q0 (fluid cells) of {deformed}, pseudo_l2"))
     quasi = ""
-    if solver["participant"] == "openfoam":
-        quasi = (f", transient: pimpleFoam over each step ({solver['substeps']} time step"
-                 f"{'s' * (solver['substeps'] > 1)}) and an elastodynamic solid" if dynamic
+    s = solver.settings
+    if solver.kind == "openfoam":
+        quasi = (f", transient: pimpleFoam over each step ({s['substeps']} time step"
+                 f"{'s' * (s['substeps'] > 1)}) and an elastodynamic solid" if dynamic
                  else ", quasi-static: steady simpleFoam and a static solid per step" if elastic
                  else ", steady simpleFoam")
         if dynamic:
             plan.notes.append("openfoam: the solid velocity is applied per solid body (a rigid translation with the "
                               "mean velocity of its wetted cells; rotation and deformation within a body are not)"
-                              if solver["solid_velocity"] == "bodies" else
+                              if s["solid_velocity"] == "bodies" else
                               "openfoam: the solid velocity is not applied (penalization towards rest)")
-        if solver["solver_ranks"] > 1:
-            plan.tasks.append(f"fluid: openfoam on {solver['solver_ranks']} MPI ranks ({solver['decomposition']} "
+        if s["ranks"] > 1:
+            plan.tasks.append(f"fluid: openfoam on {s['ranks']} MPI ranks ({s['decomposition']} "
                               f"decomposition by decomposePar once; fields written and read per processor, no "
                               f"reconstructPar)")
-    if solver["participant"] == "chorin":
+    if solver.kind == "chorin":
         quasi = (", transient: Chorin projection time steps over each step (implicit Euler) and an elastodynamic "
                  "solid" if dynamic else ", quasi-static: Chorin projection in pseudo-time to steady state and a "
                  "static solid per step" if elastic else ", Chorin projection in pseudo-time to steady state")
