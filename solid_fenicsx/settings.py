@@ -10,8 +10,8 @@ LINEAR_SOLVERS = ("cg", "lu")
 PARTICIPANT = ParticipantSpec(
     kind="solid_fenicsx", module="solid_fenicsx", role="solid",
     memory=(120 * 2**20, 1000),  # P1 elasticity with CG + GAMG: 25k tets 130 MB, 197k tets 298 MB
-    description="linear elasticity on tetrahedra with dolfinx 0.5.2 (static, elastodynamics, two-body mortar "
-                "contact)",
+    description="linear elasticity on tetrahedra with dolfinx 0.5.2 (static, elastodynamics, frictionless mortar "
+                "contact of two bodies or with a rigid plane, platen loads under stress control)",
     settings=Settings(
         Setting("degree", "integer", "polynomial degree of the displacement", default=1, choices=(1, 2)),
         Setting("linear_solver", "string", "cg: CG with GAMG; lu: a direct solver", default="cg",

@@ -63,7 +63,10 @@ def check_number(value, positive=False, minimum=None, maximum=None) -> float:
     if positive and not value > 0:
         raise Invalid(f"must be positive, got {value!r}")
     if minimum is not None and value < minimum or maximum is not None and value > maximum:
-        raise Invalid(f"must lie in [{minimum}, {maximum}], got {value!r}")
+        bounds = (f"lie in [{minimum}, {maximum}]" if minimum is not None and maximum is not None else
+                  f"be >= {minimum}" if minimum is not None else
+                  f"lie in (0, {maximum}]" if positive else f"be <= {maximum}")
+        raise Invalid(f"must {bounds}, got {value!r}")
     return value
 
 
@@ -211,15 +214,17 @@ class Setting:
             return f"{text}{f' [{self.unit}]' if self.unit else ''}"
         noun = {"vector": "3 numbers", "integers": "list of integers", "strings": "list of strings"}.get(
             self.type, self.type)
-        bounds = []
-        if self.positive:
-            bounds.append("> 0")
-        if self.minimum is not None and self.maximum is not None:
-            bounds = [f"in [{_toml(self.minimum)}, {_toml(self.maximum)}]"]
-        elif self.minimum is not None:
-            bounds.append(f">= {_toml(self.minimum)}")
-        elif self.maximum is not None:
-            bounds.append(f"<= {_toml(self.maximum)}")
+        lo, hi = self.minimum, self.maximum
+        if lo is not None and lo == hi:
+            bounds = [f"= {_toml(lo)}"]
+        elif self.positive:
+            bounds = ["> 0" if hi is None else f"in (0, {_toml(hi)}]"]
+        elif lo is not None and hi is not None:
+            bounds = [f"in [{_toml(lo)}, {_toml(hi)}]"]
+        elif lo is not None:
+            bounds = [f">= {_toml(lo)}"]
+        else:
+            bounds = [] if hi is None else [f"<= {_toml(hi)}"]
         return " ".join([noun, *bounds]) + (f" [{self.unit}]" if self.unit else "")
 
     def describe_default(self) -> str:

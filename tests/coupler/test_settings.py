@@ -107,3 +107,13 @@ def test_the_reference_shows_types_and_defaults_as_a_scene_writes_them():
     assert (s["k"].describe_default(), s["drag"].describe_default()) == ("`2.0`", "none")
     assert (s["x"].describe_type(), s["n"].describe_type()) == ("number in [0.0, 1.0]", "integer >= 1")
     assert Setting("t", "number", "tol", default=1e-7).describe_default() == "`1e-7`"
+
+
+def test_a_positive_bounded_number_and_a_single_allowed_integer_read_as_intervals():
+    cfl = Setting("cfl", "number", "Courant number", default=0.5, positive=True, maximum=1.0)
+    ranks = Setting("ranks", "integer", "one process", default=1, minimum=1, maximum=1)
+    assert (cfl.describe_type(), ranks.describe_type()) == ("number in (0, 1.0]", "integer = 1")
+    with pytest.raises(SceneError, match=r"^s.toml: \[solvers.fluid\] ranks: must be 1, got 2$"):
+        Settings(ranks).validate({"ranks": 2}, "s.toml: [solvers.fluid]")
+    with pytest.raises(SceneError, match=r"^s.toml: \[solvers.fluid\] cfl: must lie in \(0, 1.0\], got 2.0$"):
+        Settings(cfl).validate({"cfl": 2.0}, "s.toml: [solvers.fluid]")

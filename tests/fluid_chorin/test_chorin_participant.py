@@ -98,7 +98,8 @@ def test_the_scene_selects_chorin_and_checks_its_keys(tmp_path):
     assert fluid.config["inlet"] == {"velocity": [0.01, 0.0, 0.0]} and fluid.config["transient"] is False
     assert "Chorin projection in pseudo-time" in plan.iteration
     for old, new, match in (('penalization = "wall"', 'poisson = "lu"', r"\[solvers.fluid\] poisson: unknown value"),
-                            ('penalization = "wall"', "cfl = 2.0", r"\[solvers.fluid\] cfl: must lie in"),
+                            ('penalization = "wall"', "cfl = 2.0",
+                             r"\[solvers.fluid\] cfl: must lie in \(0, 1.0\], got 2.0$"),
                             ('penalization = "wall"', "ranks = 2", r"\[solvers.fluid\] ranks: must be 1, got 2$")):
         bad = copy_case(CASES / "small_fracture", tmp_path / new.split()[0], {**CHORIN, old: new})
         with pytest.raises(SceneError, match=match):
