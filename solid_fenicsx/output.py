@@ -14,6 +14,8 @@ import dolfinx
 import dolfinx.fem
 import dolfinx.io
 
+from transfer.meshfile import write_pvd
+
 from .elasticity import Elasticity
 from .vertex_io import write_vtu
 
@@ -86,8 +88,5 @@ class VTUSeries:
                   cell_data={"von_mises": s.von_mises("DG0")})
         self.entries.append((float(t), name))
         if s.mesh.comm.rank == 0:
-            rows = "\n".join(f'    <DataSet timestep="{tt:.12g}" file="{n}"/>' for tt, n in self.entries)
-            (self.dir / f"{self.stem}.pvd").write_text(
-                '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
-                f"{rows}\n  </Collection>\n</VTKFile>\n")
+            write_pvd(self.dir / f"{self.stem}.pvd", self.entries)
         return self.dir / name

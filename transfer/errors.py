@@ -26,7 +26,13 @@ class QuadratureError(TransferError, ValueError):
 
 
 class FieldError(TransferError, ValueError):
-    """A field has the wrong shape or contains NaN/inf."""
+    """A field that cannot be used: the wrong shape, NaN/inf values, or (between processes,
+    :mod:`coupler.protocol.wire`) a dtype or name that cannot travel. ``field`` is its name
+    when known (the message then starts with it)."""
+
+    def __init__(self, message: str, field: str | None = None):
+        self.field = field
+        super().__init__(message if field is None else f"field {field!r}: {message}")
 
 
 class MeshFileError(TransferError):

@@ -119,14 +119,24 @@ def _same_values(read, written: np.ndarray) -> bool:
             and np.allclose(read, written, rtol=1e-12, atol=0, equal_nan=True))
 
 
+def write_pvd(path, entries) -> None:
+    """A ParaView collection ``.pvd`` listing the files of a time series: `entries` are
+    (time, file name relative to the collection) pairs, in order."""
+    rows = "\n".join(f'    <DataSet timestep="{t:.12g}" file="{name}"/>' for t, name in entries)
+    Path(path).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+                          f"{rows}\n  </Collection>\n</VTKFile>\n")
+
+
 def family(mesh: Mesh, kind: str) -> str:
     """Lagrange family of a point (degree 1) or cell (degree 0) field on `mesh`."""
     return ("P" if mesh.is_simplex else "Q") + ("1" if kind == "point" else "0")
 
 
 @dataclass
-class Field:
-    """A named field of a mesh file: dof values of shape (n,) or (n, ...)."""
+class MeshFileField:
+    """A named field of a mesh file: its kind (point or cell data) and dof values of shape
+    (n,) or (n, ...). (:class:`coupler.protocol.wire.Field` is another thing: a named array
+    with units travelling between processes.)"""
 
     name: str
     kind: str  # "point" or "cell"
@@ -208,7 +218,7 @@ class MeshFile:
     def field_names(self) -> dict[str, list[str]]:
         return {"point": list(self.raw.point_data), "cell": list(self.raw.cell_data)}
 
-    def field(self, name: str) -> Field:
+    def field(self, name: str) -> MeshFileField:
         """The field `name`: point data if there is such, else cell data of the mesh's blocks."""
         raw = self.raw
         if name in raw.point_data:
@@ -231,7 +241,7 @@ class MeshFile:
         if bad.any():
             raise MeshFileError(f"{self.path}: field {name!r} has {int(bad.sum())} NaN/inf value(s) "
                                f"(first at {kind} {int(np.flatnonzero(bad)[0])})")
-        return Field(name, kind, values)
+        return MeshFileField(name, kind, values)
 
     def check_keeps(self, path, fields: dict[str, tuple[str, np.ndarray]]) -> None:
         """Fail early unless the format of `path` keeps this mesh's cells and `fields`

@@ -9,6 +9,7 @@ from pathlib import Path
 import meshio
 
 from transfer import StructuredGrid
+from transfer.meshfile import write_pvd
 
 SUMMARY = "summary.json"
 
@@ -27,10 +28,7 @@ class Series:
             self.mesh.points, [(cell_type, self.mesh.cells)], point_data=point_data or {},
             cell_data={k: [v] for k, v in (cell_data or {}).items()}))
         self.entries.append((t, file))
-        rows = "\n".join(f'    <DataSet timestep="{t:.9g}" file="{f}"/>' for t, f in self.entries)
-        (self.directory / f"{self.name}.pvd").write_text(
-            f'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n{rows}\n'
-            f'  </Collection>\n</VTKFile>\n')
+        write_pvd(self.directory / f"{self.name}.pvd", self.entries)
         return self.directory / file
 
 

@@ -1,6 +1,7 @@
 """Errors of the participant protocol (docs/protocol.md): malformed or mismatched messages,
-fields that cannot travel, and participants that fail, die or do not answer. Each is a
-:class:`coupler.errors.CouplerError`: the CLI prints it as one line."""
+and participants that fail, die or do not answer. Each is a :class:`coupler.errors.CouplerError`:
+the CLI prints it as one line. A field that cannot travel (NaN/inf, dtype, name) is the
+project's one :class:`transfer.errors.FieldError`."""
 
 from coupler.errors import CouplerError
 
@@ -9,16 +10,6 @@ class ProtocolError(CouplerError):
     """A message breaks the participant protocol: malformed payload, or a reply that does
     not answer the request (stale or mismatched run id, participant, verb, window,
     iteration). Such data is rejected, never used."""
-
-
-class FieldError(ProtocolError, ValueError):
-    """A field cannot travel: NaN/inf values, an unsupported dtype, a bad name.
-
-    ``field`` is the field's name."""
-
-    def __init__(self, field: str, message: str):
-        self.field = field
-        super().__init__(f"field {field!r}: {message}")
 
 
 class ParticipantFailure(CouplerError):

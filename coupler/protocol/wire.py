@@ -27,7 +27,8 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from coupler.protocol.errors import FieldError, ProtocolError
+from coupler.protocol.errors import ProtocolError
+from transfer.errors import FieldError
 
 #: Version of the wire format, written in every header as ``"v"``.
 VERSION = 1
@@ -144,7 +145,7 @@ def as_fields(fields) -> list[Field]:
         for name, value in fields.items():
             if isinstance(value, Field):
                 if value.name != name:
-                    raise FieldError(name, f"mapped to a Field named {value.name!r}")
+                    raise FieldError(f"mapped to a Field named {value.name!r}", field=name)
                 out.append(value)
             else:
                 out.append(Field(name, value))
@@ -172,16 +173,13 @@ def check_finite(name: str, data: np.ndarray) -> None:
     bad = ~np.isfinite(flat)
     n_nan = int(np.isnan(flat).sum())
     first = int(np.argmax(bad)) // (2 if data.dtype.kind == "c" else 1)
-    raise FieldError(
-        name,
-        f"{int(bad.sum())} non-finite value(s) ({n_nan} NaN) out of {flat.size}, "
-        f"first at flat index {first}: refusing to send it",
-    )
+    raise FieldError(f"{int(bad.sum())} non-finite value(s) ({n_nan} NaN) out of {flat.size}, "
+                     f"first at flat index {first}: refusing to send it", field=name)
 
 
 def _check_name(name) -> None:
     if not isinstance(name, str) or not name:
-        raise FieldError(str(name), "a field name must be a non-empty string")
+        raise FieldError("a field name must be a non-empty string", field=str(name))
 
 
 def encode(header: Mapping, fields=None, *, check: bool = True) -> bytearray:
@@ -201,11 +199,11 @@ def encode(header: Mapping, fields=None, *, check: bool = True) -> bytearray:
     for f in flist:
         _check_name(f.name)
         if f.name in seen:
-            raise FieldError(f.name, "appears twice in one message")
+            raise FieldError("appears twice in one message", field=f.name)
         seen.add(f.name)
         data = np.asarray(f.data)
         if data.dtype.kind not in _KINDS:
-            raise FieldError(f.name, f"dtype {data.dtype} cannot travel (numeric dtypes only)")
+            raise FieldError(f"dtype {data.dtype} cannot travel (numeric dtypes only)", field=f.name)
         if check:
             check_finite(f.name, data)
         if not data.flags.c_contiguous:

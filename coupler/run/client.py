@@ -122,7 +122,7 @@ class ParticipantClient:
         ``(header, fields)``. Raises :class:`ParticipantError` (the participant answered
         an error), :class:`ParticipantDied`, :class:`ParticipantTimeout`,
         :class:`ProtocolError` (a reply that does not answer the request),
-        :class:`coupler.errors.FieldError` (NaN/inf in an input field)."""
+        :class:`transfer.errors.FieldError` (NaN/inf in an input field)."""
         if verb not in VERBS:
             raise ProtocolError(f"unknown verb {verb!r}")
         timeout = self.timeout if timeout is None else timeout

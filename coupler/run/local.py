@@ -17,8 +17,9 @@ import json
 import os
 import time
 
-from coupler.protocol.errors import FieldError, ParticipantError
+from coupler.protocol.errors import ParticipantError
 from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite
+from transfer.errors import FieldError
 
 
 class LocalClient:

@@ -9,8 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from transfer import FunctionSpace, OverlapWarning, Transfer
-
-from transfer.meshfile import Field
+from transfer.meshfile import MeshFileField
 
 
 @dataclass
@@ -41,7 +40,7 @@ class Projection:
         return float(self.operator.stats.get("assembly_seconds", float("nan")))
 
 
-def project(field: Field, source: FunctionSpace, target: FunctionSpace, method: str, *,
+def project(field: MeshFileField, source: FunctionSpace, target: FunctionSpace, method: str, *,
             quadrature_degree: int | None = None, threads: int = 1) -> Projection:
     """Assemble ``T`` from `source` to `target` with `method` and apply it to `field`.
     Overlap warnings are not issued but left in ``operator.warnings`` for the caller to report."""

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coupler.protocol.errors import FieldError, ParticipantDied, ParticipantError, ParticipantTimeout
+from coupler.protocol.errors import ParticipantDied, ParticipantError, ParticipantTimeout
+from transfer import FieldError
 from coupler.run.launch import Launcher, descendants
 from coupler.run.client import CouplerSession, ParticipantClient
 from coupler.protocol.wire import Field

@@ -9,8 +9,8 @@ import struct
 import numpy as np
 import pytest
 
-from coupler.errors import CouplerError
-from coupler.protocol.errors import FieldError, ProtocolError
+from coupler.protocol.errors import ProtocolError
+from transfer import FieldError, TransferError
 from coupler.protocol.wire import ALIGN, Field, check_reply, decode, decode_header, encode
 
 HEADER = {"run_id": "r1", "participant": "solid", "verb": "advance", "window": 3, "iteration": 2}
@@ -88,7 +88,8 @@ def test_nan_and_inf_rejected_naming_the_field(bad):
         encode(HEADER, [Field("ok", np.ones(3)), Field("traction", data)])
     assert info.value.field == "traction"
     assert "non-finite" in str(info.value) and "13" in str(info.value)  # flat index 4*3+1
-    assert isinstance(info.value, ProtocolError) and isinstance(info.value, CouplerError)
+    # the project's one FieldError: a field the transfer or the wire cannot use
+    assert isinstance(info.value, TransferError) and isinstance(info.value, ValueError)
 
 
 def test_nan_in_complex_and_float32_rejected_ints_fine():
