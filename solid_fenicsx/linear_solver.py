@@ -16,6 +16,8 @@ import dolfinx
 import dolfinx.la
 from nonsmooth.petsc import converged_reason
 
+from .settings import LINEAR_SOLVERS
+
 
 @dataclass
 class SolverOptions:
@@ -35,8 +37,9 @@ class SolverOptions:
     petsc_options: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        if self.kind not in ("cg", "lu"):
-            raise ValueError(f"linear solver must be 'cg' or 'lu', got {self.kind!r}")
+        if self.kind not in LINEAR_SOLVERS:
+            raise ValueError(f"linear solver must be one of {', '.join(map(repr, LINEAR_SOLVERS))}, "
+                             f"got {self.kind!r}")
 
 
 class LinearSolveError(RuntimeError):
