@@ -464,13 +464,16 @@ class Elasticity:
         f.destroy()
         return self.mesh.comm.allreduce(local, op=MPI.SUM)
 
-    def pressure_resultant(self, boundary: Boundary, p: float) -> np.ndarray:
-        """(3,) the force of a uniform pressure p on a boundary, ``int -p n ds``, on every rank."""
+    def pressure_resultant(self, boundary: Boundary, p) -> np.ndarray:
+        """(3,) the force of a pressure p on a boundary, ``int -p n ds``, on every rank: p a
+        number (uniform) or a field (a P1 Function, e.g. the coupled fluid pressure)."""
         from mpi4py import MPI
 
         ds = self.ds(self.solid.tags_of(boundary))
-        local = [dolfinx.fem.assemble_scalar(dolfinx.fem.form(-self.n[i] * ds)) for i in range(3)]
-        return float(p) * self.mesh.comm.allreduce(np.array(local), op=MPI.SUM)
+        field = isinstance(p, dolfinx.fem.Function)
+        local = [dolfinx.fem.assemble_scalar(dolfinx.fem.form(-(p if field else 1.0) * self.n[i] * ds))
+                 for i in range(3)]
+        return (1.0 if field else float(p)) * self.mesh.comm.allreduce(np.array(local), op=MPI.SUM)
 
     # -- dynamic --------------------------------------------------------------
     def _require_dynamic(self, dt):

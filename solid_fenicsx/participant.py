@@ -214,6 +214,8 @@ class SolidParticipant(Participant):
             reports, figures, slave = self.static.run(int(window))
             for solver, converged, iterations, residual, tolerance, detail, history in reports:
                 self.report_solve(solver, converged, iterations, residual, tolerance, detail=detail, history=history)
+            if self.contact is not None and "pressure" in s.fields:
+                figures.update(self._wetted_forces())
             if figures:
                 self.report_figures(**figures)
             extra = self._slave_fields(slave)
@@ -231,6 +233,17 @@ class SolidParticipant(Participant):
         units = {"displacement": "m", "velocity": "m/s", "von_mises": "Pa", "contact_pressure": "Pa", "gap": "m",
                  "in_contact": "1", "slave": "1", "mortar_weight": "m^2"}
         return {k: Field(k, v, units[k]) for k, v in out.items()}
+
+    def _wetted_forces(self) -> dict:
+        """The coupled fluid pressure's force on each wetted face (``fluid_force_<face>_<x|y|z>``):
+        with contact, the fluid's share of the load the platen carries (its pressure is zero where
+        the faces touch)."""
+        faces = [self.wetted] if isinstance(self.wetted, (str, int)) else list(self.wetted)
+        figures = {}
+        for name, boundary in zip(faces, [self.wetted_boundary] if len(faces) == 1 else self.wetted_boundary):
+            force = self.solver.pressure_resultant(boundary, self.solver.fields["pressure"])
+            figures.update({f"fluid_force_{name}_{c}": float(force[i]) for i, c in enumerate("xyz")})
+        return figures
 
     def _slave_fields(self, values: dict) -> dict:
         """Values at the contact's slave nodes as P1 functions, zero off the slave face."""

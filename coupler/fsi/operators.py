@@ -24,6 +24,7 @@ from transfer import FunctionSpace, OverlapWarning, StructuredGrid, Transfer
 
 from .centres import centres_inside
 from .interface import SolidOnGrid, WettedInterface
+from .open_gap import touching
 from .viscous import FluidTraction, traction_figures
 
 
@@ -129,6 +130,27 @@ class PressureTrace:
 
     def deliver(self, x) -> np.ndarray:
         return self.fs.on_grid.interface.to_solid_vertices(x)
+
+
+class OpenPressureTrace(PressureTrace):
+    """Steps 2-3 in a fracture with contact: the pressure trace where the gap is open and zero
+    where the faces touch (:func:`coupler.fsi.open_gap.touching`, from the solid's latest
+    ``in_contact``): there the contact pressure carries the load and no fluid acts."""
+
+    def __init__(self, ctx: OperatorContext, exchange=None):
+        super().__init__(ctx, exchange)
+        self.points = np.asarray(ctx.meshes["solid"].points)
+
+    def evaluate(self, outputs) -> np.ndarray:
+        return np.where(open_faces(self.fs.on_grid.interface, self.points, outputs["solid"]),
+                        super().evaluate(outputs), 0.0)
+
+
+def open_faces(interface, points: np.ndarray, solid: dict) -> np.ndarray:
+    """Per interface vertex: whether the fluid acts there (the faces do not touch), from the
+    solid's outputs (displacement, slave, in_contact)."""
+    deformed = points + solid["displacement"]
+    return ~touching(deformed, interface.vertices, solid["slave"] > 0.5, solid["in_contact"] > 0.5)
 
 
 class ViscousTraction:
@@ -266,7 +288,8 @@ def _family(mesh, kind: str, grid: str | None = None) -> str:
 
 
 #: operator name (as plans write it) -> class, built as ``cls(context, exchange)``
-OPERATORS = {"pressure_trace": PressureTrace, "viscous_traction": ViscousTraction,
+OPERATORS = {"pressure_trace": PressureTrace, "open_pressure_trace": OpenPressureTrace,
+             "viscous_traction": ViscousTraction,
              "solid_fraction": SolidFraction, "solid_velocity": SolidVelocity,
              "l2": lambda ctx, exchange: Projection(ctx, exchange, "l2"),
              "pseudo_l2": lambda ctx, exchange: Projection(ctx, exchange, "pseudo_l2")}

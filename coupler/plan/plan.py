@@ -84,6 +84,7 @@ class Plan:
     tasks: list[str] = field(default_factory=list)  # what a participant does inside (e.g. contact)
     iteration: str = ""
     notes: list[str] = field(default_factory=list)  # warnings about the scene, printed by check and run
+    monitors: list[str] = field(default_factory=list)  # per-step figures (coupler.fsi.monitors.MONITORS)
 
     @property
     def implicit(self) -> bool:
@@ -104,7 +105,8 @@ class Plan:
         return {"effects": self.effects,
                 "participants": [{k: v for k, v in asdict(p).items() if k != "config"} for p in self.participants],
                 "exchanges": [asdict(e) for e in self.exchanges],
-                "loads": self.loads, "tasks": self.tasks, "iteration": self.iteration, "notes": self.notes}
+                "loads": self.loads, "tasks": self.tasks, "iteration": self.iteration, "notes": self.notes,
+                **({"monitors": self.monitors} if self.monitors else {})}
 
     def lines(self) -> list[str]:
         """The plan as text, for ``varcouple check``."""
@@ -115,6 +117,7 @@ class Plan:
         out += [f"exchange      {e.describe()}" for e in self.exchanges]
         out += [f"load          {load}" for load in self.loads]
         out += [f"task          {task}" for task in self.tasks]
+        out += [f"figures       {m} per step" for m in self.monitors]
         out.append(f"iteration     {self.iteration}")
         out += [f"note          {n}" for n in self.notes]
         return out

@@ -37,6 +37,7 @@ from coupler import checks
 from coupler.coupling.acceleration import make_accelerator
 from coupler.coupling.loop import run_coupled
 from coupler.errors import CouplerError, SceneError, run_status
+from coupler.fsi.monitors import MONITORS
 from coupler.fsi.operators import OPERATORS, OperatorContext
 from coupler.output.plots import residual_plot
 from coupler.output.progress import ProgressBar
@@ -237,6 +238,7 @@ class Run:
         self.meshes = meshes
         self.context = OperatorContext(self.scene, meshes, geometry, self.phases, self.log)
         self.operators = [OPERATORS[e.operator](self.context, e) for e in self.plan.exchanges]
+        self.monitors = {name: MONITORS[name][0](self.context) for name in self.plan.monitors}
         self.summary.update(self.context.summary())
         self.series = {name: Series(self.out, name, mesh) for name, mesh in meshes.items()}
 
@@ -306,6 +308,8 @@ class Run:
         for op in self.operators:
             for key, figures in (op.figures() if hasattr(op, "figures") else {}).items():
                 record.setdefault(key, {}).update(figures)  # operators of one kind share a key
+        for name, monitor in self.monitors.items():
+            record[name] = monitor.figures(self.outputs)
         u = self.outputs.get("solid", {}).get("displacement")
         if u is not None:
             record["max_displacement"] = float(np.max(np.linalg.norm(u, axis=1)))
@@ -341,6 +345,9 @@ class Run:
         self.finish()
         if plan.implicit:
             residual_plot(self.out / "residuals.png", result)
+        for name in self.monitors:
+            for line in MONITORS[name][1](self.summary["steps"]):
+                self.log(line)
         self.log(f"{steps} step{'s' * (steps > 1)} done; results in {self.out}")
         done = {"iterations": result.iterations, "converged": [r["converged"] for r in self.summary["steps"]]}
         if scene.check:

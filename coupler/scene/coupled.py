@@ -408,9 +408,8 @@ def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
         if kind == "platen":
             if "value" in t.data:
                 raise t.error("value", "a platen is stress-controlled: give stress = [...], one per step")
-            for other in ("dynamics", "flow"):
-                if other in effects:
-                    raise t.error("type", f"a platen (stress-controlled load steps) is static: not with '{other}'")
+            if "dynamics" in effects:
+                raise t.error("type", "a platen (stress-controlled load steps) is static: not with 'dynamics'")
             value = _per_step(t, "stress")
             if min(value) < 0:
                 raise t.error("stress", f"mean normal stresses are compressive, >= 0; got {value!r}")

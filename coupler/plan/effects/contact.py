@@ -2,7 +2,15 @@
 face ``master`` by mortar coupling (paper 2.2, eq. 9-11), or with a rigid plane
 ``obstacle`` (eq. 11 with T = 0: the bound is the distance to the plane along its normal;
 paper 4.3), solved by the solid participant on the transformed system of eq. 10 in load
-steps."""
+steps.
+
+With ``flow`` (the hydro-mechanical fracture): one implicit coupling per load step. The
+fluid sees the deformed, contact-closed blocks; its pressure, sampled in the open gap, acts
+on both contact faces, and where they touch it is masked: the contact pressure carries the
+load there (operator ``open_pressure_trace``). The solid solves the contact problem under
+that pressure and its other loads (a platen's stress of the step) in every coupling
+iteration. Per step the coupler records the fracture's figures (:mod:`coupler.fsi.fracture`).
+"""
 
 import math
 
@@ -43,10 +51,9 @@ def parse(scene, data: dict) -> None:
         raise SceneError(f"{path}: [contact] slave: missing: the effect 'contact' needs a [contact] table "
                          f"with slave and master boundaries (or slave and obstacle)")
     t = Table(path, "contact", data["contact"], TABLES["contact"])
-    for other in ("flow", "dynamics"):
-        if other in effects:
-            raise SceneError(f"{path}: [physics] effects: 'contact' with '{other}' is not supported "
-                             f"(contact is static: load steps over [time] steps)")
+    if "dynamics" in effects:
+        raise SceneError(f"{path}: [physics] effects: 'contact' with 'dynamics' is not supported "
+                         f"(contact is static: load steps over [time] steps)")
     s = scene.solvers["solid"]
     if s.kind != "solid_fenicsx" or s.settings["degree"] != 1:
         raise SceneError(f"{path}: [solvers.solid]: contact needs participant solid_fenicsx, degree = 1")
@@ -69,6 +76,8 @@ def parse(scene, data: dict) -> None:
                    max_normal_angle=t.number("max_normal_angle", 45.0, positive=True, maximum=90.0))
         if cfg["slave"] == cfg["master"]:
             raise t.error("master", f"the same boundary as slave ({cfg['slave']!r}): contact is between two bodies")
+    if "flow" in effects:
+        _check_with_flow(scene, cfg)
     for key in ("slave", "master"):
         if key in cfg and cfg[key] not in solid.boundaries:
             raise t.error(key, f"unknown boundary {cfg[key]!r}; named boundaries: {', '.join(solid.boundaries)}")
@@ -81,6 +90,43 @@ def parse(scene, data: dict) -> None:
             if key in t.data:
                 raise t.error(key, f"only the multilevel solver has it (solver is {solver!r})")
     scene.effect_settings[NAME] = cfg
+
+
+def _check_with_flow(scene, cfg: dict) -> None:
+    """Contact with flow: the fluid fills the gap between the two contact faces, which are the
+    wetted interface; it loads them by its pressure only, with no static fluid besides."""
+    path = scene.path
+    if "obstacle" in cfg:
+        raise SceneError(f"{path}: [contact] obstacle: contact with 'flow' is the fluid in a fracture between two "
+                         f"bodies: give master (the other face) instead")
+    if "fluid_pressure" in scene.effects:
+        raise SceneError(f"{path}: [physics] effects: 'fluid_pressure' (a fluid at rest, no fluid solver) and 'flow' "
+                         f"both load the fracture faces: keep one")
+    interface = scene.coupling["interface"]
+    names = {interface} if isinstance(interface, str) else set(interface or ())
+    if names != {cfg["slave"], cfg["master"]}:
+        raise SceneError(f"{path}: [coupling] interface: with contact the fluid wets the two contact faces: give "
+                         f"[{cfg['slave']!r}, {cfg['master']!r}], got {interface!r}")
+    if scene.coupling["traction"] != "pressure":
+        raise SceneError(f"{path}: [coupling] traction: contact with 'flow' takes the fluid's pressure on the faces "
+                         f"(traction = \"pressure\"), got {scene.coupling['traction']!r}")
+
+
+def check_fluid_below_confinement(scene) -> None:
+    """Contact with flow (after [flow] is read): the flow is driven by a pressure difference,
+    and no boundary pressure of the fluid reaches a platen's confining stress, where the
+    faces would separate and the platen could no longer reach its stress."""
+    path, flow = scene.path, scene.effect_settings.get("flow") or {}
+    if "pressure" not in flow.get("inlet", {}):
+        raise SceneError(f"{path}: [flow] inlet_pressure: missing: contact with 'flow' drives the flow by a pressure "
+                         f"difference (inlet_pressure on xmin, outlet_pressure on xmax); the fracture's hydraulic "
+                         f"aperture needs it")
+    fluid = max(flow["inlet"]["pressure"], flow["outlet"]["pressure"])
+    for i, load in enumerate(scene.loads, start=1):
+        if load.type == "platen" and fluid >= min(load.value):
+            raise SceneError(f"{path}: [flow] inlet_pressure: the fluid's pressure {fluid:g} Pa reaches the smallest "
+                             f"confining stress {min(load.value):g} Pa of [loads.{i}] stress: the faces would "
+                             f"separate; keep the fluid's pressure below the confining stress")
 
 
 def _obstacle(t: Table) -> dict:
@@ -129,3 +175,29 @@ def plan(scene, plan) -> None:
     steps = scene.time["steps"]
     plan.iteration = (f"contact: {steps} load step{'s' * (steps > 1)} (constant loads ramped linearly, those given "
                       f"per step as given; each step starts from the last), {c['solver']} per step")
+
+
+def plan_with_flow(scene, plan) -> None:
+    """Contact with flow, after the flow rule planned the fluid and its exchanges: the
+    hydro-mechanical fracture's iteration and per-step figures."""
+    c, coupling = scene.effect_settings[NAME], scene.coupling
+    steps, flow = scene.time["steps"], scene.effect_settings["flow"]
+    platen = [load for load in scene.loads if load.type == "platen"]
+    loading = (f"the platen's stress of the step ({', '.join(f'{v:g}' for v in platen[0].value)} Pa)" if platen
+               else "the step's loads")
+    plan.tasks.append(f"solid: in every coupling iteration the contact of '{c['slave']}' and '{c['master']}' under "
+                      f"{loading} and the fluid's pressure on the open parts of both faces (where they touch, the "
+                      f"contact pressure carries the load and no fluid acts)")
+    plan.tasks.append("coupler: per step the fracture's mechanical aperture (contacts as zero), contact area "
+                      "fraction, flow rate Q through the sections x = const, hydraulic aperture "
+                      "(12 mu Q L / (W dp))^(1/3) and mean fluid pressure on the open faces "
+                      "(coupler/fsi/fracture.py)")
+    plan.monitors.append("fracture")
+    dp = flow["inlet"]["pressure"] - flow["outlet"]["pressure"]
+    plan.iteration = (f"hydro-mechanical fracture (flow solver {scene.solvers['fluid']['participant']}, not the "
+                      f"fluid at rest of 'fluid_pressure'): {steps} load step{'s' * (steps > 1)}, each one implicit "
+                      f"coupling ({coupling['acceleration']} on the fluid pressure at the faces, tolerance "
+                      f"{coupling['tolerance']:g}, at most {coupling['max_iterations']} iterations): the fluid "
+                      f"(pressure difference {dp:g} Pa from xmin to xmax) in the deformed, contact-closed blocks, "
+                      f"the solid's contact ({c['solver']}) from the step's start under {loading} and the fluid's "
+                      f"pressure")

@@ -194,6 +194,11 @@ def plan(scene, plan) -> None:
     else:
         plan.iteration = (f"{n} time step{'s' * (n > 1)} of {scene.time['dt']:g} s{quasi}; one-way (a fixed "
                           f"solid): one fluid solve per step, no fixed point")
+    if "contact" in scene.effects:  # the hydro-mechanical fracture
+        from . import contact
+
+        contact.check_fluid_below_confinement(scene)
+        contact.plan_with_flow(scene, plan)
 
 
 def _loading(scene, plan) -> None:
@@ -208,6 +213,12 @@ def _loading(scene, plan) -> None:
             accelerated=True, description=f"(-p I + tau) n on the wetted boundary '{interface}': the Q0 pressure "
                                           f"traced half a cell into the fluid, the wall shear from three velocity "
                                           f"samples (coupler/fsi/viscous.py)"))
+    elif "contact" in scene.effects:
+        plan.exchanges.append(Exchange(
+            ["fluid.pressure", "solid.in_contact"], "solid.pressure", "open_pressure_trace", "2-3", accelerated=True,
+            description=f"Q0 (grid) -> P1 on the contact faces '{interface}' moved half a fluid cell into the gap, "
+                        f"pseudo_l2 trace, zero where the faces touch (slave nodes in contact, master vertices "
+                        f"whose nearest slave node is in contact)"))
     else:
         plan.exchanges.append(Exchange(
             ["fluid.pressure"], "solid.pressure", "pressure_trace", "2-3", accelerated=True,

@@ -36,6 +36,8 @@ def plan(scene, plan) -> None:
     they act."""
     contact = scene.effect_settings.get("contact")
     if contact and "master" in contact:
+        plan.tasks.append("solid: the fluid at rest in the fracture (the cheap variant: a uniform pressure per step, "
+                          "no flow solver; effects elasticity, contact and flow run the flow solver instead)")
         plan.tasks.append(f"solid: the fluid pressure on '{contact['slave']}' and '{contact['master']}' acts on the "
                           f"open parts of the faces: applied to the whole faces, the contact multiplier is the "
                           f"contact stress beyond it (exact, no iteration on the contact set); reported as the "

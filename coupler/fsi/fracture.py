@@ -1,0 +1,63 @@
+"""The figures of a hydro-mechanical fracture per load step (effects elasticity, contact and
+flow): the mechanical aperture e_m (contacts as zero), the contact area fraction, the flow rate
+Q through the sections x = const, the hydraulic aperture e_h = (12 mu Q L / (W dp))^(1/3) and
+the mean fluid pressure on the open parts of the faces; a table of them over the steps."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .apertures import contact_area_fraction, hydraulic_aperture, mechanical_aperture
+from .flow_rate import percolates, section_flow_rates
+from .operators import OperatorContext, _fluid_solid, open_faces
+
+
+class FractureFigures:
+    """Built once per run like an operator; :meth:`figures` on a converged step's outputs."""
+
+    def __init__(self, ctx: OperatorContext):
+        scene, g = ctx.scene, ctx.scene.fluid
+        self.ctx, self.fs = ctx, _fluid_solid(ctx)
+        flow = scene.effect_settings["flow"]
+        self.pressure_drop = flow["inlet"]["pressure"] - flow["outlet"]["pressure"]
+        self.length, self.width = g.spacing[0] * g.shape[0], g.spacing[1] * g.shape[1]
+        self.viscosity = scene.fluid_material["viscosity"]
+        self.points = np.asarray(ctx.meshes["solid"].points)
+
+    def figures(self, outputs) -> dict:
+        solid, fluid = outputs["solid"], outputs["fluid"]
+        slave = solid["slave"] > 0.5
+        weights, touching = solid["mortar_weight"][slave], solid["in_contact"][slave] > 0.5
+        on_grid = self.fs.update(outputs)
+        grid = self.ctx.meshes["fluid"]
+        connected = percolates(grid, on_grid.fraction)
+        rate = float(section_flow_rates(grid, fluid["velocity"]).mean()) if connected else 0.0
+        if not connected:
+            self.ctx.warn(["fracture: no connected open path from the inlet (xmin) to the outlet (xmax): every path "
+                           "crosses cells at least half solid; flow rate and hydraulic aperture reported as 0"])
+        interface = on_grid.interface
+        wet = open_faces(interface, self.points, solid)
+        pressure = interface.from_fluid(fluid["pressure"])
+        area = float(interface.weights[wet].sum())
+        return {"mechanical_aperture": mechanical_aperture(solid["gap"][slave], touching, weights),
+                "hydraulic_aperture": (hydraulic_aperture(rate, self.viscosity, self.length, self.width,
+                                                          self.pressure_drop) if self.pressure_drop else 0.0),
+                "contact_area_fraction": contact_area_fraction(touching, weights),
+                "flow_rate": rate, "percolating": connected,
+                "mean_face_pressure": float(np.sum(interface.weights[wet] * pressure[wet]) / area) if area else 0.0}
+
+
+def table(steps: list[dict]) -> list[str]:
+    """The fracture's figures per step as text lines (the run's log)."""
+    lines = ["fracture  step  stress [Pa]  coupling  inner  e_m [um]  e_h [um]  contact  Q [m^3/s]  p_faces [Pa]"]
+    for record in steps:
+        f = record.get("fracture")
+        if not f:
+            continue
+        solid = record.get("figures", {}).get("solid", {})
+        inner = sum(r.get("iterations", 0) for reports in record.get("solves", {}).values() for r in reports)
+        lines.append(f"fracture  {record['step']:4d}  {solid.get('stress', float('nan')):11.4g}  "
+                     f"{record['iterations']:8d}  {inner:5d}  {1e6 * f['mechanical_aperture']:8.3f}  "
+                     f"{1e6 * f['hydraulic_aperture']:8.3f}  {f['contact_area_fraction']:7.3f}  "
+                     f"{f['flow_rate']:9.3e}  {f['mean_face_pressure']:12.5g}")
+    return lines
