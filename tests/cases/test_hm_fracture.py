@@ -1,0 +1,122 @@
+"""The hydro-mechanical fracture (cases/hm_fracture; effects elasticity, contact and flow): a
+rough fracture closed by a platen at three confining stresses with a pressure-driven flow
+through it, one implicit coupling per load step. On a coarser fluid grid in the plane (8 x 8
+columns instead of 16 x 16; the same 10 um across): the force balance at every stress, the
+apertures and flow rate against stress, zero flow against the pure contact scene, a lost open
+path and the refusals."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from coupler.cli import main
+from vc_helpers import CASES, copy_case
+
+CASE = CASES / "hm_fracture"
+COARSE = {"shape = [16, 16, 53]": "shape = [8, 8, 53]"}
+FLOW_TABLES = ("geometry.fluid", "materials.fluid", "flow", "solvers.fluid", "coupling")
+
+
+def run(case, out) -> dict:
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("VARCOUPLE_PICTURES", "0")
+        assert main(["run", str(case), "-o", str(out)]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def coarse(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("hm")
+    return run(copy_case(CASE, tmp, COARSE), tmp / "out")
+
+
+def test_platen_force_is_contact_plus_fluid_force_at_every_stress(coarse):
+    """The upper block: the platen's force = the contact force of the lower block on it + the
+    fluid's force on its face (zero where the faces touch), to 1e-6."""
+    for step, stress in zip(coarse["steps"], (1e6, 2e6, 4e6)):
+        f = step["figures"]["solid"]
+        assert step["converged"] and f["stress"] == pytest.approx(stress, rel=5e-3)
+        fluid = f["fluid_force_fracture_upper_z"]
+        assert -f["force_z"] + fluid == pytest.approx(f["platen_force"], rel=1e-6)
+        # the fluid (0.2 to 0.3 MPa over the open part of the 20 mm square) carries a real share
+        assert 0.2e6 * 0.02 ** 2 * 0.8 < fluid < 0.3e6 * 0.02 ** 2
+        # the lower face gets the opposite push from the same fluid, to the discretisation: the
+        # coarser upper face (4 x 4 lattice) and its contact mask from the nearest slave node
+        assert f["fluid_force_fracture_lower_z"] == pytest.approx(-fluid, rel=0.1)
+
+
+def test_rough_fracture_apertures_and_flow_fall_with_stress(coarse):
+    rows = [s["fracture"] for s in coarse["steps"]]
+    for r in rows:
+        assert r["percolating"] and 0 < r["hydraulic_aperture"] <= r["mechanical_aperture"]
+        assert 2e5 < r["mean_face_pressure"] < 3e5
+    for before, after in zip(rows, rows[1:]):
+        assert after["mechanical_aperture"] < before["mechanical_aperture"]
+        assert after["hydraulic_aperture"] < before["hydraulic_aperture"]
+        assert after["flow_rate"] < before["flow_rate"]
+        assert after["contact_area_fraction"] >= before["contact_area_fraction"]
+    step = coarse["steps"][0]  # e_h is the cubic law's aperture for the measured Q
+    mu, L, W, dp = 1.0, 0.02, 0.02, 1e5
+    assert rows[0]["hydraulic_aperture"] ** 3 == pytest.approx(12 * mu * rows[0]["flow_rate"] * L / (W * dp),
+                                                               rel=1e-12)
+    assert step["iterations"] <= 8
+
+
+def _without_flow(text: str) -> str:
+    """The same scene as pure contact: effects elasticity and contact, no fluid tables."""
+    text = text.replace('effects = ["elasticity", "contact", "flow"]', 'effects = ["elasticity", "contact"]')
+    parts = re.split(r"(?m)^(?=\[)", text)
+    return "".join(p for p in parts if not any(p.startswith(f"[{t}]") for t in FLOW_TABLES))
+
+
+def test_zero_pressure_difference_gives_the_pure_contact_closure(tmp_path):
+    """No pressure difference and no fluid pressure: the coupled scene's closure figures are
+    the pure contact scene's (the same scene without flow) to 1e-8."""
+    fluidless = {"inlet_pressure = 3.0e5": "inlet_pressure = 0.0", "outlet_pressure = 2.0e5": "outlet_pressure = 0.0",
+                 **COARSE}
+    coupled = run(copy_case(CASE, tmp_path / "flow", fluidless), tmp_path / "flow" / "out")
+    case = copy_case(CASE, tmp_path / "dry")
+    (case / "scene.toml").write_text(_without_flow((case / "scene.toml").read_text()))
+    dry = run(case, tmp_path / "dry" / "out")
+    assert "flow" not in dry["effects"]
+    keys = ("closure", "mean_gap", "area_fraction", "active_nodes", "force_z", "platen_force",
+            "platen_displacement", "stress")
+    for wet, ref in zip(coupled["steps"], dry["steps"], strict=True):
+        a, b = wet["figures"]["solid"], ref["figures"]["solid"]
+        for key in keys:
+            assert a[key] == pytest.approx(b[key], rel=1e-8, abs=1e-20), key
+        assert wet["fracture"]["flow_rate"] == 0.0 or abs(wet["fracture"]["flow_rate"]) < 1e-20
+        assert wet["fracture"]["hydraulic_aperture"] == 0.0 and wet["fracture"]["mean_face_pressure"] == 0.0
+        assert wet["iterations"] == 1
+
+
+def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path):
+    """A soft rock closed to below two fluid cells: no open path through the grid's cells from
+    inlet to outlet: flow rate and hydraulic aperture 0, the warning in the log and summary."""
+    soft = {"E = 1.0e10": "E = 3.0e8", "shape = [16, 16, 53]": "shape = [8, 8, 27]",
+            "upper = [0.02, 0.02, 0.00031]": "upper = [0.02, 0.02, 0.00032]"}
+    summary = run(copy_case(CASE, tmp_path, soft), tmp_path / "out")
+    last = summary["steps"][-1]["fracture"]
+    assert not last["percolating"] and last["flow_rate"] == 0.0 and last["hydraulic_aperture"] == 0.0
+    assert last["mechanical_aperture"] > 0
+    assert any("no connected open path" in w for w in summary["warnings"])
+
+
+@pytest.mark.parametrize("replace, where, reason", [
+    ({"outlet_pressure = 2.0e5": "outlet_pressure = 1.0e6"}, "[flow] inlet_pressure",
+     "reaches the smallest confining stress 1e+06 Pa of [loads.2] stress"),
+    ({"inlet_pressure = 3.0e5 ": "inlet_velocity = [0.001, 0.0, 0.0] "}, "[flow] inlet_pressure",
+     "missing: contact with 'flow' drives the flow by a pressure difference"),
+    ({'interface = ["fracture_lower", "fracture_upper"]': 'interface = "fracture_lower"'},
+     "[coupling] interface", "the fluid wets the two contact faces"),
+    ({'effects = ["elasticity", "contact", "flow"]': 'effects = ["elasticity", "contact", "flow", "dynamics"]'},
+     "[loads.2] type", "a platen (stress-controlled load steps) is static: not with 'dynamics'"),
+])
+def test_refusals_name_file_key_and_reason(tmp_path, capsys, replace, where, reason):
+    case = copy_case(CASE, tmp_path, replace)
+    assert main(["check", str(case)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "scene.toml" in err[0] and where in err[0] and reason in err[0], err
