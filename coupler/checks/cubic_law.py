@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from coupler.fsi.flow_rate import section_flow_rates
+
 KIND = "cubic_law"
 DESCRIPTION = "the flow rate through a gap against the cubic law w^3 dp / (12 mu L)"
 KEYS = {"aperture": "w, the gap [m] (default: the aperture parameter of the [geometry.solid] generator)",
@@ -41,11 +43,10 @@ def parse(table, scene) -> dict:
 
 def flow_rates(grid, velocity: np.ndarray, across: int) -> np.ndarray:
     """The flow rate per unit width through each cross-section x = const of `grid` (one per
-    column of cells along x) [m^2/s]; `across`: the axis (1 or 2) across the gap."""
-    nx, ny, nz = grid.shape
-    ux = np.asarray(velocity)[:, 0].reshape(nz, ny, nx)
-    per_width = ux.sum(axis=2 - across) * grid.spacing[across]  # (k, j, i): across y sums j, across z sums k
-    return per_width.mean(axis=0)
+    column of cells along x) [m^2/s]; `across`: the axis (1 or 2) across the gap, the other
+    one (2 or 1) is the width."""
+    width = 3 - across
+    return section_flow_rates(grid, velocity) / (grid.spacing[width] * grid.shape[width])
 
 
 def evaluate(settings, scene, result) -> dict:
