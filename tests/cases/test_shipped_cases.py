@@ -15,7 +15,8 @@ from case_figures import RECORD, figures, run_case
 
 
 RECORDED = json.loads(RECORD.read_text())
-SLOW = {"cube_obstacle_large", "fracture_closure", "measured_fracture", "rock_obstacle", "fracture_flow", "hertz", "fracture_open_by_pressure"}
+SLOW = {"cube_obstacle_large", "fracture_closure", "measured_fracture", "rock_obstacle", "fracture_flow", "hertz",
+        "fracture_open_by_pressure", "hm_fracture"}
 #: fields a case no longer writes, on purpose: the quasi-static flow plan sends no solid velocity to
 #: the grid (the solid is at rest in each step; the field was zero); a transfer's error against exact
 #: is its [check]'s (summary.json), not a field of the target
