@@ -120,3 +120,13 @@ def test_refusals_name_file_key_and_reason(tmp_path, capsys, replace, where, rea
     assert main(["check", str(case)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "scene.toml" in err[0] and where in err[0] and reason in err[0], err
+
+
+def test_check_states_which_variant_runs(capsys):
+    """The flow solver (contact + flow) or the fluid at rest (contact + fluid_pressure)."""
+    assert main(["check", str(CASE)]) == 0
+    out = capsys.readouterr().out
+    assert "hydro-mechanical fracture (flow solver chorin, not the fluid at rest of 'fluid_pressure')" in out
+    assert "open_pressure_trace" in out and "figures       fracture per step" in out
+    assert main(["check", str(CASES / "fracture_open_by_pressure")]) == 0
+    assert "the fluid at rest in the fracture (the cheap variant" in capsys.readouterr().out
