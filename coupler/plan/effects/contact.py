@@ -194,7 +194,7 @@ def plan_with_flow(scene, plan) -> None:
                       "(coupler/fsi/fracture.py)")
     plan.monitors.append("fracture")
     dp = flow["inlet"]["pressure"] - flow["outlet"]["pressure"]
-    plan.iteration = (f"hydro-mechanical fracture (flow solver {scene.solvers['fluid']['participant']}, not the "
+    plan.iteration = (f"hydro-mechanical fracture (flow solver {scene.solvers['fluid'].kind}, not the "
                       f"fluid at rest of 'fluid_pressure'): {steps} load step{'s' * (steps > 1)}, each one implicit "
                       f"coupling ({coupling['acceleration']} on the fluid pressure at the faces, tolerance "
                       f"{coupling['tolerance']:g}, at most {coupling['max_iterations']} iterations): the fluid "
