@@ -60,11 +60,21 @@ class StepSolves:
 
     def error(self, step: int) -> InnerSolveNotConverged:
         """The error naming the participant, solver, step, iteration and residual of each failure,
-        and where its limits are set (``[contact]`` for contact solvers, else ``[solvers.X]``)."""
+        and where the first failure's limits are set (:func:`limits`)."""
         what = "; ".join(f"participant {name!r}: {r.describe()}" for name, r in self.failures)
         name, report = self.failures[0]
-        table = "[contact]" if report.solver.startswith("contact") else f"[solvers.{name}]"
         return InnerSolveNotConverged(
             f"not converged in time step {step}, coupling iteration {self.final_iteration}: {what}. The step's "
             f"result is not trustworthy; raise the solver's iteration limit (max_iterations) or loosen its "
-            f"tolerance in {table}, or set [solvers.{name}] allow_unconverged = true to accept it on purpose")
+            f"tolerance in {limits(name, report.solver)}, or set [solvers.{name}] allow_unconverged = true to "
+            f"accept it on purpose")
+
+
+def limits(participant: str, solver: str) -> str:
+    """The scene table holding a solver's iteration limit and tolerance: ``[contact]`` for the
+    contact solvers, the platen's ``[[loads]]`` entry for its stress search, else ``[solvers.X]``."""
+    if solver.startswith("contact"):
+        return "[contact]"
+    if solver == "platen":
+        return "the platen's [[loads]] entry"
+    return f"[solvers.{participant}]"

@@ -14,7 +14,9 @@ import pytest
 
 from coupler.cli import main
 from coupler.errors import EXIT_CODES
+from coupler.protocol.wire import SolveReport
 from coupler.run.outdir import LOCK, OutputBusy, OutputLock
+from coupler.run.solves import StepSolves
 from vc_helpers import CASES, copy_case
 
 CASE = CASES / "standin_flow"
@@ -47,6 +49,17 @@ def test_an_unconverged_inner_solve_stops_the_run_as_not_converged(tmp_path, cap
                                             "residual": 0.01, "tolerance": 1e-6,
                                             "detail": "told to (config 'unconverged')", "accepted": False}
     assert (out / "solid_0001.vtu").is_file() and not (out / "solid_0002.vtu").exists()
+
+
+@pytest.mark.parametrize("solver, table", [("platen", "the platen's [[loads]] entry"),
+                                           ("contact active_set", "[contact]"),
+                                           ("static CG+GAMG", "[solvers.solid]")])
+def test_an_unconverged_solve_names_the_table_of_its_limits(solver, table):
+    solves = StepSolves({})
+    solves.add("solid", 0, [SolveReport(solver, False, 20, 3e-2, 1e-3)])
+    message = str(solves.error(step=2))
+    assert f"loosen its tolerance in {table}, or set [solvers.solid] allow_unconverged" in message
+    assert "time step 2" in message and solver in message
 
 
 def test_allow_unconverged_accepts_it_on_purpose_and_says_so(tmp_path, capsys):
