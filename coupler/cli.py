@@ -333,12 +333,17 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a usage error argparse has printed
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
 
+    import faulthandler
     import signal
 
     from transfer import TransferError
 
     from coupler.errors import EXIT_CODES, CouplerError, NotConverged, RunFailed, Terminated, one_line
 
+    try:  # kill -USR1 PID: every thread's stack to stderr (a run that hangs says where)
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
+    except (AttributeError, OSError, ValueError):  # no SIGUSR1, or stderr is not a file (captured)
+        pass
     try:  # SIGTERM (timeout, batch schedulers) ends a run like Ctrl-C: participants stopped, results kept
         previous = signal.signal(signal.SIGTERM, _terminate)
     except ValueError:  # not the main thread

@@ -74,6 +74,24 @@ def test_allow_unconverged_accepts_it_on_purpose_and_says_so(tmp_path, capsys):
     assert s["steps"][1]["solves"]["fluid"][0]["accepted"] and s["steps"][0]["accepted_unconverged"] == []
 
 
+def _finish(proc, stderr: Path | None = None, timeout=60) -> str:
+    """The stderr of `proc` (its pipe, or the file `stderr`) once it exits; if it does not within
+    `timeout` s, the test fails with the stacks of its threads (the CLI dumps them on SIGUSR1)."""
+    def read(timeout=None) -> str:
+        if stderr is None:
+            return proc.communicate(timeout=timeout)[1]
+        proc.wait(timeout)
+        return stderr.read_text()
+
+    try:
+        return read(timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2)
+        proc.kill()
+        pytest.fail(f"the run did not stop within {timeout} s; its threads:\n{read()[-6000:]}")
+
+
 def _wait_for_steps(out, timeout=60):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -97,7 +115,7 @@ def test_a_signal_stops_the_participants_and_keeps_the_results(tmp_path, sig, co
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _wait_for_steps(out)
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    err = _finish(proc)
     assert proc.returncode == code, err
     assert err.strip().splitlines()[-1].startswith(f"varcouple: error: {said}")
     s = summary(out)
@@ -109,11 +127,27 @@ def test_a_signal_stops_the_participants_and_keeps_the_results(tmp_path, sig, co
     assert not (out / LOCK).exists()
 
 
+def test_sigusr1_shows_where_a_run_is_and_the_run_goes_on(tmp_path):
+    case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    steps = len(_wait_for_steps(out)["steps"])
+    proc.send_signal(signal.SIGUSR1)
+    time.sleep(1.0)
+    assert len(summary(out)["steps"]) > steps  # still stepping
+    proc.send_signal(signal.SIGINT)
+    err = _finish(proc)
+    assert proc.returncode == EXIT_CODES["interrupted"]
+    assert "most recent call first" in err and "coupler/cli.py" in err
+
+
 def test_a_second_run_into_the_same_output_is_refused(tmp_path, capsys):
     case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
     out = tmp_path / "out"
+    log = tmp_path / "first.err"
     first = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                             stdout=subprocess.DEVNULL, stderr=log.open("w"))
     try:
         s = _wait_for_steps(out)
         code, err = run(capsys, CASE, out)
@@ -122,7 +156,7 @@ def test_a_second_run_into_the_same_output_is_refused(tmp_path, capsys):
         assert summary(out)["run_id"] == s["run_id"]  # the first run's files are untouched
     finally:
         first.send_signal(signal.SIGINT)
-        first.wait(60)
+        _finish(first, log)
 
 
 def test_a_stale_lock_is_taken_over(tmp_path):
