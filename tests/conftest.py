@@ -64,3 +64,17 @@ def no_pictures(monkeypatch):
     """Runs in tests render no pictures unless the test asks for them ([output] pictures = true
     or VARCOUPLE_PICTURES=1): rendering is tested on its own (tests/coupler/test_pictures.py)."""
     monkeypatch.setenv("VARCOUPLE_PICTURES", "0")
+
+
+@pytest.fixture(autouse=True)
+def signals_not_ignored():
+    """No test leaves SIGINT or SIGTERM ignored: SIG_IGN is inherited by every process a later
+    test starts, whose Ctrl-C or SIGTERM would then do nothing. (Other handler changes are
+    harmless to children: gmsh's import sets SIG_DFL, its finalize Python's default.)"""
+    import signal
+
+    yield
+    ignored = [signal.Signals(s).name for s in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(s) == signal.SIG_IGN]
+    for name in ignored:
+        signal.signal(signal.Signals[name], signal.default_int_handler if name == "SIGINT" else signal.SIG_DFL)
+    assert not ignored, f"the test left {', '.join(ignored)} ignored"
