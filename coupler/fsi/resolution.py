@@ -36,5 +36,6 @@ def cells_across_warning(mean_open_aperture: float, h: float) -> str | None:
     return (f"fracture: the mean open aperture {1e6 * mean_open_aperture:.3g} um is {n:.2f} fluid cells across "
             f"([geometry.fluid] cells {1e6 * h:.3g} um across the fracture): the gap is not resolved; the immersed "
             f"plates' flow rate errs by +12.5 % at 4 cells across, +3.1 % at 8 and +0.78 % at 16 (2 / n^2, "
-            f"cases/parallel_plates), {error} extrapolated to {n:.2f}: Q and e_h are not to be trusted; refine "
-            f"[geometry.fluid] shape across the fracture to at least 8 cells across the mean aperture for 3 %")
+            f"cases/parallel_plates), {error} extrapolated to {n:.2f}; a rough fracture converges more slowly "
+            f"(cases/hm_fracture/README.md): Q and e_h are not to be trusted; refine [geometry.fluid] shape across "
+            f"the fracture to at least 8 cells across the mean aperture")
