@@ -31,7 +31,6 @@ import json
 import os
 import platform
 import re
-import shutil
 import sys
 import tempfile
 import time
@@ -39,6 +38,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from bench.case_runs import run_edited  # noqa: E402
 
 
 #: the issue's goals: (key of the report, bound, what it measures)
@@ -82,31 +83,20 @@ def report(summary: dict) -> dict:
 def run_case(case: Path, acceleration: str, relaxation: float, replace: dict, tolerance: float) -> dict:
     """``varcouple run`` on a copy of `case` with the scene text replacements and the coupling
     keys given; the report of its summary.json with the goals."""
-    from coupler.cli import main
-
-    with tempfile.TemporaryDirectory(prefix="varcouple-bench-fsi-") as tmp:
-        copy = Path(tmp) / "case"
-        shutil.copytree(case, copy, ignore=shutil.ignore_patterns("results"))
-        scene = (copy / "scene.toml").read_text()
-        for old, new in replace.items():
-            if old not in scene:
-                raise SystemExit(f"--set: {old!r} not in {case / 'scene.toml'}")
-            scene = scene.replace(old, new)
+    def coupling(scene: str) -> str:
         lines = scene.splitlines()
         i = lines.index("[coupling]")
         end = next((j for j in range(i + 1, len(lines)) if lines[j].startswith("[")), len(lines))
         keep = [ln for ln in lines[i + 1:end] if not re.match(r"(acceleration|relaxation|tolerance)\s*=", ln)]
         lines[i + 1:end] = [f'acceleration = "{acceleration}"', f"relaxation = {relaxation}",
                             f"tolerance = {tolerance!r}", *keep]
-        (copy / "scene.toml").write_text("\n".join(lines) + "\n")
-        out = Path(tmp) / "out"
-        start = time.perf_counter()
-        code = main(["run", str(copy), "--output", str(out)])
-        result = report(json.loads((out / "summary.json").read_text()))
-        result.update(acceleration=acceleration, relaxation=relaxation, exit_code=code,
-                      measured_seconds=time.perf_counter() - start)
-        result["goals"] = goals(result)
-        return result
+        return "\n".join(lines) + "\n"
+
+    code, seconds, summary = run_edited(case, replace, coupling, prefix="varcouple-bench-fsi-")
+    result = report(summary)
+    result.update(acceleration=acceleration, relaxation=relaxation, exit_code=code, measured_seconds=seconds)
+    result["goals"] = goals(result)
+    return result
 
 
 def fluid_ranks(shape, ranks_list=(1, 2)) -> dict:

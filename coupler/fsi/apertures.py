@@ -14,6 +14,13 @@ def mechanical_aperture(gap: np.ndarray, in_contact: np.ndarray, weights: np.nda
     return float(np.sum(weights * open_gap) / np.sum(weights))
 
 
+def mean_open_aperture(gap: np.ndarray, in_contact: np.ndarray, weights: np.ndarray) -> float:
+    """The mean gap over the open part of the fracture plane (0 when it is all in contact)."""
+    open_ = ~np.asarray(in_contact, bool)
+    area = float(np.sum(weights[open_]))
+    return float(np.sum(weights[open_] * np.maximum(gap[open_], 0.0)) / area) if area > 0 else 0.0
+
+
 def contact_area_fraction(in_contact: np.ndarray, weights: np.ndarray) -> float:
     """The fraction of the fracture plane in contact (by the nodes' areas)."""
     return float(np.sum(weights[in_contact]) / np.sum(weights))

@@ -7,6 +7,8 @@ EGL render window: no X server) from the run's last VTU files.
   fracture's gap), with the solid's outline and streamlines, and the fluid pressure on the
   wetted faces of the solid;
 - contact: the contact pressure and the in-contact map on the slave face;
+- contact and flow (a hydro-mechanical fracture): per load step the aperture map beside the
+  speed in the fracture's mid-surface (coupler/output/fracture_maps.py);
 - transfer: the source field and each transferred one on the same slice, with one colour range.
 
 Colour maps are perceptually uniform (viridis, cividis, inferno), every colour bar names
@@ -16,73 +18,12 @@ contact face, the slice), not the bounding box.
 
 from __future__ import annotations
 
-import os
-import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")  # offscreen, no X server
-
-WINDOW = (1200, 800)
-
-
-@dataclass
-class Picture:
-    """A rendered picture: its file (in the output directory) and what it shows."""
-
-    file: str
-    title: str
-    caption: str
-
-
-def last_step(out: Path, series: str) -> Path | None:
-    """The last VTU file of ``<series>.pvd`` in `out` (None when the series was not written)."""
-    pvd = out / f"{series}.pvd"
-    if not pvd.is_file():
-        return None
-    files = re.findall(r'file="([^"]+)"', pvd.read_text())
-    return out / files[-1] if files else None
-
-
-def _plotter():
-    import pyvista as pv
-
-    pv.OFF_SCREEN = True
-    plotter = pv.Plotter(off_screen=True, window_size=WINDOW)
-    plotter.set_background("white")
-    return plotter
-
-
-def _bar(title: str) -> dict:
-    """A horizontal colour bar under the picture, naming the quantity and its unit."""
-    return {"title": title, "color": "black", "fmt": "%.3g", "vertical": False, "position_x": 0.2,
-            "position_y": 0.03, "height": 0.07, "width": 0.6, "title_font_size": 20, "label_font_size": 16}
-
-
-def _save(plotter, out: Path, name: str, text: str) -> Path:
-    plotter.add_text(text, position="upper_left", font_size=12, color="black")
-    path = out / name
-    plotter.screenshot(str(path))
-    plotter.close()
-    return path
-
-
-def _view(plotter, bounds, normal) -> None:
-    """Look along `normal` at the box `bounds` (xmin, xmax, ymin, ymax, zmin, zmax), framed."""
-    normal = np.asarray(normal, float) / np.linalg.norm(normal)
-    centre = np.array([(bounds[0] + bounds[1]) / 2, (bounds[2] + bounds[3]) / 2, (bounds[4] + bounds[5]) / 2])
-    size = np.linalg.norm([bounds[1] - bounds[0], bounds[3] - bounds[2], bounds[5] - bounds[4]])
-    up = np.array([0.0, 0.0, 1.0]) if abs(normal[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    plotter.camera_position = [tuple(centre + normal * 3 * size), tuple(centre), tuple(up)]
-    plotter.reset_camera(bounds=bounds)
-    plotter.camera.zoom(1.0)
-
-
-def _magnitude(values) -> np.ndarray:
-    values = np.asarray(values, float)
-    return np.linalg.norm(values, axis=1) if values.ndim == 2 else np.abs(values)
+from .drawing import Picture, colour_bar, last_step, magnitude, plane_normal, plotter, save, surface_where, view
+from .fracture_maps import fracture_maps
 
 
 def deformed_solid(solid, out: Path) -> Picture:
@@ -90,19 +31,19 @@ def deformed_solid(solid, out: Path) -> Picture:
     body's size) and coloured by the displacement magnitude."""
     u = np.asarray(solid.point_data["displacement"], float)
     size = float(np.linalg.norm(np.ptp(solid.points, axis=0)))
-    largest = float(_magnitude(u).max())
+    largest = float(magnitude(u).max())
     factor = 0.05 * size / largest if largest > 0 else 1.0
     factor = float(f"{factor:.1g}")
     shown = solid.copy()
     title = "displacement magnitude [m]"
-    shown.point_data[title] = _magnitude(u)
+    shown.point_data[title] = magnitude(u)
     warped = shown.warp_by_vector("displacement", factor=factor)
-    p = _plotter()
-    p.add_mesh(warped, scalars=title, cmap="viridis", show_edges=False, scalar_bar_args=_bar(title))
+    p = plotter()
+    p.add_mesh(warped, scalars=title, cmap="viridis", show_edges=False, scalar_bar_args=colour_bar(title))
     p.add_mesh(solid.extract_feature_edges(), color="gray", line_width=1, opacity=0.5)
     p.view_isometric()
     p.reset_camera()
-    _save(p, out, "solid_displacement.png", f"deformed solid, displacement scaled x {factor:g}; largest {largest:.3g} m")
+    save(p, out, "solid_displacement.png", f"deformed solid, displacement scaled x {factor:g}; largest {largest:.3g} m")
     return Picture("solid_displacement.png", "Deformed solid",
                    f"Displacement magnitude on the solid warped by {factor:g} (largest {largest:.3g} m).")
 
@@ -122,13 +63,13 @@ def von_mises_cut(solid, out: Path) -> Picture | None:
     cut = solid.slice(normal=normal, origin=solid.center)
     if cut.n_points == 0:
         return None
-    p = _plotter()
-    p.add_mesh(cut, scalars="von_mises", cmap="inferno", scalar_bar_args=_bar("von Mises stress [Pa]"))
+    p = plotter()
+    p.add_mesh(cut, scalars="von_mises", cmap="inferno", scalar_bar_args=colour_bar("von Mises stress [Pa]"))
     p.add_mesh(cut.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,
                                          non_manifold_edges=False), color="black", line_width=1.5)
-    _view(p, cut.bounds, normal)
+    view(p, cut.bounds, normal)
     where = f"{'xyz'[axis]} = {solid.center[axis]:.3g} m"
-    _save(p, out, "solid_von_mises.png", f"von Mises stress on the cut {where}")
+    save(p, out, "solid_von_mises.png", f"von Mises stress on the cut {where}")
     return Picture("solid_von_mises.png", "Von Mises stress",
                    f"Von Mises stress on the cut {where} through the solid (largest "
                    f"{float(np.max(cut.point_data['von_mises'])):.3g} Pa).")
@@ -138,14 +79,14 @@ def flow_slice(fluid, solid, out: Path) -> Picture:
     """Speed on the grid's mid-plane across its thinnest extent, the solid's outline on it
     (solid fraction 1/2) and streamlines seeded along the inlet."""
     grid = fluid.cell_data_to_point_data()
-    grid.point_data["speed"] = _magnitude(grid.point_data["velocity"])
+    grid.point_data["speed"] = magnitude(grid.point_data["velocity"])
     b = grid.bounds
     extents = [b[1] - b[0], b[3] - b[2], b[5] - b[4]]
     axis = int(np.argmin(extents))
     normal = np.eye(3)[axis]
     plane = grid.slice(normal=normal, origin=grid.center)
-    p = _plotter()
-    p.add_mesh(plane, scalars="speed", cmap="viridis", scalar_bar_args=_bar("speed [m/s]"))
+    p = plotter()
+    p.add_mesh(plane, scalars="speed", cmap="viridis", scalar_bar_args=colour_bar("speed [m/s]"))
     if "solid_fraction" in plane.point_data:
         outline = plane.contour([0.5], scalars="solid_fraction")
         if outline.n_points:
@@ -167,49 +108,28 @@ def flow_slice(fluid, solid, out: Path) -> Picture:
                                           step_unit="cl", integration_direction="forward")
     if lines.n_points:
         p.add_mesh(lines, color="white", line_width=1.5, opacity=0.8)
-    _view(p, plane.bounds, normal)
+    view(p, plane.bounds, normal)
     where = f"{'xyz'[axis]} = {grid.center[axis]:.3g} m"
-    _save(p, out, "flow_speed.png", f"fluid speed on the grid's mid-plane {where}, solid outline, streamlines")
+    save(p, out, "flow_speed.png", f"fluid speed on the grid's mid-plane {where}, solid outline, streamlines")
     return Picture("flow_speed.png", "Flow", f"Fluid speed on the plane {where} (largest "
                    f"{float(np.max(plane.point_data['speed'])):.3g} m/s), the solid's outline (black) and "
                    f"streamlines from the inlet (white).")
-
-
-def _surface_where(solid, field: str):
-    """The boundary faces of the solid whose vertices all carry a non-zero `field`."""
-    surface = solid.extract_surface(algorithm="dataset_surface")
-    values = _magnitude(surface.point_data[field])
-    faces = surface.faces.reshape(-1, 4)[:, 1:] if surface.is_all_triangles else None
-    if faces is None:
-        surface = surface.triangulate()
-        values = _magnitude(surface.point_data[field])
-        faces = surface.faces.reshape(-1, 4)[:, 1:]
-    keep = np.all(values[faces] != 0, axis=1)
-    return surface.extract_cells(np.flatnonzero(keep)).extract_surface(algorithm="dataset_surface") \
-        if keep.any() else None
-
-
-def _plane_normal(points) -> np.ndarray:
-    """The normal of the plane that fits `points` best (their covariance's smallest direction)."""
-    centred = np.asarray(points) - np.mean(points, axis=0)
-    normal = np.linalg.eigh(centred.T @ centred)[1][:, 0]
-    return normal if normal[np.argmax(np.abs(normal))] > 0 else -normal
 
 
 def wetted_pressure(solid, out: Path) -> Picture | None:
     field = "pressure" if "pressure" in solid.point_data else "traction" if "traction" in solid.point_data else None
     if field is None:
         return None
-    faces = _surface_where(solid, field)
+    faces = surface_where(solid, field)
     if faces is None:
         return None
     title = "fluid pressure [Pa]" if field == "pressure" else "|fluid traction| [Pa]"
-    faces.point_data[title] = _magnitude(faces.point_data[field]) if field == "traction" else \
+    faces.point_data[title] = magnitude(faces.point_data[field]) if field == "traction" else \
         np.asarray(faces.point_data[field], float)
-    p = _plotter()
-    p.add_mesh(faces, scalars=title, cmap="cividis", scalar_bar_args=_bar(title))
-    _view(p, faces.bounds, _plane_normal(faces.points))
-    _save(p, out, "fluid_pressure_on_faces.png", f"{title.split(' [')[0]} on the wetted faces of the solid")
+    p = plotter()
+    p.add_mesh(faces, scalars=title, cmap="cividis", scalar_bar_args=colour_bar(title))
+    view(p, faces.bounds, plane_normal(faces.points))
+    save(p, out, "fluid_pressure_on_faces.png", f"{title.split(' [')[0]} on the wetted faces of the solid")
     values = faces.point_data[title]
     return Picture("fluid_pressure_on_faces.png", "Fluid load on the rock",
                    f"The {title} on the wetted faces, from {float(values.min()):.3g} to {float(values.max()):.3g} Pa.")
@@ -219,25 +139,25 @@ def contact_face(solid, out: Path) -> list[Picture]:
     """The contact pressure and the in-contact map on the slave face."""
     if "slave" not in solid.point_data or "contact_pressure" not in solid.point_data:
         return []
-    face = _surface_where(solid, "slave")
+    face = surface_where(solid, "slave")
     if face is None:
         return []
-    normal = _plane_normal(face.points)
+    normal = plane_normal(face.points)
     pictures = []
-    p = _plotter()
-    p.add_mesh(face, scalars="contact_pressure", cmap="inferno", scalar_bar_args=_bar("contact pressure [Pa]"))
-    _view(p, face.bounds, normal)
-    _save(p, out, "contact_pressure.png", "contact pressure on the slave face")
+    p = plotter()
+    p.add_mesh(face, scalars="contact_pressure", cmap="inferno", scalar_bar_args=colour_bar("contact pressure [Pa]"))
+    view(p, face.bounds, normal)
+    save(p, out, "contact_pressure.png", "contact pressure on the slave face")
     largest = float(np.max(face.point_data["contact_pressure"]))
     pictures.append(Picture("contact_pressure.png", "Contact pressure",
                             f"Contact pressure on the slave face (largest {largest:.3g} Pa)."))
-    p = _plotter()
+    p = plotter()
     in_contact = np.asarray(face.point_data["in_contact"], float)
     p.add_mesh(face, scalars=in_contact, cmap=["#d9d9d9", "#b2182b"], clim=(0, 1), n_colors=2,
-               scalar_bar_args={**_bar("in contact"), "n_labels": 2})
-    _view(p, face.bounds, normal)
+               scalar_bar_args={**colour_bar("in contact"), "n_labels": 2})
+    view(p, face.bounds, normal)
     fraction = float(np.mean(in_contact))
-    _save(p, out, "contact_map.png", f"slave face in contact (red): {100 * fraction:.1f} % of its vertices")
+    save(p, out, "contact_map.png", f"slave face in contact (red): {100 * fraction:.1f} % of its vertices")
     pictures.append(Picture("contact_map.png", "In contact", f"Slave face vertices in contact (red): "
                             f"{100 * fraction:.1f} % of them."))
     return pictures
@@ -259,7 +179,7 @@ def transferred_fields(out: Path, files: list[Path]) -> Picture | None:
     axis = int(np.argmin([b[1] - b[0], b[3] - b[2], b[5] - b[4]]))
     normal, origin = np.eye(3)[axis], source.center
     cuts = [m.slice(normal=normal, origin=origin) for m in meshes]
-    values = [_magnitude(c[field]) for c in cuts if c.n_points and field in c.array_names]
+    values = [magnitude(c[field]) for c in cuts if c.n_points and field in c.array_names]
     if len(values) < len(cuts) or not all(np.isfinite(v).any() for v in values):
         return None
     clim = (min(float(np.nanmin(v)) for v in values), max(float(np.nanmax(v)) for v in values))
@@ -267,10 +187,10 @@ def transferred_fields(out: Path, files: list[Path]) -> Picture | None:
     p.set_background("white")
     for i, (cut, file) in enumerate(zip(cuts, files)):
         p.subplot(0, i)
-        p.add_mesh(cut, scalars=_magnitude(cut[field]), clim=clim, cmap="viridis", nan_color="white",
-                   scalar_bar_args=_bar(field) if i == len(cuts) - 1 else None, show_scalar_bar=i == len(cuts) - 1)
+        p.add_mesh(cut, scalars=magnitude(cut[field]), clim=clim, cmap="viridis", nan_color="white",
+                   scalar_bar_args=colour_bar(field) if i == len(cuts) - 1 else None, show_scalar_bar=i == len(cuts) - 1)
         p.add_text(file.stem.rsplit("_", 1)[0], position="upper_left", font_size=12, color="black")
-        _view(p, cut.bounds, normal)
+        view(p, cut.bounds, normal)
     where = f"{'xyz'[axis]} = {origin[axis]:.3g}"
     path = out / "transfer.png"
     p.screenshot(str(path))
@@ -312,6 +232,8 @@ def render_here(out: Path, effects: list[str]) -> list[Picture]:
             pictures.append(wetted_pressure(solid, out))
     if "contact" in effects and solid is not None:
         pictures += contact_face(solid, out)
+    if "contact" in effects and "flow" in effects and fluid_file is not None:
+        pictures += fracture_maps(out)
     if "transfer" in effects and last_step(out, "source") is not None:
         targets = sorted(out.glob("target_*.pvd"))
         pictures.append(transferred_fields(out, [last_step(out, "source")] + [last_step(out, t.stem) for t in targets]))

@@ -57,6 +57,41 @@ def solver_convergence(path: Path, steps: list[dict]) -> bool:
     return True
 
 
+def apertures_plot(path: Path, steps: list[dict]) -> bool:
+    """A hydro-mechanical fracture's mechanical and hydraulic apertures e_m and e_h (the
+    per-step ``"fracture"`` figures) against the confining stress (the platen's), and the contact
+    area fraction on a second axis; False when no step has both."""
+    rows = [(s["figures"]["solid"]["stress"], s["fracture"]) for s in steps
+            if s.get("fracture") and "stress" in s.get("figures", {}).get("solid", {})]
+    if not rows:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stress = np.array([r[0] for r in rows]) / 1e6
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(stress, [1e6 * f["mechanical_aperture"] for _, f in rows], "o-", color="#31688e",
+            label="mechanical aperture $e_m$")
+    ax.plot(stress, [1e6 * f["hydraulic_aperture"] for _, f in rows], "s-", color="#35b779",
+            label="hydraulic aperture $e_h$")
+    ax.set_xlabel("confining stress [MPa]")
+    ax.set_ylabel("aperture [µm]")
+    ax.set_ylim(bottom=0)
+    area = ax.twinx()
+    area.plot(stress, [100 * f["contact_area_fraction"] for _, f in rows], "^--", color="#7f7f7f",
+              label="contact area")
+    area.set_ylabel("contact area [%]", color="#7f7f7f")
+    area.set_ylim(bottom=0)
+    lines = ax.get_legend_handles_labels(), area.get_legend_handles_labels()
+    ax.legend(lines[0][0] + lines[1][0], lines[0][1] + lines[1][1], fontsize=8, loc="lower left")
+    ax.set_title("apertures against confining stress")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
 
 def varying_figures(steps: list[dict]) -> dict[str, list]:
     """``{"participant.figure": value per step}`` of the figures that change over the steps

@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .plots import figures_plot, solver_convergence
+from .plots import apertures_plot, figures_plot, solver_convergence
 from .report import write_page
 from .results import write_summary
 
@@ -29,6 +29,7 @@ def publish(out: Path, summary: dict, pictures: bool, log=print) -> Path:
     if pictures:
         solver_convergence(out / "convergence.png", summary.get("steps", []))
     figures_plot(out / "figures.png", summary.get("steps", []), summary.get("check", {}).get("curves"))
+    apertures_plot(out / "apertures.png", summary.get("steps", []))
     page = write_page(out, summary, rendered)
     log(f"report: {page}")
     return page

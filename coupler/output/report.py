@@ -135,12 +135,16 @@ PLOTS = {"residuals.png": ("Coupling residuals", "The relative interface residua
          "convergence.png": ("Inner solver convergence", "The criterion of every inner solve that reports its "
                                                          "history, per iteration of each step."),
          "figures.png": ("Figures per step", "Every figure the participants report that changes over the steps "
-                                             "(dashed: the check's fit).")}
+                                             "(dashed: the check's fit)."),
+         "apertures.png": ("Apertures against stress", "The fracture's mechanical aperture e_m (the mean gap, "
+                                                       "contacts as zero), hydraulic aperture e_h (the cubic law's "
+                                                       "gap for the measured flow rate) and contact area fraction "
+                                                       "at each confining stress.")}
 
 
 def write_page(out: Path, summary: dict, pictures: list) -> Path:
     """Write ``index.html`` in the run's output directory `out`; `pictures` are
-    :class:`coupler.output.pictures.Picture` (files in `out`); the run's :data:`PLOTS` are
+    :class:`coupler.output.drawing.Picture` (files in `out`); the run's :data:`PLOTS` are
     shown when they exist."""
     title = Path(summary.get("case", out.name)).name or out.name
     figures = [(p.title, p.caption, out / p.file) for p in pictures]

@@ -93,9 +93,11 @@ def test_zero_pressure_difference_gives_the_pure_contact_closure(tmp_path):
         assert wet["iterations"] == 1
 
 
-def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path):
+def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path, capsys):
     """A soft rock closed to below two fluid cells: no open path through the grid's cells from
-    inlet to outlet: flow rate and hydraulic aperture 0, the warning in the log and summary."""
+    inlet to outlet: flow rate and hydraulic aperture 0, the warning in the log and summary. At
+    4 MPa its contact area exceeds 50 % and its mean open aperture (13 um) is under one fluid cell
+    (20 um): both accuracy warnings in that step's figures, each printed once."""
     soft = {"E = 1.0e10": "E = 3.0e8", "shape = [16, 16, 53]": "shape = [8, 8, 27]",
             "upper = [0.02, 0.02, 0.00031]": "upper = [0.02, 0.02, 0.00032]"}
     summary = run(copy_case(CASE, tmp_path, soft), tmp_path / "out")
@@ -103,6 +105,23 @@ def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path):
     assert not last["percolating"] and last["flow_rate"] == 0.0 and last["hydraulic_aperture"] == 0.0
     assert last["mechanical_aperture"] > 0
     assert any("no connected open path" in w for w in summary["warnings"])
+    h = 0.00054 / 27
+    for step in summary["steps"]:
+        f = step["fracture"]
+        assert f["cells_across"] == pytest.approx(f["mean_open_aperture"] / h, rel=1e-12)
+        assert f["mean_open_aperture"] * (1 - f["contact_area_fraction"]) == pytest.approx(f["mechanical_aperture"],
+                                                                                          rel=1e-9)
+    assert [len(s["fracture"].get("warnings", [])) for s in summary["steps"]] == [0, 0, 2]
+    assert last["contact_area_fraction"] > 0.5 and last["cells_across"] < 1
+    area, across = last["warnings"]
+    assert f"the contact area is {100 * last['contact_area_fraction']:.0f} % of the fracture plane (above 50 %)" in area
+    assert "(2.5 x 2.5 mm in the plane)" in area
+    n = last["cells_across"]
+    assert f"is {n:.2f} fluid cells across ([geometry.fluid] cells 20 um across the fracture)" in across
+    assert f"{200 / n ** 2:.0f} % extrapolated" in across and "+3.1 % at 8" in across
+    printed = capsys.readouterr().out
+    assert printed.count("warning: fracture: the contact area is") == 1
+    assert printed.count("warning: fracture: the mean open aperture") == 1
 
 
 @pytest.mark.parametrize("replace, where, reason", [

@@ -178,3 +178,95 @@ def test_solvers_that_report_their_history_get_a_convergence_plot(tmp_path):
     assert solver_convergence(tmp_path / "convergence.png", steps)
     not_blank(tmp_path / "convergence.png")
     assert not solver_convergence(tmp_path / "none.png", [{"step": 0, "solves": {"solid": []}}])
+
+
+def test_the_mid_surface_lies_halfway_across_the_open_cells_of_a_column():
+    """A column of six unit cells, fractions 1, 0.5, 0, 0, 0.25, 1: the lower block is 1.5 high,
+    the open aperture 3.25, the mid-surface at 3.125, where a speed equal to the height is 3.125;
+    a closed column has aperture and speed 0."""
+    from coupler.output.fracture_maps import mid_surface
+
+    fraction = np.array([[[1, 0.5, 0, 0, 0.25, 1], [1, 1, 1, 1, 1, 1]]], float)
+    velocity = np.zeros((1, 2, 6, 3))
+    velocity[..., 0] = np.arange(6) + 0.5  # the speed at each cell centre is its height
+    aperture, height, speed = mid_surface(fraction, velocity, 1.0)
+    assert aperture[0, 0] == pytest.approx(3.25) and height[0, 0] == pytest.approx(3.125)
+    assert speed[0, 0] == pytest.approx(3.125)
+    assert aperture[0, 1] == 0 and speed[0, 1] == 0
+
+
+def fracture_solid():
+    """The unit cube of tets as the lower block: its face z = 0 the slave face, with the gap
+    1e-4 (1 - y) (widest at y = 0), in contact nowhere."""
+    solid = solid_with_fields()
+    y = solid.points[:, 1]
+    solid.point_data["gap"] = np.where(solid.point_data["slave"] > 0, 1e-4 * (1 - y), 0.0)
+    solid.point_data["in_contact"] = np.zeros(solid.n_points)
+    return solid
+
+
+def panel(path: Path, index: int, colour) -> np.ndarray:
+    """(row, column) of the pixels closest to `colour` in panel `index` of two side by side,
+    above the colour bar."""
+    img = image(path)
+    width = img.shape[1] // 2
+    img = img[: int(0.85 * len(img)), index * width:(index + 1) * width]
+    distance = np.linalg.norm(img - np.asarray(colour, float), axis=2)
+    rows, cols = np.nonzero(distance <= distance.min() + 10)
+    return np.array([rows.mean(), cols.mean()])
+
+
+def cmap_rgb(name: str, at: float) -> np.ndarray:
+    import matplotlib
+
+    return 255 * np.asarray(matplotlib.colormaps[name](at)[:3])
+
+
+def hm_summary() -> dict:
+    """A run's summary with two load steps of a hydro-mechanical fracture."""
+    steps = [{"step": k, "t": k + 1.0, "iterations": 3, "residuals": [1e-6], "converged": True,
+              "figures": {"solid": {"stress": stress}},
+              "fracture": {"mechanical_aperture": e_m, "hydraulic_aperture": e_h, "contact_area_fraction": c,
+                           "flow_rate": 1e-9, "mean_face_pressure": 2.5e5}}
+             for k, (stress, e_m, e_h, c) in enumerate([(1e6, 9e-5, 8e-5, 0.03), (4e6, 7e-5, 6e-5, 0.07)])]
+    return {"case": "cases/hm", "status": "completed", "effects": ["elasticity", "contact", "flow"], "steps": steps}
+
+
+def test_the_fracture_map_shows_the_widest_aperture_and_the_fastest_flow_where_they_are(tmp_path):
+    """Per step of a contact + flow run: the aperture (widest at y = 0: bottom of the left panel)
+    and the mid-surface speed (x + y: fastest at the top right of the right panel)."""
+    series(tmp_path, "solid", fracture_solid())
+    series(tmp_path, "fluid", grid_with_speed())
+    (tmp_path / "summary.json").write_text(json.dumps(hm_summary()))
+    made = pictures.render(tmp_path, ["elasticity", "contact", "flow"])
+    assert [p.file for p in made][-1] == "fracture_step_0000.png"
+    path = tmp_path / "fracture_step_0000.png"
+    not_blank(path)
+    assert made[-1].title == "Fracture, step 0, 1 MPa" and "largest 100 um" in made[-1].caption
+    wide, narrow = panel(path, 0, cmap_rgb("cividis", 1.0)), panel(path, 0, cmap_rgb("cividis", 0.0))
+    assert wide[0] > narrow[0] + 200 and abs(wide[1] - narrow[1]) < 50, (wide, narrow)
+    fast, slow = panel(path, 1, VIRIDIS_MAX), panel(path, 1, VIRIDIS_MIN)
+    assert fast[1] > slow[1] + 200 and fast[0] < slow[0] - 200, (fast, slow)
+    # only for a scene with contact and flow, and a solid with the contact faces' gap
+    assert "fracture_step_0000.png" not in [p.file for p in pictures.render(tmp_path, ["elasticity", "contact"])]
+    series(tmp_path, "solid", solid_with_fields())
+    assert "fracture_step_0000.png" not in [p.file for p in pictures.render(tmp_path, ["elasticity", "contact",
+                                                                                        "flow"])]
+
+
+def test_the_report_of_a_fracture_run_shows_apertures_against_stress_and_the_maps(tmp_path):
+    from coupler.output.plots import apertures_plot
+    from coupler.output.publish import publish
+
+    series(tmp_path, "solid", fracture_solid())
+    series(tmp_path, "fluid", grid_with_speed())
+    summary = hm_summary()
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    page = publish(tmp_path, summary, pictures=True, log=lambda _: None).read_text()
+    assert "fracture_step_0000.png" in summary["pictures"]
+    not_blank(tmp_path / "apertures.png")
+    assert "Apertures against stress" in page and 'alt="apertures.png"' in page and 'alt="fracture_step_0000.png"' in page
+    # e_m above e_h: the e_m line's markers (viridis blue) above the e_h line's (green) at both stresses
+    e_m, e_h = nearest(tmp_path / "apertures.png", (49, 104, 142)), nearest(tmp_path / "apertures.png", (53, 183, 121))
+    assert e_m[0] < e_h[0], (e_m, e_h)
+    assert not apertures_plot(tmp_path / "none.png", [{"step": 0, "figures": {"solid": {"stress": 1e6}}}])

@@ -1,0 +1,174 @@
+"""The hydro-mechanical fracture (cases/hm_fracture: contact + flow, paper 1 and 4.2): what it
+costs and how accurate it is.
+
+* ``iterations``: the case as shipped (IQN-ILS, one implicit coupling per confining stress):
+  coupling iterations per stress, the fluid's pseudo-time steps, the time per phase (fluid,
+  solid, geometry updates, transfer, messaging);
+* ``refinement``: the same scene with the fluid grid refined across the gap only, 4, 8 and 16
+  cells across the mean initial aperture (the grid's z spacing = aperture / n; the in-plane
+  columns as in the tests, 8 x 8): e_m, e_h, Q and the cells across the mean open aperture per
+  stress, the error of e_h (and Q) against the finest grid, the wall and fluid seconds and the
+  cells (error against cost), drawn in ``hm.png``.
+
+Goal (PASS/MISS): at most 8 coupling iterations per stress with IQN-ILS.
+
+    .venv/bin/python bench/hm.py [--quick] [--across 4 8 16] [-o FILE]
+
+``--quick`` (smoke test): one stress (1 MPa), 8 x 8 columns, 4 and 8 cells across; output
+bench/results/hm_quick.json unless ``-o`` is given. The machine is shared: the load average
+before and after is recorded; times are indicative.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.case_runs import run_edited  # noqa: E402
+
+CASE = ROOT / "cases" / "hm_fracture"
+GOAL_ITERATIONS = 8
+APERTURE = 1.0e-4  # the scene's mean initial aperture [m] ([geometry.solid.parameters] aperture)
+Z_LOWER, Z_UPPER = -0.00022, 0.00031  # the scene's grid across the gap [m]
+PHASES = ("fluid", "solid", "geometry update", "transfer", "messaging", "checkpoint", "output")
+
+
+def run_scene(replace: dict) -> dict:
+    """``varcouple run`` on a copy of cases/hm_fracture with the text replacements `replace` in
+    its scene: status, seconds (wall and per phase), cells and per stress the iterations and the
+    fracture's figures."""
+    code, wall, summary = run_edited(CASE, replace, prefix="varcouple-bench-hm-")
+    steps = summary.get("steps", [])
+    phases = summary.get("phases_seconds", {})
+    return {"exit_code": code, "status": summary.get("status"), "error": summary.get("error"), "wall_seconds": wall,
+            "phases_seconds": {p: phases.get(p, 0.0) for p in PHASES},
+            "fluid_cells": summary.get("sizes", {}).get("fluid", {}).get("cells"),
+            "stress": [s["figures"]["solid"]["stress"] for s in steps],
+            "iterations": [s["iterations"] for s in steps],
+            "fluid_steps": [sum(r["iterations"] for r in s["solves"].get("fluid", []) if "pseudo" in r["solver"])
+                            for s in steps],
+            "fracture": [{k: v for k, v in s["fracture"].items() if k != "warnings"} for s in steps],
+            "warnings": summary.get("warnings", [])}
+
+
+def grid(columns: int, across: float) -> dict:
+    """Replacements for a grid of `columns` x `columns` cells in the plane and cells APERTURE /
+    `across` high, from the scene's lower z up to at least its upper z."""
+    h = APERTURE / across
+    nz = math.ceil((Z_UPPER - Z_LOWER) / h - 1e-9)
+    return {"shape = [16, 16, 53]": f"shape = [{columns}, {columns}, {nz}]",
+            "upper = [0.02, 0.02, 0.00031]": f"upper = [0.02, 0.02, {Z_LOWER + nz * h!r}]"}
+
+
+def stresses(values: list[float]) -> dict:
+    return {"stress = [1.0e6, 2.0e6, 4.0e6]": f"stress = [{', '.join(repr(v) for v in values)}]",
+            "steps = 3": f"steps = {len(values)}"}
+
+
+def refinement(across: list[int], columns: int, load: dict) -> list[dict]:
+    """One run per number of cells across; each stress's e_h and Q against the finest run's."""
+    rows = [{"cells_across_initial_aperture": n, **run_scene({**grid(columns, n), **load})} for n in across]
+    finest = rows[-1]["fracture"]
+    for row in rows:
+        row["error_hydraulic_aperture"] = [abs(f["hydraulic_aperture"] / g["hydraulic_aperture"] - 1)
+                                           for f, g in zip(row["fracture"], finest)]
+        row["error_flow_rate"] = [abs(f["flow_rate"] / g["flow_rate"] - 1) for f, g in zip(row["fracture"], finest)]
+        row["error_mechanical_aperture"] = [abs(f["mechanical_aperture"] / g["mechanical_aperture"] - 1)
+                                            for f, g in zip(row["fracture"], finest)]
+    return rows
+
+
+def plot(path: Path, rows: list[dict]) -> None:
+    """Error of e_h against the finest grid, against the cells across and against the fluid's
+    seconds (the runs' wall times are dominated by start-up at the coarse grids)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    coarse = rows[:-1]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for k, stress in enumerate(rows[0]["stress"]):
+        errors = [100 * r["error_hydraulic_aperture"][k] for r in coarse]
+        label = f"{stress / 1e6:.3g} MPa"
+        axes[0].loglog([r["cells_across_initial_aperture"] for r in coarse], errors, "o-", label=label)
+        axes[1].loglog([r["phases_seconds"]["fluid"] for r in coarse], errors, "o-", label=label)
+    axes[0].set_xlabel("fluid cells across the mean initial aperture")
+    axes[1].set_xlabel("fluid solver time of the run [s]")
+    for ax in axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+            axis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ax.set_ylabel(f"error of e_h against {rows[-1]['cells_across_initial_aperture']} across [%]")
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=8, title="confining stress")
+    fig.suptitle("hm_fracture: hydraulic aperture against cost (grid refined across the gap)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="one stress, 8 x 8 columns, 4 and 8 across (smoke test)")
+    ap.add_argument("--across", nargs="+", type=int, default=[4, 8, 16])
+    ap.add_argument("-o", "--output", type=Path, help="JSON output (default bench/results/hm.json)")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.across = [4, 8]
+    output = args.output or ROOT / "bench" / "results" / ("hm_quick.json" if args.quick else "hm.json")
+    os.environ["VARCOUPLE_PICTURES"] = "0"  # time the coupling, not the renderings
+    load = stresses([1.0e6]) if args.quick else {}
+    result = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(), "cpu_count": os.cpu_count(),
+              "load_average_before": os.getloadavg(), "quick": args.quick,
+              "note": "machine shared with other engineers: times are indicative"}
+
+    shipped = run_scene({**({"shape = [16, 16, 53]": "shape = [8, 8, 53]"} if args.quick else {}), **load})
+    result["iterations"] = shipped
+    worst = max(shipped["iterations"])
+    result["goals"] = {"iqn_ils_iterations_per_stress": {"value": worst, "goal": f"<= {GOAL_ITERATIONS}",
+                                                         "status": "PASS" if worst <= GOAL_ITERATIONS else "MISS"}}
+    print(f"hm_fracture as shipped ({shipped['fluid_cells']} fluid cells): {shipped['status']}, "
+          f"{shipped['wall_seconds']:.1f} s")
+    print(f"  {'stress MPa':>10s} {'coupling it':>11s} {'fluid steps':>11s} {'e_m um':>8s} {'e_h um':>8s} "
+          f"{'contact':>7s} {'Q m^3/s':>9s} {'cells across':>12s}")
+    for s, it, fs, f in zip(shipped["stress"], shipped["iterations"], shipped["fluid_steps"], shipped["fracture"]):
+        print(f"  {s / 1e6:10.3g} {it:11d} {fs:11d} {1e6 * f['mechanical_aperture']:8.2f} "
+              f"{1e6 * f['hydraulic_aperture']:8.2f} {f['contact_area_fraction']:7.3f} {f['flow_rate']:9.3e} "
+              f"{f['cells_across']:12.2f}")
+    print("  seconds per phase: " + ", ".join(f"{p} {t:.2f}" for p, t in shipped["phases_seconds"].items()))
+
+    rows = refinement(args.across, 8, load)
+    result["refinement"] = rows
+    finest = rows[-1]["cells_across_initial_aperture"]
+    print(f"\nrefined across the gap (8 x 8 columns): error against {finest} cells across the mean initial aperture")
+    print(f"  {'across':>6s} {'cells':>6s} {'wall s':>7s} {'fluid s':>8s} {'stress MPa':>10s} {'e_h um':>8s} "
+          f"{'err e_h':>8s} {'err Q':>8s} {'err e_m':>8s} {'coupling it':>11s}")
+    for r in rows:
+        for k, (s, f) in enumerate(zip(r["stress"], r["fracture"])):
+            print(f"  {r['cells_across_initial_aperture']:6d} {r['fluid_cells']:6d} {r['wall_seconds']:7.1f} "
+                  f"{r['phases_seconds']['fluid']:8.1f} {s / 1e6:10.3g} {1e6 * f['hydraulic_aperture']:8.2f} "
+                  f"{r['error_hydraulic_aperture'][k]:8.2%} {r['error_flow_rate'][k]:8.2%} "
+                  f"{r['error_mechanical_aperture'][k]:8.2%} {r['iterations'][k]:11d}")
+    for name, g in result["goals"].items():
+        print(f"goal {name}: {g['value']} ({g['goal']}) {g['status']}")
+    result["load_average_after"] = os.getloadavg()
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(json.dumps(result, indent=1))
+    plot(output.with_suffix(".png"), rows)
+    print(f"written {output} and {output.with_suffix('.png').name}")
+    return result
+
+
+if __name__ == "__main__":
+    main()
