@@ -13,7 +13,7 @@ import pytest
 from transfer import FunctionSpace, StructuredGrid
 from transfer.generate import box_hexahedra, box_tetrahedra
 
-from vc_helpers import SHIFT
+from vc_helpers import SHIFT, stopping_signals_not_delivered
 
 
 @pytest.fixture(params=["l2", "pseudo_l2"])
@@ -68,13 +68,9 @@ def no_pictures(monkeypatch):
 
 @pytest.fixture(autouse=True)
 def signals_not_ignored():
-    """No test leaves SIGINT or SIGTERM ignored: SIG_IGN is inherited by every process a later
-    test starts, whose Ctrl-C or SIGTERM would then do nothing. (Other handler changes are
+    """No test leaves SIGINT or SIGTERM ignored or blocked: both are inherited by every process a
+    later test starts, whose Ctrl-C or SIGTERM would then do nothing. (Other handler changes are
     harmless to children: gmsh's import sets SIG_DFL, its finalize Python's default.)"""
-    import signal
-
     yield
-    ignored = [signal.Signals(s).name for s in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(s) == signal.SIG_IGN]
-    for name in ignored:
-        signal.signal(signal.Signals[name], signal.default_int_handler if name == "SIGINT" else signal.SIG_DFL)
-    assert not ignored, f"the test left {', '.join(ignored)} ignored"
+    found = stopping_signals_not_delivered()
+    assert not found, f"the test left {', '.join(found)} in the test process"

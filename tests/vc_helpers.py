@@ -285,3 +285,17 @@ def run_mpi(script, ranks: int, *args, timeout: float = 300):
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def stopping_signals_not_delivered(pid: str = "self") -> list[str]:
+    """SIGINT and SIGTERM if ignored or blocked in process `pid` (its /proc status: what C code
+    did too, which Python's signal.getsignal does not see); both are inherited by the processes
+    it starts."""
+    status = dict(line.split(":\t", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+                  if ":\t" in line)
+    found = []
+    for name, number in (("SIGINT", 2), ("SIGTERM", 15)):
+        for field, how in (("SigIgn", "ignored"), ("SigBlk", "blocked")):
+            if int(status.get(field, "0"), 16) & (1 << (number - 1)):
+                found.append(f"{name} {how}")
+    return found

@@ -17,7 +17,7 @@ from coupler.errors import EXIT_CODES
 from coupler.protocol.wire import SolveReport
 from coupler.run.outdir import LOCK, OutputBusy, OutputLock
 from coupler.run.solves import StepSolves
-from vc_helpers import CASES, copy_case
+from vc_helpers import CASES, copy_case, stopping_signals_not_delivered
 
 CASE = CASES / "standin_flow"
 
@@ -86,10 +86,12 @@ def _finish(proc, stderr: Path | None = None, timeout=60) -> str:
     try:
         return read(timeout)
     except subprocess.TimeoutExpired:
+        undelivered = stopping_signals_not_delivered(str(proc.pid))
         proc.send_signal(signal.SIGUSR1)
         time.sleep(2)
         proc.kill()
-        pytest.fail(f"the run did not stop within {timeout} s; its threads:\n{read()[-6000:]}")
+        signals = ", ".join(undelivered) or "SIGINT and SIGTERM neither ignored nor blocked"
+        pytest.fail(f"the run did not stop within {timeout} s ({signals}); its threads:\n{read()[-6000:]}")
 
 
 def _wait_for_steps(out, timeout=60):
