@@ -4,6 +4,7 @@ matters: geometry and quadrature here are written from scratch, not taken from `
 from __future__ import annotations
 
 import importlib.util
+import signal
 from itertools import combinations
 from pathlib import Path
 
@@ -285,6 +286,15 @@ def run_mpi(script, ranks: int, *args, timeout: float = 300):
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def deliver_stopping_signals() -> None:
+    """SIGINT and SIGTERM neither ignored nor blocked in the calling process (Python's own
+    handler for SIGINT, the default for SIGTERM): the `preexec_fn` of a test that signals a run,
+    whatever the test process inherited."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # also where C code ignored it
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def stopping_signals_not_delivered(pid: str = "self") -> list[str]:

@@ -17,7 +17,7 @@ from coupler.errors import EXIT_CODES
 from coupler.protocol.wire import SolveReport
 from coupler.run.outdir import LOCK, OutputBusy, OutputLock
 from coupler.run.solves import StepSolves
-from vc_helpers import CASES, copy_case, stopping_signals_not_delivered
+from vc_helpers import CASES, copy_case, deliver_stopping_signals, stopping_signals_not_delivered
 
 CASE = CASES / "standin_flow"
 
@@ -107,14 +107,20 @@ def _wait_for_steps(out, timeout=60):
     raise AssertionError("the run wrote no step")
 
 
+def _start_run(case, out, **popen):
+    """`varcouple run` in a child process that receives SIGINT and SIGTERM whatever the test
+    process inherited (a shell's background job ignores SIGINT)."""
+    return subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
+                            preexec_fn=deliver_stopping_signals, **popen)
+
+
 @pytest.mark.parametrize("sig, code, status, said", [(signal.SIGINT, 130, "interrupted", "interrupted"),
                                                      (signal.SIGTERM, 143, "terminated", "terminated by signal 15")],
                          ids=["ctrl_c", "sigterm"])
 def test_a_signal_stops_the_participants_and_keeps_the_results(tmp_path, sig, code, status, said):
     case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = _start_run(case, out, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _wait_for_steps(out)
     proc.send_signal(sig)
     err = _finish(proc)
@@ -132,8 +138,7 @@ def test_a_signal_stops_the_participants_and_keeps_the_results(tmp_path, sig, co
 def test_sigusr1_shows_where_a_run_is_and_the_run_goes_on(tmp_path):
     case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = _start_run(case, out, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     steps = len(_wait_for_steps(out)["steps"])
     proc.send_signal(signal.SIGUSR1)
     time.sleep(1.0)
@@ -148,8 +153,7 @@ def test_a_second_run_into_the_same_output_is_refused(tmp_path, capsys):
     case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
     out = tmp_path / "out"
     log = tmp_path / "first.err"
-    first = subprocess.Popen([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
-                             stdout=subprocess.DEVNULL, stderr=log.open("w"))
+    first = _start_run(case, out, stdout=subprocess.DEVNULL, stderr=log.open("w"))
     try:
         s = _wait_for_steps(out)
         code, err = run(capsys, CASE, out)
