@@ -16,6 +16,8 @@ from __future__ import annotations
 from coupler.fsi.apertures import hydraulic_aperture
 from coupler.fsi.flow_rate import section_flow_rates
 
+from .cubic_law import pressure_drop
+
 KIND = "lubrication"
 DESCRIPTION = "the hydraulic aperture through a sinusoidal aperture against its lubrication limit (series or parallel)"
 KEYS = {"aperture": "e0, the mean aperture [m] (default: the [geometry.solid] generator wavy_plates' aperture)",
@@ -37,15 +39,7 @@ def parallel_limit(e0: float, a: float) -> float:
 
 
 def parse(table, scene) -> dict:
-    if "flow" not in scene.effects:
-        raise table.error("kind", f"'lubrication' compares a flow: needs the effect 'flow', got {scene.effects!r}")
-    inlet, outlet = scene.flow["inlet"], scene.flow["outlet"]
-    if "pressure" not in inlet:
-        raise table.error("kind", "'lubrication' needs the pressure drop: give [flow] inlet_pressure")
-    dp = inlet["pressure"] - outlet["pressure"]
-    if not dp > 0:
-        raise table.error("kind", f"'lubrication' needs a pressure drop: [flow] inlet_pressure - outlet_pressure is "
-                                  f"{dp:g} Pa")
+    dp = pressure_drop(table, scene, KIND)
     made = scene.solid.generator or {}
     generated = made.get("parameters", {}) if made.get("name") == GENERATOR else {}
     for key in ("aperture", "amplitude", "direction"):
