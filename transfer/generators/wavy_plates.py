@@ -98,7 +98,8 @@ def mesh(p: dict) -> Block:
     nx, ny = _lattice(p)
     size = (g["spacing"][0] * g["shape"][0], g["spacing"][1] * g["shape"][1])
     xs, ys = np.linspace(0.0, size[0], nx + 1), np.linspace(0.0, size[1], ny + 1)
-    s = (xs[:, None] + 0.0 * ys[None]) if p["direction"] == "along" else (0.0 * xs[:, None] + ys[None])
+    x, y = np.meshgrid(xs, ys, indexing="ij")  # the surfaces' node grid, (nx + 1, ny + 1)
+    s = x if p["direction"] == "along" else y
     lower = np.full(s.shape, _lower_face(p))
     top = g["spacing"][2] * g["shape"][2]
     blocks = fracture_blocks((nx, ny, 2), size, top, (lower, lower + aperture(p, s)), bottom=0.0, top=top)
