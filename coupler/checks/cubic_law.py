@@ -22,16 +22,23 @@ KEYS = {"aperture": "w, the gap [m] (default: the aperture parameter of the [geo
         "tolerance": "largest accepted |Q / Q_cubic - 1|"}
 
 
-def parse(table, scene) -> dict:
+def pressure_drop(table, scene, kind: str) -> float:
+    """dp = inlet - outlet pressure of the scene's flow, which check `kind` compares with; one
+    line naming ``[check] kind`` when there is no flow or no positive pressure drop."""
     if "flow" not in scene.effects:
-        raise table.error("kind", f"'cubic_law' compares a flow: needs the effect 'flow', got {scene.effects!r}")
+        raise table.error("kind", f"{kind!r} compares a flow: needs the effect 'flow', got {scene.effects!r}")
     inlet, outlet = scene.flow["inlet"], scene.flow["outlet"]
     if "pressure" not in inlet:
-        raise table.error("kind", "'cubic_law' needs the pressure drop: give [flow] inlet_pressure")
+        raise table.error("kind", f"{kind!r} needs the pressure drop: give [flow] inlet_pressure")
     dp = inlet["pressure"] - outlet["pressure"]
     if not dp > 0:
-        raise table.error("kind", f"'cubic_law' needs a pressure drop: [flow] inlet_pressure - outlet_pressure is "
+        raise table.error("kind", f"{kind!r} needs a pressure drop: [flow] inlet_pressure - outlet_pressure is "
                                   f"{dp:g} Pa")
+    return dp
+
+
+def parse(table, scene) -> dict:
+    dp = pressure_drop(table, scene, KIND)
     generated = (scene.solid.generator or {}).get("parameters", {})
     if "aperture" not in table.data and "aperture" not in generated:
         raise table.error("aperture", "missing: the gap w [m] (no generator of [geometry.solid] gives one)")

@@ -20,6 +20,7 @@ building the mesh) and, for geometry made for a fluid grid (an immersed-boundary
 - ``hertz``: a half-sphere on a block, gmsh (paper figure 5)
 - ``penny_crack``: the quarter model of a penny-shaped crack (pressurized_fracture)
 - ``plates``: two flat blocks with a gap and the 2D fluid grid made for them (parallel_plates)
+- ``wavy_plates``: two blocks with a sinusoidal aperture and the fluid grid made for them (lubrication)
 
 The modules without ``NAME`` are their building blocks: :mod:`.surfaces` (self-affine rough
 surfaces), :mod:`.blocks` (:class:`~transfer.generators.blocks.Block`, the blocks around a
