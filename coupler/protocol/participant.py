@@ -18,7 +18,9 @@ MPI: when the process is one of several MPI ranks, rank 0 alone talks zenoh; eve
 it receives is broadcast to the other ranks, which call the same method of their own
 participant object with the same arguments (so collective solver code runs on all
 ranks). The reply is rank 0's return value. A non-root rank whose method raises aborts
-the MPI job (the coupler then sees the participant die, with the log).
+the MPI job (the coupler then sees the participant die, with the log). Between verbs the other
+ranks sleep (:func:`_wait_for_root`) instead of spinning in the broadcast: a waiting rank leaves
+its core to the solvers that run meanwhile (the other participant, its ranks).
 """
 
 from __future__ import annotations
@@ -166,17 +168,32 @@ class _MpiRoot:
         def call(*args):
             if verb == "advance":  # views of the zenoh payload: pickle plain arrays
                 args = (*args[:4], {k: Field(f.name, f.data, f.units) for k, f in args[4].items()})
-            self.comm.bcast((verb, args), root=0)
+            self._send((verb, args))
             return method(*args)
 
         return call
 
+    def _send(self, message):
+        self.comm.Ibarrier().Wait()  # the other ranks wait in theirs (_wait_for_root)
+        self.comm.bcast(message, root=0)
+
     def stop(self):
-        self.comm.bcast(("__stop__", ()), root=0)
+        self._send(("__stop__", ()))
+
+
+def _wait_for_root(comm, poll: float = 1e-3) -> None:
+    """Wait until rank 0 has a call to broadcast, sleeping between tests of a nonblocking
+    barrier: Open MPI's blocking collectives poll without yielding, so a rank waiting in
+    ``bcast`` for the next verb would take a core for the whole of the other participants'
+    solves."""
+    request = comm.Ibarrier()
+    while not request.Test():
+        time.sleep(poll)
 
 
 def _mpi_worker(handler: Participant, comm) -> None:
     while True:
+        _wait_for_root(comm)
         verb, args = comm.bcast(None, root=0)
         if verb == "__stop__":
             return
