@@ -97,10 +97,17 @@ def test_the_scene_selects_chorin_and_checks_its_keys(tmp_path):
     assert fluid.config["cfl"] == 0.4 and fluid.config["tolerance"] == 1e-7 and fluid.config["poisson"] == "auto"
     assert fluid.config["inlet"] == {"velocity": [0.01, 0.0, 0.0]} and fluid.config["transient"] is False
     assert "Chorin projection in pseudo-time" in plan.iteration
+    assert fluid.ranks == 1 and fluid.config["slab_axis"] == "longest" and not plan.tasks
+    parallel = copy_case(CASES / "small_fracture", tmp_path / "ranks", {**CHORIN, 'penalization = "wall"':
+                                                                         'penalization = "wall"\nranks = 3'})
+    plan = make_plan(load(parallel))
+    assert plan.participant("fluid").ranks == 3  # started by mpirun -n 3
+    assert "fluid: chorin on 3 MPI ranks, the grid in slabs along the longest direction" in plan.tasks[0]
     for old, new, match in (('penalization = "wall"', 'poisson = "lu"', r"\[solvers.fluid\] poisson: unknown value"),
                             ('penalization = "wall"', "cfl = 2.0",
                              r"\[solvers.fluid\] cfl: must lie in \(0, 1.0\], got 2.0$"),
-                            ('penalization = "wall"', "ranks = 2", r"\[solvers.fluid\] ranks: must be 1, got 2$")):
+                            ('penalization = "wall"', 'slab_axis = "w"',
+                             r"\[solvers.fluid\] slab_axis: unknown value 'w'")):
         bad = copy_case(CASES / "small_fracture", tmp_path / new.split()[0], {**CHORIN, old: new})
         with pytest.raises(SceneError, match=match):
             load(bad)

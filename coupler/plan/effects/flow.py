@@ -183,6 +183,10 @@ def plan(scene, plan) -> None:
         quasi = (", transient: Chorin projection time steps over each step (implicit Euler) and an elastodynamic "
                  "solid" if dynamic else ", quasi-static: Chorin projection in pseudo-time to steady state and a "
                  "static solid per step" if elastic else ", Chorin projection in pseudo-time to steady state")
+        if solver.ranks > 1:
+            along = "the longest direction" if s["slab_axis"] == "longest" else s["slab_axis"]
+            plan.tasks.append(f"fluid: chorin on {solver.ranks} MPI ranks, the grid in slabs along {along} (one per "
+                              f"rank, ghost layers exchanged each step, the pressure Poisson solve distributed)")
         if dynamic:
             plan.notes.append("chorin: the solid velocity is applied per cell (the fluid follows rotating and "
                               "deforming solids)")
