@@ -4,11 +4,10 @@ solver: the coupler reads it to validate scenes (entry point ``varcouple.partici
 
 from coupler.protocol.penalization import PENALIZATION
 from coupler.protocol.settings import ParticipantSpec, Setting, Settings
+from coupler.protocol.slabs import MIN_CELLS, SLAB_AXES
 
 #: pressure Poisson solvers (:mod:`fluid_chorin.poisson`)
 POISSON_METHODS = ("auto", "direct", "gamg")
-#: directions to cut the grid along on several MPI ranks (:mod:`fluid_chorin.slabs`)
-SLAB_AXES = ("longest", "x", "y", "z")
 
 PARTICIPANT = ParticipantSpec(
     kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",),
@@ -30,5 +29,5 @@ PARTICIPANT = ParticipantSpec(
                 "GAMG beyond), direct (on several ranks MUMPS's Cholesky), gamg", default="auto",
                 choices=POISSON_METHODS),
         Setting("slab_axis", "string", "with ranks > 1: the direction the grid is cut in slabs along, one per MPI "
-                "rank (at least 2 cells each); longest: the direction of the most cells", default="longest",
+                f"rank (at least {MIN_CELLS} cells each); longest: the direction of the most cells", default="longest",
                 choices=SLAB_AXES)))

@@ -21,33 +21,24 @@ from __future__ import annotations
 
 import numpy as np
 
+from coupler.protocol.slabs import slab_bounds
 from transfer.grid import BOX_FACES
 
 from .staggered import AXIS, along
 
-#: the ``slab_axis`` setting's names of the directions
-DIRECTIONS = {"x": 0, "y": 1, "z": 2}
-
-
-def slab_direction(shape, setting: str) -> int:
-    """The direction to cut: ``"x"``, ``"y"``, ``"z"`` or ``"longest"`` (the first of the most cells)."""
-    if setting == "longest":
-        return int(np.argmax(shape))
-    return DIRECTIONS[setting]
-
 
 class Slabs:
-    def __init__(self, shape, faces: dict, comm=None, direction: int = 0):
+    """The slabs of a grid of ``shape`` with face conditions ``faces`` over the ranks of ``comm``,
+    cut along ``slab_axis`` (:data:`coupler.protocol.slabs.SLAB_AXES`)."""
+
+    def __init__(self, shape, faces: dict, comm=None, slab_axis: str = "longest"):
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
         self.rank = self.comm.Get_rank() if self.comm else 0
         self.size = self.comm.Get_size() if self.comm else 1
         self.shape = tuple(int(n) for n in shape)
-        self.d, self.axis = int(direction), AXIS[int(direction)]
+        self.d, self.bounds = slab_bounds(self.shape, self.size, slab_axis)
+        self.axis = AXIS[self.d]
         n = self.shape[self.d]
-        if n < 2 * self.size and self.size > 1:
-            raise ValueError(f"{self.size} ranks need at least 2 cells each along {'xyz'[self.d]} (slab_axis), "
-                             f"the grid has {n}")
-        self.bounds = [n * r // self.size for r in range(self.size + 1)]
         self.lo, self.hi = self.bounds[self.rank], self.bounds[self.rank + 1]
         self.below = self.rank - 1 if self.rank > 0 else None
         self.above = self.rank + 1 if self.rank < self.size - 1 else None

@@ -49,7 +49,7 @@ from coupler.protocol.wire import SolveReport
 from transfer.penalization import drag_fraction
 
 from .poisson import PoissonReport, PressurePoisson
-from .slabs import Slabs, slab_direction
+from .slabs import Slabs
 from .spec import ChorinSpec
 from .staggered import AXIS, Staggered, along, to_faces
 
@@ -85,7 +85,7 @@ class ChorinSolver:
 
     def __init__(self, spec: ChorinSpec, comm=None):
         self.spec = spec
-        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, slab_direction(spec.grid.shape, spec.slab_axis))
+        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis)
         #: this rank's part of the grid, ghosts included (the whole grid on one rank)
         self.grid = Staggered(self.slabs.local_shape, spec.grid.spacing, self.slabs.faces)
         self.state = State(self.grid.zeros(), np.zeros(self.grid.cells))

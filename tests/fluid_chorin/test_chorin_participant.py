@@ -107,8 +107,11 @@ def test_the_scene_selects_chorin_and_checks_its_keys(tmp_path):
                             ('penalization = "wall"', "cfl = 2.0",
                              r"\[solvers.fluid\] cfl: must lie in \(0, 1.0\], got 2.0$"),
                             ('penalization = "wall"', 'slab_axis = "w"',
-                             r"\[solvers.fluid\] slab_axis: unknown value 'w'")):
-        bad = copy_case(CASES / "small_fracture", tmp_path / new.split()[0], {**CHORIN, old: new})
+                             r"\[solvers.fluid\] slab_axis: unknown value 'w'"),
+                            ('penalization = "wall"', 'ranks = 6\nslab_axis = "z"',
+                             r"scene.toml: \[solvers.fluid\] ranks: 6 ranks need at least 2 cells each along z \(slab_axis "
+                             r"'z'\), the grid has 11 \(\[geometry.fluid\] shape\)$")):
+        bad = copy_case(CASES / "small_fracture", tmp_path / f"bad_{new.split()[0]}", {**CHORIN, old: new})
         with pytest.raises(SceneError, match=match):
             load(bad)
 
