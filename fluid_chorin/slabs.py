@@ -116,7 +116,12 @@ class Slabs:
     def sum(self, value: float) -> float:
         return self.comm.allreduce(value) if self.comm else value
 
-    def max(self, value: float) -> float:
+    def max(self, values: np.ndarray) -> np.ndarray:
+        """The largest of each entry over the ranks (one reduction)."""
+        if self.comm is None:
+            return values
         from mpi4py import MPI
 
-        return self.comm.allreduce(value, op=MPI.MAX) if self.comm else value
+        out = np.empty_like(values)
+        self.comm.Allreduce(np.ascontiguousarray(values), out, op=MPI.MAX)
+        return out

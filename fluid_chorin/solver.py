@@ -187,9 +187,9 @@ class ChorinSolver:
         g, nu = self.grid, self.spec.nu
         speed = np.zeros(3)
         for c in range(3):
-            speed[c] = self.slabs.max(max(
-                np.abs(state.q[c]).max(initial=0.0), np.abs(self.target[c]).max(initial=0.0),
-                *(abs(f["value"][c]) for f in self.spec.faces.values() if f["kind"] == "velocity")))
+            speed[c] = max(np.abs(state.q[c]).max(initial=0.0), np.abs(self.target[c]).max(initial=0.0),
+                           *(abs(f["value"][c]) for f in self.spec.faces.values() if f["kind"] == "velocity"))
+        speed = self.slabs.max(speed)
         active = np.asarray(g.active)
         inv_h2 = float(np.sum(1.0 / g.h[active] ** 2))
         bounds = [0.9 / (2.0 * nu * inv_h2)]
