@@ -82,3 +82,11 @@ def test_small_fracture_with_two_chorin_ranks_gives_the_one_rank_run(tmp_path):
             data = (a.cell_data[field][0], b.cell_data[field][0]) if field in a.cell_data else \
                 (a.point_data[field], b.point_data[field])
             assert_equal(*data)
+
+
+def test_the_ranks_benchmark_times_the_cavity_on_one_and_two_ranks():
+    """bench/fluids.py --ranks runs ``--cavity`` under mpirun: one JSON line from rank 0."""
+    rows = [run_mpi(ROOT / "bench" / "fluids.py", r, "--cavity", 8, 8, 1, 3, "direct") for r in (1, 2)]
+    assert [row["ranks"] for row in rows] == [1, 2] and [row["cells"] for row in rows] == [64, 64]
+    assert [row["poisson"] for row in rows] == ["Cholesky", "Cholesky (MUMPS)"]
+    assert all(row["seconds_per_step"] > 0 and 0 < row["poisson_share"] < 1 for row in rows)
