@@ -56,7 +56,7 @@ class PressurePoisson:
                  rtol: float = 1e-10, max_iterations: int = 500):
         from petsc4py import PETSc
 
-        self.grid, self.slabs, self.rtol = grid, slabs, rtol
+        self.slabs = slabs
         comm = PETSc.COMM_SELF if slabs.comm is None else PETSc.Comm(slabs.comm)
         n, N = slabs.count, int(np.prod(slabs.shape))
         self.size = N
