@@ -12,9 +12,17 @@ coupling iteration) and the Chorin participant (fluid_chorin, state in memory).
   against the cubic law (the scene's [check]) and the fluid's time (set-up and solve) per fluid
   (accuracy against cost).
 
+* ``ranks`` (with ``--ranks 1 2``): the Chorin fluid on MPI ranks by grid slabs: the lid-driven
+  cavity (Re 100; 64^2 and 128^2 cells, and a 3D cavity of 40^3) for a fixed number of
+  pseudo-time steps under ``mpirun -n R`` with each Poisson solver (time per step, the pressure
+  Poisson solves' share), and small_fracture coupled with ``[solvers.fluid] ranks = R`` (wall and
+  fluid time). The machine's load average is recorded before and after: MPI ranks that share
+  their cores with other jobs wait on each other, so timings under load are no speed-ups.
+
 Goal (PASS/MISS): coupled small_fracture at least 2x faster end to end with the Chorin fluid.
 
-    .venv/bin/python bench/fluids.py [--cases small_fracture ...] [--across 4 8 16 32] [--quick] [-o FILE]
+    .venv/bin/python bench/fluids.py [--cases small_fracture ...] [--across 4 8 16 32] [--ranks 1 2] [--quick]
+                                     [-o FILE]
 
 ``--quick`` (smoke test): small_fracture only, plates at 4 and 8 across; output
 bench/results/fluids_quick.json unless ``-o`` is given.
@@ -125,16 +133,101 @@ def plates_side_by_side(across) -> list[dict]:
     return rows
 
 
+#: the cavities of the ranks section: name -> (shape, pseudo-time steps timed)
+CAVITIES = {"64^2": ((64, 64, 1), 200), "128^2": ((128, 128, 1), 100), "40^3": ((40, 40, 40), 30)}
+
+
+def cavity_steps(shape, steps: int, poisson: str) -> dict:
+    """On the ranks of MPI.COMM_WORLD: ``steps`` pseudo-time steps of the lid-driven cavity at Re 100
+    from rest (one set-up step first, untimed); seconds per step and in the Poisson solves (rank 0's)."""
+    from mpi4py import MPI
+
+    from fluid_chorin.solver import ChorinSolver
+    from fluid_chorin.spec import ChorinSpec
+
+    comm = MPI.COMM_WORLD
+    n = max(shape)
+    closed = "wall" if shape[2] > 1 else "empty"
+    config = {"grid": {"origin": [0, 0, 0], "spacing": [1 / n] * 3, "shape": list(shape)}, "inlet": "wall",
+              "outlet": "wall", "walls": "wall", "rho": 1.0, "mu": 0.01, "poisson": poisson,
+              "boundaries": {"zmin": closed, "zmax": closed, "ymax": {"velocity": [1.0, 0.0, 0.0]}}}
+    solver = ChorinSolver(ChorinSpec.from_config(config), comm)
+    dt = solver.stable_dt(solver.state)
+    solver.state = solver.step(dt, solver.state, solver.state)[0]  # the Poisson set-up
+    poisson_seconds, solve = 0.0, solver.poisson(dt).solve
+
+    def timed(rhs):
+        nonlocal poisson_seconds
+        t = time.perf_counter()
+        out = solve(rhs)
+        poisson_seconds += time.perf_counter() - t
+        return out
+
+    solver.poisson(dt).solve = timed
+    comm.Barrier()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        new, _, report = solver.step(dt, solver.state, solver.state)
+        solver.state = new
+    comm.Barrier()
+    seconds = time.perf_counter() - t0
+    return {"ranks": comm.size, "cells": int(np.prod(shape)), "steps": steps, "poisson": report.method,
+            "poisson_iterations": report.iterations, "seconds_per_step": seconds / steps,
+            "poisson_share": poisson_seconds / seconds}
+
+
+def ranks_side_by_side(ranks) -> dict:
+    """The cavities under ``mpirun -n R`` and small_fracture with R chorin ranks, for each R."""
+    import subprocess
+
+    from coupler.protocol.mpi import mpi_environment
+
+    env = dict(mpi_environment(), OMP_NUM_THREADS="1")
+    out = {"load_average_before": os.getloadavg(), "cavity": [], "small_fracture": []}
+    for name, (shape, steps) in CAVITIES.items():
+        for poisson in ("direct", "gamg"):
+            for r in ranks:
+                cmd = [shutil.which("mpirun") or "mpirun", "-n", str(r), "--oversubscribe", sys.executable,
+                       __file__, "--cavity", *map(str, shape), str(steps), poisson]
+                proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+                if proc.returncode:
+                    raise SystemExit(f"the {name} cavity on {r} ranks failed: {proc.stderr[-2000:]}")
+                row = {"grid": name, **json.loads(proc.stdout.strip().splitlines()[-1])}
+                out["cavity"].append(row)
+                print(f"  cavity {name:6s} {row['poisson']:18s} {r} rank{'s' * (r > 1)}: "
+                      f"{1e3 * row['seconds_per_step']:8.2f} ms per step, Poisson {row['poisson_share']:.0%}")
+    for r in ranks:
+        run = run_case("small_fracture", "chorin", {'penalization = "wall"': f'penalization = "wall"\nranks = {r}'})
+        out["small_fracture"].append({"ranks": r, **run})
+        print(f"  small_fracture, chorin on {r} rank{'s' * (r > 1)}: {run['status']}, {run['wall_seconds']:.2f} s "
+              f"end to end, fluid {run['fluid_seconds']:.2f} s, iterations {run['iterations_per_step']}, "
+              f"max displacement {run['max_displacement'][-1]:.6e} m")
+    out["load_average_after"] = os.getloadavg()
+    print(f"  load average before {out['load_average_before'][0]:.2f}, after {out['load_average_after'][0]:.2f} "
+          f"({os.cpu_count()} cores: timings under load are no speed-ups)")
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
-    ap.add_argument("--across", nargs="+", type=int, default=[4, 8, 16, 32])
+    ap.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES, help="none: skip the coupled runs")
+    ap.add_argument("--across", nargs="*", type=int, default=[4, 8, 16, 32], help="none: skip the plates")
     ap.add_argument("--quick", action="store_true", help="small_fracture and plates at 4, 8 across only")
+    ap.add_argument("--ranks", nargs="+", type=int, help="also the Chorin fluid on these MPI rank counts")
+    ap.add_argument("--cavity", nargs=5, metavar=("NX", "NY", "NZ", "STEPS", "POISSON"),
+                    help="(run under mpirun by --ranks) time the cavity's steps, print JSON")
     ap.add_argument("-o", "--output", type=Path)
     args = ap.parse_args(argv)
+    if args.cavity:
+        *shape, steps, poisson = args.cavity
+        row = cavity_steps(tuple(int(n) for n in shape), int(steps), poisson)
+        if row["ranks"] == 1 or __import__("mpi4py.MPI").MPI.COMM_WORLD.rank == 0:
+            print(json.dumps(row))
+        return row
     if args.quick:
         args.cases, args.across = ["small_fracture"], [4, 8]
-    output = args.output or ROOT / "bench" / "results" / ("fluids_quick.json" if args.quick else "fluids.json")
+    output = args.output or ROOT / "bench" / "results" / ("fluids_quick.json" if args.quick else "fluids_ranks.json"
+                                                           if args.ranks and not args.cases else "fluids.json")
     os.environ.setdefault("VARCOUPLE_PICTURES", "0")  # time the solvers, not the renderings
     result = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(),
               "cpu_count": os.cpu_count(), "load_average_before": os.getloadavg(), "coupled": {}, "goals": {}}
@@ -159,12 +252,16 @@ def main(argv=None):
         speedup = result["coupled"]["small_fracture"]["chorin_against_openfoam"]["speedup_end_to_end"]
         result["goals"]["small_fracture_speedup"] = {"value": speedup, "goal": f">= {GOAL_SPEEDUP}",
                                                      "status": "PASS" if speedup >= GOAL_SPEEDUP else "MISS"}
-    print("\nimmersed plates (fluid alone, offset 0.3): error against the cubic law and seconds")
-    print(f"  {'across':>6s} {'cells':>6s} {'openfoam err':>13s} {'s':>6s} {'chorin err':>11s} {'s':>6s}")
+    if args.across:
+        print("\nimmersed plates (fluid alone, offset 0.3): error against the cubic law and seconds")
+        print(f"  {'across':>6s} {'cells':>6s} {'openfoam err':>13s} {'s':>6s} {'chorin err':>11s} {'s':>6s}")
     result["plates"] = plates_side_by_side(args.across)
     for row in result["plates"]:
         print(f"  {row['cells_across']:6d} {row['cells']:6d} {row['openfoam']['error']:+13.3%} "
               f"{row['openfoam']['seconds']:6.2f} {row['chorin']['error']:+11.3%} {row['chorin']['seconds']:6.2f}")
+    if args.ranks:
+        print("\nthe Chorin fluid on MPI ranks by grid slabs")
+        result["ranks"] = ranks_side_by_side(args.ranks)
     for name, g in result["goals"].items():
         print(f"goal {name}: {g['value']:.2f} ({g['goal']}) {g['status']}")
     result["load_average_after"] = os.getloadavg()

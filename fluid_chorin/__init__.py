@@ -4,6 +4,7 @@ correction) on a staggered grid, the rock immersed by volume penalization from e
 fractions, driven towards the solid's velocity cell by cell. State in memory.
 
 Modules: :mod:`.staggered` (the MAC grid, boundary conditions, operators), :mod:`.poisson`
-(the pressure equation, PETSc CG + GAMG), :mod:`.spec` (the configuration), :mod:`.solver`
-(time and pseudo-time stepping), :mod:`.participant` (``python -m fluid_chorin``).
+(the pressure equation, PETSc CG + GAMG), :mod:`.slabs` (the grid cut over MPI ranks),
+:mod:`.spec` (the configuration), :mod:`.solver` (time and pseudo-time stepping),
+:mod:`.participant` (``python -m fluid_chorin``).
 """

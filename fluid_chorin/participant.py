@@ -6,6 +6,10 @@ fluid; the flow rule fills them from the scene). Inputs of ``advance``: ``solid_
 (:mod:`fluid_chorin.solver`). Outputs: ``pressure`` (n_cells,) Pa and ``velocity``
 (n_cells, 3) m/s at the cell centres, x fastest.
 
+MPI: started on N ranks (``[solvers.fluid] ranks = N``), every rank receives the verbs and
+the whole input fields, steps its slab of the grid (:mod:`fluid_chorin.slabs`), and rank 0
+answers with the fields gathered from all.
+
 Steady (no ``transient``): each ``advance`` makes pseudo-time steps from the current state
 (a warm start) to the tolerance. Transient: from ``t`` over ``dt``. Both report the
 stepping and the pressure Poisson solves (``report_solve``).
@@ -43,9 +47,12 @@ class ChorinParticipant(Participant):
 
     def configure(self, config: dict) -> None:
         spec = ChorinSpec.from_config(config)
-        self.solver, self.saved = ChorinSolver(spec), {}
-        log.info("fluid_chorin: grid %s (%d cells), nu %g, drag %g 1/s, %s", spec.grid.shape, spec.grid.num_cells,
-                 spec.nu, self.solver.d_max, "transient" if spec.transient else "steady (pseudo-time)")
+        self.solver, self.saved = ChorinSolver(spec, self.comm), {}
+        slabs = self.solver.slabs
+        log.info("fluid_chorin: grid %s (%d cells), nu %g, drag %g 1/s, %s%s", spec.grid.shape, spec.grid.num_cells,
+                 spec.nu, self.solver.d_max, "transient" if spec.transient else "steady (pseudo-time)",
+                 f"; rank {self.rank} of {self.size}: cells {slabs.lo} to {slabs.hi - 1} along {'xyz'[slabs.d]}"
+                 if self.size > 1 else "")
 
     def geometry(self):
         if self.solver is None:
@@ -69,7 +76,7 @@ class ChorinParticipant(Participant):
                     raise ValueError(f"input {name!r} holds NaN/inf at index {int(np.argmin(np.isfinite(data)))}")
                 arrays[name] = data
         if arrays:
-            fraction = arrays.get("solid_fraction", solver.fraction.ravel())
+            fraction = arrays.get("solid_fraction", solver.solid_fraction)
             solver.set_solid(fraction, arrays.get("solid_velocity"))
         t0 = time.perf_counter()
         run = solver.transient(t, dt) if solver.spec.transient else solver.steady()
@@ -77,8 +84,10 @@ class ChorinParticipant(Participant):
                  iteration, run.report.solver, run.report.iterations, run.report.residual, len(run.poisson),
                  time.perf_counter() - t0)
         self.report(run)
-        return {"pressure": Field("pressure", solver.cell_pressure(), "Pa"),
-                "velocity": Field("velocity", solver.cell_velocity(), "m/s")}
+        pressure, velocity = solver.cell_pressure(), solver.cell_velocity()  # gathered on rank 0
+        if pressure is None:
+            return {}
+        return {"pressure": Field("pressure", pressure, "Pa"), "velocity": Field("velocity", velocity, "m/s")}
 
     def report(self, run: Run) -> None:
         """The stepping and, in one report, its pressure Poisson solves (the worst of them)."""

@@ -12,19 +12,22 @@ of zero-mean fields.
 
 Methods: ``"gamg"``, conjugate gradients preconditioned by PETSc's algebraic multigrid to a
 relative residual ``rtol``; ``"direct"``, PETSc's sparse Cholesky factorization (nested
-dissection ordering; one cell pinned when singular), cheaper per solve on small grids, where
-multigrid's fixed cost per cycle dominates; ``"auto"`` takes the direct one up to
-:data:`DIRECT_CELLS` cells. Either is set up once per matrix (a new ``dt`` or solid) and
-reused for every solve with it.
+dissection ordering; one cell pinned when singular; on several MPI ranks MUMPS's), cheaper per
+solve on small grids, where multigrid's fixed cost per cycle dominates; ``"auto"`` takes the
+direct one up to :data:`DIRECT_CELLS` cells. Either is set up once per matrix (a new ``dt`` or
+solid) and reused for every solve with it. On several ranks (:mod:`fluid_chorin.slabs`) the
+matrix and vectors are distributed by slabs, each rank holding the rows of its cells.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
+from .slabs import Slabs
 from .staggered import AXIS, Staggered, along
 
 #: ``"auto"`` factorizes up to this many cells and uses multigrid beyond
@@ -45,67 +48,96 @@ class PoissonReport:
 
 
 class PressurePoisson:
-    def __init__(self, grid: Staggered, beta: list[np.ndarray], method: str = "auto", rtol: float = 1e-10,
-                 max_iterations: int = 500):
+    """The pressure equation on the cells of ``slabs`` (:class:`fluid_chorin.slabs.Slabs`): each
+    rank assembles the rows of its own cells from its local ``grid`` and ``beta`` (ghosts
+    included) into one PETSc matrix over the ranks' communicator."""
+
+    def __init__(self, grid: Staggered, beta: list[np.ndarray], slabs: Slabs, method: str = "auto",
+                 rtol: float = 1e-10, max_iterations: int = 500):
         from petsc4py import PETSc
 
-        self.grid, self.rtol = grid, rtol
-        matrix = assemble(grid, beta)
-        n = matrix.shape[0]
-        self.singular = not grid.pressure_faces
-        self.method = ("direct" if n <= DIRECT_CELLS else "gamg") if method == "auto" else method
+        self.slabs = slabs
+        comm = PETSc.COMM_SELF if slabs.comm is None else PETSc.Comm(slabs.comm)
+        n, N = slabs.count, int(np.prod(slabs.shape))
+        self.size = N
+        local = assemble(grid, beta)
+        rows = np.arange(local.shape[0]).reshape(grid.cells)[slabs.owned()].ravel()
+        local = local[rows]
+        matrix = sp.csr_matrix((local.data, slabs.numbering.ravel()[local.indices], local.indptr), shape=(n, N))
+        self.singular = not any(f["kind"] == "pressure" for f in slabs.grid_faces.values())
+        self.method = ("direct" if N <= DIRECT_CELLS else "gamg") if method == "auto" else method
+        self.pinned = self.method == "direct" and self.singular and slabs.offset == 0
         if self.method == "direct" and self.singular:  # pin cell 0 (the solution is shifted to zero mean)
-            keep = sp.diags(np.r_[0.0, np.ones(n - 1)])
-            matrix = (keep @ matrix @ keep + sp.diags(np.r_[1.0, np.zeros(n - 1)])).tocsr()
+            first = np.ones(n)
+            first[0] = 1.0 - self.pinned
+            keep = np.ones(N)
+            keep[0] = 0.0
+            pin = sp.csr_matrix(([1.0] * self.pinned, ([0] * self.pinned, [0] * self.pinned)), shape=(n, N))
+            matrix = (sp.diags(first) @ matrix @ sp.diags(keep) + pin).tocsr()
+        if self.method == "direct" and slabs.size > 1 and not PETSc.Sys.hasExternalPackage("mumps"):
+            raise ValueError(f"poisson = 'direct' on {slabs.size} ranks needs PETSc with MUMPS, which this PETSc "
+                             f"lacks: use poisson = 'gamg'")
         matrix.sort_indices()
-        A = PETSc.Mat().createAIJ(size=(n, n), csr=(matrix.indptr.astype(PETSc.IntType),
-                                                    matrix.indices.astype(PETSc.IntType), matrix.data),
-                                  comm=PETSc.COMM_SELF)
+        A = PETSc.Mat().createAIJ(size=((n, N), (n, N)), csr=(matrix.indptr.astype(PETSc.IntType),
+                                                              matrix.indices.astype(PETSc.IntType), matrix.data),
+                                  comm=comm)
         A.assemble()
-        ksp = PETSc.KSP().create(comm=PETSc.COMM_SELF)
+        ksp = PETSc.KSP().create(comm=comm)
         ksp.setOperators(A)
         if self.method == "direct":
             ksp.setType("preonly")
             pc = ksp.getPC()
             pc.setType("cholesky")
-            pc.setFactorOrdering("nd")
+            if slabs.size > 1:
+                pc.setFactorSolverType("mumps")
+            else:
+                pc.setFactorOrdering("nd")
         else:
             if self.singular:
-                A.setNullSpace(PETSc.NullSpace().create(constant=True, comm=PETSc.COMM_SELF))
+                A.setNullSpace(PETSc.NullSpace().create(constant=True, comm=comm))
             ksp.setType("cg")
             ksp.getPC().setType("gamg")
             ksp.setTolerances(rtol=rtol, atol=1e-300, max_it=max_iterations)
             ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         ksp.setUp()
-        self.matrix, self.A, self.ksp = matrix, A, ksp
-        self.criterion = (DIRECT_TOLERANCE, "Cholesky") if self.method == "direct" else (rtol, "CG + GAMG")
+        self.A, self.ksp = A, ksp
+        self.criterion = ((DIRECT_TOLERANCE, "Cholesky" + " (MUMPS)" * (slabs.size > 1)) if self.method == "direct"
+                          else (rtol, "CG + GAMG"))
         self.x, self.b = A.createVecs()
+        self.r = self.b.duplicate()
+
+    def mean(self, values: np.ndarray) -> float:
+        return self.slabs.sum(float(values.sum())) / self.size
 
     def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, PoissonReport]:
+        """phi on the owned cells for the right-hand side ``rhs`` on them."""
         b = np.asarray(rhs, dtype=float).ravel()
         if self.singular:
-            b = b - b.mean()
-            if self.method == "direct":
+            b = b - self.mean(b)
+            if self.pinned:
                 b[0] = 0.0
-        norm = float(np.linalg.norm(b))
+        norm = math.sqrt(self.slabs.sum(float(np.dot(b, b))))
+        shape = rhs.shape
         if norm == 0.0:
-            return np.zeros(self.grid.cells), PoissonReport(0, 0.0, True, *self.criterion)
+            return np.zeros(shape), PoissonReport(0, 0.0, True, *self.criterion)
         self.b.array[:] = b
         self.x.set(0.0)
         self.ksp.solve(self.b, self.x)
         phi = self.x.array.copy()
         if self.singular:
-            phi -= phi.mean()
+            phi -= self.mean(phi)
         if self.method == "direct":
-            residual = float(np.linalg.norm(self.matrix @ self.x.array - b)) / norm
+            self.A.mult(self.x, self.r)
+            self.r.axpy(-1.0, self.b)
+            residual = self.r.norm() / norm
             report = PoissonReport(1, residual, residual < DIRECT_TOLERANCE, *self.criterion)
         else:
             report = PoissonReport(self.ksp.getIterationNumber(), self.ksp.getResidualNorm() / norm,
                                    self.ksp.getConvergedReason() > 0, *self.criterion)
-        return phi.reshape(self.grid.cells), report
+        return phi.reshape(shape), report
 
     def destroy(self) -> None:
-        for obj in (self.ksp, self.A, self.x, self.b):
+        for obj in (self.ksp, self.A, self.x, self.b, self.r):
             obj.destroy()
 
 

@@ -4,6 +4,7 @@ solver: the coupler reads it to validate scenes (entry point ``varcouple.partici
 
 from coupler.protocol.penalization import PENALIZATION
 from coupler.protocol.settings import ParticipantSpec, Setting, Settings
+from coupler.protocol.slabs import MIN_CELLS, SLAB_AXES
 
 #: pressure Poisson solvers (:mod:`fluid_chorin.poisson`)
 POISSON_METHODS = ("auto", "direct", "gamg")
@@ -13,9 +14,7 @@ PARTICIPANT = ParticipantSpec(
     memory=(120 * 2**20, 2000),
     description="incompressible flow on the structured grid by Chorin's projection on a staggered grid, in memory, "
                 "the solid immersed by volume penalization towards its velocity cell by cell",
-    settings=Settings(
-        Setting("ranks", "integer", "one process (no grid slabs over MPI ranks yet)", default=1, minimum=1,
-                maximum=1)) + PENALIZATION + Settings(
+    settings=PENALIZATION + Settings(
         Setting("max_iterations", "integer", "pseudo-time steps per coupling iteration at most", default=20000,
                 minimum=1),
         Setting("tolerance", "number", "the relative change of velocity and pressure in one pseudo-time step (with "
@@ -27,4 +26,8 @@ PARTICIPANT = ParticipantSpec(
         Setting("cfl", "number", "Courant number of the explicit convection", default=0.5, positive=True,
                 maximum=1.0),
         Setting("poisson", "string", "the pressure solver: auto (PETSc's sparse Cholesky up to 30000 cells, CG + "
-                "GAMG beyond), direct, gamg", default="auto", choices=POISSON_METHODS)))
+                "GAMG beyond), direct (on several ranks MUMPS's Cholesky), gamg", default="auto",
+                choices=POISSON_METHODS),
+        Setting("slab_axis", "string", "with ranks > 1: the direction the grid is cut in slabs along, one per MPI "
+                f"rank (at least {MIN_CELLS} cells each); longest: the direction of the most cells", default="longest",
+                choices=SLAB_AXES)))

@@ -30,6 +30,11 @@ below the tolerance. A transient coupling step (:meth:`ChorinSolver.transient`) 
 time steps within the explicit stability bound, each iterated on ``(u^k, p^k)`` (outer
 iterations, as PIMPLE) until the change is below the tolerance: implicit Euler in time, as
 the OpenFOAM fluid's pimpleFoam.
+
+On several MPI ranks (``comm``) each rank steps its slab of the grid (:mod:`fluid_chorin.slabs`):
+the predictor and correction on its local grid, the ghost layers exchanged after each
+correction, the Poisson equation solved on a distributed matrix, and the norms and step
+bounds reduced over the ranks; the fields are gathered on rank 0.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ from coupler.protocol.wire import SolveReport
 from transfer.penalization import drag_fraction
 
 from .poisson import PoissonReport, PressurePoisson
+from .slabs import Slabs
 from .spec import ChorinSpec
 from .staggered import AXIS, Staggered, along, to_faces
 
@@ -74,16 +80,14 @@ class Run:
         return self.report.converged
 
 
-def _relative(change, value) -> float:
-    scale = float(np.sqrt(sum(float(np.vdot(a, a)) for a in value)))
-    size = float(np.sqrt(sum(float(np.vdot(a, a)) for a in change)))
-    return size / scale if scale > 0 else (0.0 if size == 0 else math.inf)
-
-
 class ChorinSolver:
-    def __init__(self, spec: ChorinSpec):
+    """The projection on the grid of ``spec``, on the ranks of ``comm`` (None: one process)."""
+
+    def __init__(self, spec: ChorinSpec, comm=None):
         self.spec = spec
-        self.grid = Staggered(spec.grid.shape, spec.grid.spacing, spec.faces)
+        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis)
+        #: this rank's part of the grid, ghosts included (the whole grid on one rank)
+        self.grid = Staggered(self.slabs.local_shape, spec.grid.spacing, self.slabs.faces)
         self.state = State(self.grid.zeros(), np.zeros(self.grid.cells))
         self.d_max = spec.drag_value()
         #: (direction, side) of each fixed-pressure face -> its kinematic pressure
@@ -96,13 +100,16 @@ class ChorinSolver:
     # ------------------------------------------------------------------ the solid
     def set_solid(self, fraction, velocity=None) -> None:
         """Solid fraction per cell (x fastest, clipped to [0, 1]) and the solid's velocity per
-        cell ((n, 3) m/s, None: at rest): drag, target velocity and dilatation on the grid."""
-        g, spec = self.grid, self.spec
+        cell ((n, 3) m/s, None: at rest), both of the whole grid: drag, target velocity and
+        dilatation on this rank's grid."""
+        g, spec, cut = self.grid, self.spec, self.slabs.cells
         f = np.clip(np.asarray(fraction, dtype=float).reshape(-1), 0.0, 1.0)
         T = drag_fraction(f, spec.grid.shape, spec.grid.spacing, spec.nu, self.d_max, spec.penalization,
                           spec.penalization_exponent)
-        drag = (T * self.d_max).reshape(g.cells)
-        self.fraction = f.reshape(g.cells)
+        cells = spec.grid.shape[::-1]
+        drag = cut((T * self.d_max).reshape(cells))
+        self.solid_fraction = f
+        self.fraction = cut(f.reshape(cells))
         g.set_mask(1.0 - self.fraction)
         rate = self.viscous_rate() + (spec.substeps / spec.dt if spec.transient else 0.0)
         self.drag = [1.0 / to_faces(1.0 / (rate + drag), c) - rate for c in range(3)]
@@ -110,7 +117,7 @@ class ChorinSolver:
             self.target = g.zeros()
             self.source = np.zeros(g.cells)
         else:
-            v = np.asarray(velocity, dtype=float).reshape(*g.cells, 3)
+            v = cut(np.asarray(velocity, dtype=float).reshape(*cells, 3))
             weight = [to_faces(self.fraction, c) for c in range(3)]
             self.target = [np.divide(to_faces(self.fraction * v[..., c], c), weight[c],
                                      out=np.zeros(g.face_shape(c)), where=weight[c] > 0) for c in range(3)]
@@ -129,7 +136,7 @@ class ChorinSolver:
             if self._poisson is not None:
                 self._poisson.destroy()
             self.beta = [dt / (1.0 + dt * D) for D in self.drag]
-            self._poisson, self._poisson_dt = PressurePoisson(self.grid, self.beta, self.spec.poisson), dt
+            self._poisson, self._poisson_dt = PressurePoisson(self.grid, self.beta, self.slabs, self.spec.poisson), dt
         return self._poisson
 
     def step(self, dt: float, start: State, k: State) -> tuple[State, np.ndarray, PoissonReport]:
@@ -157,7 +164,10 @@ class ChorinSolver:
                     - dt * D[inner] * target[inner])
             star[d][last] = ((free + dt * D[last] * target[last]) / (1.0 + dt * D[last])
                              - beta[d][last] * g.boundary_gradient(d, side, k.p, value))
-        phi, report = poisson.solve(self.source - g.divergence(star))
+        owned = self.slabs.owned()
+        phi = np.zeros(g.cells)
+        phi[owned], report = poisson.solve((self.source - g.divergence(star))[owned])
+        self.slabs.exchange(phi)
         for c in range(3):
             inner = g.interior(c)
             star[c][inner] -= beta[c][inner] * g.gradient(c, phi)
@@ -165,6 +175,8 @@ class ChorinSolver:
             A = AXIS[d]
             plane = along(A, slice(-1, None) if side else slice(0, 1))
             star[d][plane] -= beta[d][plane] * g.boundary_gradient(d, side, phi, 0.0)
+        for c in range(3):
+            self.slabs.exchange(star[c], c)
         return State(star, k.p + phi, start.t + dt), phi, report
 
     def stable_dt(self, state: State, explicit: bool = True) -> float:
@@ -177,6 +189,7 @@ class ChorinSolver:
         for c in range(3):
             speed[c] = max(np.abs(state.q[c]).max(initial=0.0), np.abs(self.target[c]).max(initial=0.0),
                            *(abs(f["value"][c]) for f in self.spec.faces.values() if f["kind"] == "velocity"))
+        speed = self.slabs.max(speed)
         active = np.asarray(g.active)
         inv_h2 = float(np.sum(1.0 / g.h[active] ** 2))
         bounds = [0.9 / (2.0 * nu * inv_h2)]
@@ -199,8 +212,8 @@ class ChorinSolver:
         for it in range(1, spec.max_iterations + 1):
             new, phi, report = self.step(dt, self.state, self.state)
             reports.append(report)
-            residual = max(_relative([a - b for a, b in zip(new.q, self.state.q)], new.q),
-                           _relative([phi], [new.p]))
+            residual = max(self.relative([a - b for a, b in zip(new.q, self.state.q)], new.q),
+                           self.relative([phi], [new.p], cells=True))
             if not np.isfinite(residual):
                 raise FloatingPointError(f"the pseudo-time stepping diverged at step {it} (dt {dt:.3g} s)")
             self.state = State(new.q, new.p, self.state.t)
@@ -230,7 +243,7 @@ class ChorinSolver:
             for outer in range(1, spec.outer_correctors + 1):
                 new, _, report = self.step(h, start, k)
                 reports.append(report)
-                residual = _relative([a - b for a, b in zip(new.q, k.q)], new.q)
+                residual = self.relative([a - b for a, b in zip(new.q, k.q)], new.q)
                 k = new
                 if outer > 1 and residual < spec.tolerance or residual == 0.0:
                     break
@@ -246,16 +259,26 @@ class ChorinSolver:
                                                                  f"{spec.outer_correctors} outer iterations reached")),
                    reports)
 
-    # ------------------------------------------------------------------ fields
-    def cell_velocity(self) -> np.ndarray:
-        """(n, 3) m/s at the cell centres (mean of the two faces), x fastest."""
-        q = self.state.q
-        out = np.empty((int(np.prod(self.grid.cells)), 3))
-        for c in range(3):
-            A = AXIS[c]
-            out[:, c] = (0.5 * (q[c][along(A, slice(None, -1))] + q[c][along(A, slice(1, None))])).ravel()
-        return out
+    def relative(self, change: list, value: list, cells: bool = False) -> float:
+        """The norm of ``change`` relative to that of ``value`` over the owned values of every
+        rank: lists of the three face components, or (``cells``) of cell arrays."""
+        def norm(arrays):
+            where = [self.slabs.owned(None if cells else c) for c in range(len(arrays))]
+            return float(np.sqrt(self.slabs.sum(sum(float(np.vdot(a[o], a[o])) for a, o in zip(arrays, where)))))
 
-    def cell_pressure(self) -> np.ndarray:
-        """(n,) Pa."""
-        return self.state.p.ravel() * self.spec.rho
+        scale, size = norm(value), norm(change)
+        return size / scale if scale > 0 else (0.0 if size == 0 else math.inf)
+
+    # ------------------------------------------------------------------ fields
+    def cell_velocity(self) -> np.ndarray | None:
+        """(n, 3) m/s at the cell centres (mean of the two faces), x fastest; on rank 0 (None on
+        the others: every rank must call it)."""
+        q = self.state.q
+        parts = [self.slabs.gather(0.5 * (q[c][along(AXIS[c], slice(None, -1))] + q[c][along(AXIS[c], slice(1, None))]))
+                 for c in range(3)]
+        return None if parts[0] is None else np.stack([a.ravel() for a in parts], axis=1)
+
+    def cell_pressure(self) -> np.ndarray | None:
+        """(n,) Pa on rank 0 (None on the others: every rank must call it)."""
+        p = self.slabs.gather(self.state.p)
+        return None if p is None else p.ravel() * self.spec.rho

@@ -42,6 +42,7 @@ class ChorinSpec:
     substeps: int
     outer_correctors: int
     poisson: str
+    slab_axis: str
 
     @property
     def nu(self) -> float:
@@ -66,7 +67,6 @@ class ChorinSpec:
         grid = StructuredGrid(g.get("origin"), g.get("spacing"), g.get("shape"))
         faces = face_conditions(config)
         settings = PARTICIPANT.configuration(config)
-        del settings["ranks"]  # one process: nothing of the solver depends on it
         spec = cls(grid, faces, rho=float(config.get("rho", 1000.0)), mu=float(config.get("mu", 1.0e-3)),
                    transient=bool(config.get("transient", False)), dt=float(config.get("dt", 1.0)), **settings)
         spec.check()

@@ -20,6 +20,9 @@ Boundary conditions (:mod:`coupler.protocol.fluid_faces`), per grid face:
 * the pressure: a ``pressure`` face holds its value half a cell outside the last cell
   centre (Dirichlet); every other face is closed (zero normal flux, Neumann).
 
+A side of a rank's slab (:mod:`fluid_chorin.slabs`) has the kind ``neighbour``: no condition,
+its normal faces and its ghost layer hold the neighbour rank's values.
+
 Operators (second order, central): the Laplacian of each component, the convection
 ``div(u_d u_c)`` in divergence form (Harlow & Welch 1965), the pressure gradient on the
 faces and the divergence in the cells.

@@ -24,8 +24,9 @@ PARTICIPANT_MAY_IMPORT = ("coupler.errors", "coupler.protocol")
 #: the participants' packages (the stand-ins are a module of the coupler)
 PARTICIPANT_PACKAGES = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin")
 #: a participant's settings module (its declaration, read by the coupler) imports only these
-#: (the declarations and the penalization keys every grid fluid shares)
-SETTINGS_MAY_IMPORT = {"coupler.errors", "coupler.protocol.settings", "coupler.protocol.penalization"}
+#: (the declarations, the penalization keys every grid fluid shares, the slab cut of a grid on MPI ranks)
+SETTINGS_MAY_IMPORT = {"coupler.errors", "coupler.protocol.settings", "coupler.protocol.penalization",
+                       "coupler.protocol.slabs"}
 
 
 def modules() -> dict[str, ast.Module]:
@@ -141,6 +142,7 @@ def test_a_settings_module_imports_only_the_protocol_settings():
     assert not wrong, "\n".join(sorted(wrong))
     assert g["coupler.protocol.settings"] <= {"coupler.errors"}
     assert g["coupler.protocol.penalization"] <= {"coupler.protocol.settings", "transfer.penalization"}
+    assert not g["coupler.protocol.slabs"]
 
 
 def test_the_scanner_sees_a_participant_import_other_than_settings():

@@ -97,11 +97,21 @@ def test_the_scene_selects_chorin_and_checks_its_keys(tmp_path):
     assert fluid.config["cfl"] == 0.4 and fluid.config["tolerance"] == 1e-7 and fluid.config["poisson"] == "auto"
     assert fluid.config["inlet"] == {"velocity": [0.01, 0.0, 0.0]} and fluid.config["transient"] is False
     assert "Chorin projection in pseudo-time" in plan.iteration
+    assert fluid.ranks == 1 and fluid.config["slab_axis"] == "longest" and not plan.tasks
+    parallel = copy_case(CASES / "small_fracture", tmp_path / "ranks", {**CHORIN, 'penalization = "wall"':
+                                                                         'penalization = "wall"\nranks = 3'})
+    plan = make_plan(load(parallel))
+    assert plan.participant("fluid").ranks == 3  # started by mpirun -n 3
+    assert "fluid: chorin on 3 MPI ranks, the grid in slabs along the longest direction" in plan.tasks[0]
     for old, new, match in (('penalization = "wall"', 'poisson = "lu"', r"\[solvers.fluid\] poisson: unknown value"),
                             ('penalization = "wall"', "cfl = 2.0",
                              r"\[solvers.fluid\] cfl: must lie in \(0, 1.0\], got 2.0$"),
-                            ('penalization = "wall"', "ranks = 2", r"\[solvers.fluid\] ranks: must be 1, got 2$")):
-        bad = copy_case(CASES / "small_fracture", tmp_path / new.split()[0], {**CHORIN, old: new})
+                            ('penalization = "wall"', 'slab_axis = "w"',
+                             r"\[solvers.fluid\] slab_axis: unknown value 'w'"),
+                            ('penalization = "wall"', 'ranks = 6\nslab_axis = "z"',
+                             r"scene.toml: \[solvers.fluid\] ranks: 6 ranks need at least 2 cells each along z \(slab_axis "
+                             r"'z'\), the grid has 11 \(\[geometry.fluid\] shape\)$")):
+        bad = copy_case(CASES / "small_fracture", tmp_path / f"bad_{new.split()[0]}", {**CHORIN, old: new})
         with pytest.raises(SceneError, match=match):
             load(bad)
 

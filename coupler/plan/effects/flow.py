@@ -22,6 +22,7 @@ binary mask the exact fractions replace).
 import math
 
 from coupler.errors import SceneError
+from coupler.protocol.slabs import slab_bounds
 from coupler.scene.tables import Table
 from transfer.grid import BOX_FACES
 
@@ -63,12 +64,23 @@ def parse(scene, data: dict) -> None:
         if name not in scene.solid.boundaries:
             raise SceneError(f"{path}: [coupling] interface: unknown boundary {name!r}; named boundaries: "
                              f"{', '.join(scene.solid.boundaries)}")
+    _check_slabs(scene)
     if "flow" in data:
         scene.effect_settings[NAME] = _boundary_conditions(path, data["flow"], scene.fluid)
     elif NAME in scene.solvers["fluid"].spec.needs:
         raise SceneError(f"{path}: [flow] inlet_velocity: missing: the {scene.solvers['fluid'].kind} fluid needs a "
                          f"[flow] table with "
                          f"inlet_velocity = [u, v, w] or inlet_pressure = p (Pa)")
+
+
+def _check_slabs(scene) -> None:
+    """A fluid cut into slabs over its ranks (``slab_axis``) has enough cells for each."""
+    solver = scene.solvers["fluid"]
+    if "slab_axis" in solver.settings and solver.ranks > 1:
+        try:
+            slab_bounds(scene.fluid.shape, solver.ranks, solver.settings["slab_axis"])
+        except ValueError as exc:
+            raise SceneError(f"{scene.path}: [solvers.fluid] ranks: {exc} ([geometry.fluid] shape)") from None
 
 
 def _boundary_conditions(path, data, fluid) -> dict:
@@ -183,6 +195,10 @@ def plan(scene, plan) -> None:
         quasi = (", transient: Chorin projection time steps over each step (implicit Euler) and an elastodynamic "
                  "solid" if dynamic else ", quasi-static: Chorin projection in pseudo-time to steady state and a "
                  "static solid per step" if elastic else ", Chorin projection in pseudo-time to steady state")
+        if solver.ranks > 1:
+            along = "the longest direction" if s["slab_axis"] == "longest" else s["slab_axis"]
+            plan.tasks.append(f"fluid: chorin on {solver.ranks} MPI ranks, the grid in slabs along {along} (one per "
+                              f"rank, ghost layers exchanged each step, the pressure Poisson solve distributed)")
         if dynamic:
             plan.notes.append("chorin: the solid velocity is applied per cell (the fluid follows rotating and "
                               "deforming solids)")

@@ -1,0 +1,84 @@
+"""Flows of the Chorin fluid solved on the ranks of MPI.COMM_WORLD (tests/fluid_chorin/test_chorin_mpi.py):
+``mpirun -n N python tests/fluid_chorin/mpi_chorin_cases.py CASE POISSON SLAB_AXIS OUT.npz`` writes
+rank 0's gathered pressure and velocity to OUT.npz and prints the run's figures as JSON.
+:func:`solve` with ``comm=None`` is the serial reference."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+
+from fluid_chorin.solver import ChorinSolver
+from fluid_chorin.spec import ChorinSpec
+
+
+def cavity(n: int = 16, re: float = 100.0) -> tuple[dict, tuple]:
+    """The lid-driven unit cavity (closed: a singular Poisson matrix), steady."""
+    return ({"grid": {"origin": [0, 0, 0], "spacing": [1 / n] * 3, "shape": [n, n, 1]}, "inlet": "wall",
+             "outlet": "wall", "walls": "wall", "rho": 1.0, "mu": 1.0 / re, "tolerance": 1e-6,
+             "boundaries": {"zmin": "empty", "zmax": "empty", "ymax": {"velocity": [1.0, 0.0, 0.0]}}}, ())
+
+
+def plates() -> tuple[dict, tuple]:
+    """The immersed plates of cases/parallel_plates (8 cells across, 'wall' penalization: the drag
+    of a cell from its neighbours' fractions), pressure driven."""
+    from transfer import FunctionSpace, StructuredGrid, Transfer
+    from transfer.generators import GENERATORS, parameters
+
+    p = parameters("plates", {"aperture": 1e-3, "length": 2e-3, "cells_across": 8, "offset": 0.3})
+    grid = GENERATORS["plates"].grid(p)
+    G = StructuredGrid(grid["origin"], grid["spacing"], grid["shape"])
+    mesh = GENERATORS["plates"].mesh(p).mesh
+    volumes = Transfer.assemble(FunctionSpace(mesh, "P0"), FunctionSpace(G, "Q0"), "l2").D
+    return ({"grid": grid, "inlet": {"pressure": 1e-2}, "outlet": {"pressure": 0.0}, "rho": 1000.0, "mu": 1e-3,
+             "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-9},
+            (np.asarray(volumes.diagonal()) / G.cell_measures(),))
+
+
+def box(n: int = 12) -> tuple[dict, tuple]:
+    """A 3D box n x (n-2) x (n+2) with an inlet velocity on xmin, a pressure outlet on xmax, a
+    block in its lower half that moves up and turns (per-cell solid velocity), transient."""
+    shape = [n, n - 2, n + 2]
+    h = 1.0 / n
+    cells = np.stack(np.meshgrid(*[(np.arange(s) + 0.5) * h for s in shape], indexing="ij"), -1)
+    cells = cells.transpose(2, 1, 0, 3).reshape(-1, 3)  # x fastest
+    inside = (np.abs(cells[:, 0] - 0.5) < 0.2) & (cells[:, 2] < 0.45)
+    fraction = np.where(inside, 1.0, 0.0)
+    velocity = np.zeros_like(cells)
+    velocity[inside, 0] = -0.2 * (cells[inside, 1] - 0.4)
+    velocity[inside, 1] = 0.2 * (cells[inside, 0] - 0.5)
+    velocity[inside, 2] = 0.05
+    return ({"grid": {"origin": [0, 0, 0], "spacing": [h] * 3, "shape": shape}, "inlet": {"velocity": [0.1, 0, 0]},
+             "outlet": {"pressure": 0.0}, "walls": "wall", "rho": 1.0, "mu": 0.01, "transient": True, "dt": 0.05,
+             "substeps": 4, "tolerance": 1e-10}, (fraction, velocity))
+
+
+CASES = {"cavity": cavity, "plates": plates, "box": box}
+
+
+def solve(case: str, poisson: str, slab_axis: str, comm=None) -> tuple[ChorinSolver, object]:
+    config, solid = CASES[case]()
+    solver = ChorinSolver(ChorinSpec.from_config({**config, "poisson": poisson, "slab_axis": slab_axis}), comm)
+    if solid:
+        solver.set_solid(*solid)
+    run = solver.transient(0.0, config["dt"]) if config.get("transient") else solver.steady()
+    return solver, run
+
+
+def main(case: str, poisson: str, slab_axis: str, out: str) -> None:
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    solver, run = solve(case, poisson, slab_axis, comm)
+    pressure, velocity = solver.cell_pressure(), solver.cell_velocity()
+    if comm.rank == 0:
+        np.savez(out, pressure=pressure, velocity=velocity)
+        print(json.dumps({"ranks": comm.size, "converged": run.converged, "iterations": run.report.iterations,
+                          "poisson": run.poisson[-1].method, "poisson_converged": all(p.converged for p in run.poisson),
+                          "slabs": solver.slabs.bounds, "direction": solver.slabs.d}))
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
