@@ -13,15 +13,18 @@ argument; names or CIDR networks, as Open MPI's ``*_if_include``): the TCP BTL c
 those only, and the wire-up uses them. Both: messaging layer ob1 (the BTLs above; also the
 quicker start-up, see :meth:`fluid_openfoam.parallel.Decomposition.mpi_command`).
 
-What still listens: mpirun itself binds its out-of-band (ORTE) listener to the wildcard
-address, IPv4 and IPv6, whatever ``oob_tcp_if_include`` says (Open MPI 4.1,
-``orte/mca/oob/tcp/oob_tcp_listener.c``: ``INADDR_ANY``); only what it advertises and connects
-to is restricted. tests/test_mpi_loopback.py keeps that as an expected failure.
+mpirun itself binds its out-of-band (ORTE) listener to the wildcard address, IPv4 and IPv6,
+whatever ``oob_tcp_if_include`` says (Open MPI 4.1, ``orte/mca/oob/tcp/oob_tcp_listener.c``:
+``INADDR_ANY``); on one host the settings preload a small library (``LD_PRELOAD``:
+``_loopback/loopback_bind.c``, built with the kernels) that binds such sockets to loopback, in
+mpirun and whatever else is started with them.
+tests/coupler/test_mpi_loopback.py reads every listening socket of the processes a run starts.
 """
 
 from __future__ import annotations
 
 import os
+from importlib import resources
 from typing import Mapping
 
 INTERFACES_VAR = "VARCOUPLE_MPI_INTERFACES"
@@ -47,9 +50,19 @@ def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] 
                     "OMPI_MCA_oob_tcp_if_include": names})
     else:
         defaults.update(btl="self,vader", oob_tcp_if_include="lo")
+        library = loopback_library()
+        preloaded = out.get("LD_PRELOAD", "").split()
+        if library is not None and library not in preloaded:
+            out["LD_PRELOAD"] = " ".join([library, *preloaded])
     for key, value in defaults.items():
         out.setdefault(f"OMPI_MCA_{key}", value)
     # Open MPI refuses to start as root without these (containers, CI).
     out.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
     out.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     return out
+
+
+def loopback_library() -> str | None:
+    """The installed library that binds wildcard listeners to loopback (None if not built)."""
+    path = resources.files("coupler.protocol").joinpath("libloopback_bind.so")
+    return str(path) if path.is_file() else None

@@ -22,7 +22,7 @@ import pytest
 
 from coupler.run.launch import Launcher, descendants
 from coupler.run.client import CouplerSession
-from coupler.protocol.mpi import INTERFACES_VAR, mpi_environment
+from coupler.protocol.mpi import INTERFACES_VAR, loopback_library, mpi_environment
 from fluid_openfoam.case import CaseSpec
 from fluid_openfoam.parallel import Decomposition
 from fluid_openfoam.solver import OpenFOAMSolver
@@ -87,8 +87,8 @@ def wait_for(path: Path, proc, seconds: float = 60) -> None:
 
 @needs_mpirun
 def test_participant_ranks_listen_on_no_network(tmp_path):
-    """A 2-rank participant started by the Launcher: its ranks (and any orted) listen nowhere
-    but on loopback (Open MPI's TCP BTL used to listen on 0.0.0.0:1024 and [::]:1024)."""
+    """A 2-rank participant started by the Launcher: mpirun, its ranks (and any orted) listen
+    nowhere but on loopback (Open MPI's TCP BTL used to listen on 0.0.0.0:1024 and [::]:1024)."""
     coupler = CouplerSession(f"test-{uuid.uuid4().hex[:12]}")
     with coupler, Launcher(coupler.run_id, tmp_path, coupler.endpoints) as launcher:
         proc = launcher.start("solid", "coupler.standins", ranks=2, extra_args=["--kind", "echo"])
@@ -97,7 +97,7 @@ def test_participant_ranks_listen_on_no_network(tmp_path):
         assert client.announce()["ranks"] == 2
         below = descendants(proc.pid)
         assert len([p for p in below if comm(p).startswith("python")]) == 2
-        found = listeners(below)
+        found = listeners([proc.pid, *below])
         assert not exposed(found), {f"{comm(p)}[{p}]": s for p, s in exposed(found).items()}
 
 
@@ -163,9 +163,9 @@ def test_mpirun_wires_up_over_loopback(tmp_path):
 
 
 @needs_mpirun
-@pytest.mark.xfail(strict=True, reason="Open MPI 4.1's mpirun binds its out-of-band listener to the wildcard "
-                                       "address whatever oob_tcp_if_include says (coupler/mpi_env.py)")
 def test_mpirun_itself_listens_on_loopback_only(tmp_path):
+    """Open MPI 4.1's mpirun binds its out-of-band listener to the wildcard address whatever
+    oob_tcp_if_include says: the preloaded library binds it to loopback (without it this fails)."""
     proc = subprocess.Popen(["mpirun", "-n", "1", sys.executable, "-c",
                              "import time; print('ready', flush=True); time.sleep(30)"],
                             stdout=subprocess.PIPE, text=True, env=mpi_environment(env=os.environ), cwd=tmp_path)
@@ -189,6 +189,9 @@ def test_named_interfaces_for_several_hosts():
     single = mpi_environment(env={})
     assert single["OMPI_MCA_btl"] == "self,vader" and single["OMPI_MCA_oob_tcp_if_include"] == "lo"
     assert "OMPI_MCA_btl_tcp_if_include" not in single
+    assert single["LD_PRELOAD"].split()[0] == loopback_library()  # mpirun's listener on loopback
+    assert "LD_PRELOAD" not in env  # several hosts: mpirun must listen on the named interfaces
+    assert mpi_environment(env={"LD_PRELOAD": "other.so"})["LD_PRELOAD"].split() == [loopback_library(), "other.so"]
     assert mpi_environment(env={"OMPI_MCA_btl": "self,tcp"})["OMPI_MCA_btl"] == "self,tcp"
     assert mpi_environment(["eth0"], env=single)["OMPI_MCA_oob_tcp_if_include"] == "eth0"
     with pytest.raises(ValueError):
