@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,6 +55,7 @@ from .spec import ChorinSpec
 from .staggered import AXIS, Staggered, along, to_faces
 
 log = logging.getLogger("varcouple.fluid_chorin")
+PROGRESS_SECONDS = 10.0  # between progress lines of a long steady solve
 
 
 @dataclass
@@ -209,6 +211,7 @@ class ChorinSolver:
         dt = self.stable_dt(self.state)
         residual, reports = math.inf, []
         it = 0
+        shown = time.monotonic()
         for it in range(1, spec.max_iterations + 1):
             new, phi, report = self.step(dt, self.state, self.state)
             reports.append(report)
@@ -219,6 +222,10 @@ class ChorinSolver:
             self.state = State(new.q, new.p, self.state.t)
             if residual < spec.tolerance:
                 break
+            if time.monotonic() - shown > PROGRESS_SECONDS:  # a long solve shows it is moving
+                shown = time.monotonic()
+                log.info("pseudo-time step %d of at most %d: residual %.3g (tolerance %g), dt %.3g s",
+                         it, spec.max_iterations, residual, spec.tolerance, dt)
             bound = self.stable_dt(self.state)
             if bound < dt:
                 dt = 0.9 * bound

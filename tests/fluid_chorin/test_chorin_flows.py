@@ -175,3 +175,16 @@ def test_a_rotating_immersed_cylinder_drags_the_fluid_with_its_wall():
 def test_a_cylinder_at_rest_leaves_the_fluid_at_rest():
     _, _, _, _, U = couette(16, 0.0)
     assert np.abs(U).max() == 0.0
+
+
+def test_a_long_steady_solve_logs_its_progress(monkeypatch, caplog):
+    """A steady solve longer than PROGRESS_SECONDS says where it is (step, residual, dt) in the
+    participant's log; the last line's residual is above the tolerance (it was not done yet)."""
+    import fluid_chorin.solver
+
+    monkeypatch.setattr(fluid_chorin.solver, "PROGRESS_SECONDS", 0.0)
+    with caplog.at_level("INFO", logger="varcouple.fluid_chorin"):
+        cavity(8, 100)
+    lines = [r.getMessage() for r in caplog.records if "pseudo-time step" in r.getMessage()]
+    assert len(lines) > 10 and "of at most 20000: residual" in lines[-1] and "tolerance 1e-06" in lines[-1]
+    assert float(lines[-1].split("residual ")[1].split()[0]) >= 1e-6
