@@ -45,7 +45,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from coupler.protocol.fluid_faces import closed_faces, dropped_velocity
 from coupler.protocol.wire import SolveReport
+from transfer.bodies import rigid_bodies, rigid_velocity
 from transfer.penalization import drag_fraction
 
 from .poisson import PoissonReport, PressurePoisson
@@ -95,15 +97,26 @@ class ChorinSolver:
                                 for d, side in self.grid.pressure_faces}
         self._poisson: PressurePoisson | None = None
         self._poisson_dt = None
+        self.warned_faces: set[str] = set()
         self.set_solid(np.zeros(spec.grid.num_cells), None)
 
     # ------------------------------------------------------------------ the solid
     def set_solid(self, fraction, velocity=None) -> None:
         """Solid fraction per cell (x fastest, clipped to [0, 1]) and the solid's velocity per
         cell ((n, 3) m/s, None: at rest), both of the whole grid: drag, target velocity and
-        dilatation on this rank's grid."""
+        dilatation on this rank's grid. The velocity as ``solid_velocity`` says: per cell, each
+        body's rigid velocity (:func:`transfer.bodies.rigid_bodies`), or none."""
         g, spec, cut = self.grid, self.spec, self.slabs.cells
         f = np.clip(np.asarray(fraction, dtype=float).reshape(-1), 0.0, 1.0)
+        if velocity is not None and spec.solid_velocity == "none":
+            velocity = None
+        if velocity is not None and spec.solid_velocity == "bodies":
+            bodies = rigid_bodies(f, velocity, spec.grid.shape, closed_faces(spec.faces))
+            for face, value in ((face, value) for b in bodies for face, value in b.dropped.items()):
+                if face not in self.warned_faces and self.slabs.rank == 0:
+                    log.warning("%s", dropped_velocity(face, value))
+                self.warned_faces.add(face)
+            velocity = rigid_velocity(bodies, f.size)
         T = drag_fraction(f, spec.grid.shape, spec.grid.spacing, spec.nu, self.d_max, spec.penalization,
                           spec.penalization_exponent)
         cells = spec.grid.shape[::-1]
