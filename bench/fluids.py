@@ -4,9 +4,11 @@ coupling iteration) and the Chorin participant (fluid_chorin, state in memory).
 * ``coupled``: each case (default small_fracture, added_mass_heavy, added_mass_light) run
   through ``varcouple run`` once per fluid (the one ``participant`` line swapped): wall time,
   fluid time and its share, coupling iterations, wall time per coupling iteration, the maximum
-  displacement per step, the pressure drop (small_fracture: mean pressure of the fluid-centred
-  cells of the inlet column minus the outlet column), and the Chorin run's differences to the
-  OpenFOAM run;
+  displacement per step, the pressure drop per step (mean pressure of the fluid-centred cells of
+  the inlet column minus the outlet column), and the Chorin run's differences to the OpenFOAM
+  run; the transient cases also with the Chorin fluid in the OpenFOAM fluid's rigid-body model
+  (``chorin_bodies``: ``solid_velocity = "bodies"``), the same discrete problem, so that the
+  per-cell run's difference is the model's;
 * ``plates``: the fluid alone on the immersed plates of cases/parallel_plates (4 to 32 cells
   across the aperture, offset 0.3 of a cell), run once per fluid as well: error of the flow rate
   against the cubic law (the scene's [check]) and the fluid's time (set-up and solve) per fluid
@@ -46,6 +48,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 FLUIDS = ("openfoam", "chorin")
+#: the Chorin fluid in the OpenFOAM fluid's rigid-body model (scenes with dynamics)
+BODIES = {"substeps = 1": 'substeps = 1\nsolid_velocity = "bodies"'}
 CASES = ("small_fracture", "added_mass_heavy", "added_mass_light")
 GOAL_SPEEDUP = 2.0
 
@@ -99,18 +103,22 @@ def run_case(case: str, fluid: str, replace: dict | None = None) -> dict:
                 "fluid_seconds_per_coupling_iteration": fluid_seconds / iterations if iterations else None,
                 "max_displacement": [s.get("max_displacement") for s in steps],
                 "pressure_drop": pressure_drop(out, len(steps) - 1) if steps else None,
+                "pressure_drop_per_step": [pressure_drop(out, k) for k in range(len(steps))],
                 "fluid_setup_seconds": phases.get("fluid setup", 0.0), "check": summary.get("check"),
                 "fluid_cells": summary.get("sizes", {}).get("fluid", {}).get("cells"),
                 "fluid_solves": steps[-1]["solves"].get("fluid", []) if steps else []}
 
 
-def compare(runs: dict) -> dict:
-    """The Chorin run against the OpenFOAM run: relative differences and the speed-up."""
-    of, ch = runs["openfoam"], runs["chorin"]
+def compare(runs: dict, chorin: str = "chorin") -> dict:
+    """The Chorin run (``chorin``: its key in ``runs``) against the OpenFOAM run: relative
+    differences and the speed-up."""
+    of, ch = runs["openfoam"], runs[chorin]
     out = {"speedup_end_to_end": of["wall_seconds"] / ch["wall_seconds"],
            "fluid_speedup": of["fluid_seconds"] / ch["fluid_seconds"] if ch["fluid_seconds"] else None,
            "max_displacement_difference": [b / a - 1 if a and b else None
-                                           for a, b in zip(of["max_displacement"], ch["max_displacement"])]}
+                                           for a, b in zip(of["max_displacement"], ch["max_displacement"])],
+           "pressure_drop_difference_per_step": [b / a - 1 if a and b else None for a, b in
+                                                 zip(of["pressure_drop_per_step"], ch["pressure_drop_per_step"])]}
     if of["pressure_drop"] and ch["pressure_drop"]:
         out["pressure_drop_difference"] = ch["pressure_drop"] / of["pressure_drop"] - 1
     return out
@@ -233,21 +241,27 @@ def main(argv=None):
               "cpu_count": os.cpu_count(), "load_average_before": os.getloadavg(), "coupled": {}, "goals": {}}
     for case in args.cases:
         runs = {fluid: run_case(case, fluid) for fluid in FLUIDS}
+        dynamic = "substeps = 1" in (ROOT / "cases" / case / "scene.toml").read_text()
+        if dynamic:
+            runs["chorin_bodies"] = run_case(case, "chorin", BODIES)
         result["coupled"][case] = {"runs": runs, "chorin_against_openfoam": compare(runs)}
+        if dynamic:
+            result["coupled"][case]["chorin_bodies_against_openfoam"] = compare(runs, "chorin_bodies")
         print(f"\n{case}")
-        print(f"  {'fluid':9s} {'status':10s} {'wall s':>7s} {'fluid s':>8s} {'share':>6s} {'iters':>6s} "
+        print(f"  {'fluid':13s} {'status':10s} {'wall s':>7s} {'fluid s':>8s} {'share':>6s} {'iters':>6s} "
               f"{'s/iter':>7s} {'max displacement [m]':>22s} {'dp [Pa]':>8s}")
         for fluid, r in runs.items():
             disp = r["max_displacement"][-1] if r["max_displacement"] else float("nan")
             dp = r["pressure_drop"] if r["pressure_drop"] is not None else float("nan")
-            print(f"  {fluid:9s} {str(r['status']):10s} {r['wall_seconds']:7.2f} {r['fluid_seconds']:8.2f} "
+            print(f"  {fluid:13s} {str(r['status']):10s} {r['wall_seconds']:7.2f} {r['fluid_seconds']:8.2f} "
                   f"{r['fluid_share']:6.2f} {r['coupling_iterations']:6d} {r['seconds_per_coupling_iteration']:7.3f} "
                   f"{disp:22.4e} {dp:8.1f}")
-        c = result["coupled"][case]["chorin_against_openfoam"]
-        diffs = ", ".join(f"{d:+.2%}" if d is not None else "-" for d in c["max_displacement_difference"])
-        print(f"  chorin against openfoam: {c['speedup_end_to_end']:.2f}x end to end, fluid "
-              f"{c['fluid_speedup']:.1f}x; max displacement per step {diffs}"
-              + (f"; pressure drop {c['pressure_drop_difference']:+.2%}" if "pressure_drop_difference" in c else ""))
+        for key in ("chorin_against_openfoam", "chorin_bodies_against_openfoam")[:1 + dynamic]:
+            c = result["coupled"][case][key]
+            diffs = ", ".join(f"{d:+.2%}" if d is not None else "-" for d in c["max_displacement_difference"])
+            drops = ", ".join(f"{d:+.2%}" if d is not None else "-" for d in c["pressure_drop_difference_per_step"])
+            print(f"  {key.replace('_', ' ')}: {c['speedup_end_to_end']:.2f}x end to end, fluid "
+                  f"{c['fluid_speedup']:.1f}x; max displacement per step {diffs}; pressure drop per step {drops}")
     if "small_fracture" in result["coupled"]:
         speedup = result["coupled"]["small_fracture"]["chorin_against_openfoam"]["speedup_end_to_end"]
         result["goals"]["small_fracture_speedup"] = {"value": speedup, "goal": f">= {GOAL_SPEEDUP}",

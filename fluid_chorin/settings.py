@@ -8,6 +8,8 @@ from coupler.protocol.slabs import MIN_CELLS, SLAB_AXES
 
 #: pressure Poisson solvers (:mod:`fluid_chorin.poisson`)
 POISSON_METHODS = ("auto", "direct", "gamg")
+#: how the solid's velocity reaches the fluid (:meth:`fluid_chorin.solver.ChorinSolver.set_solid`)
+SOLID_VELOCITIES = ("cells", "bodies", "none")
 
 PARTICIPANT = ParticipantSpec(
     kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",),
@@ -28,6 +30,11 @@ PARTICIPANT = ParticipantSpec(
         Setting("poisson", "string", "the pressure solver: auto (PETSc's sparse Cholesky up to 30000 cells, CG + "
                 "GAMG beyond), direct (on several ranks MUMPS's Cholesky), gamg", default="auto",
                 choices=POISSON_METHODS),
+        Setting("solid_velocity", "string", "cells: the projected solid velocity per cell (rotating and deforming "
+                "solids move the fluid); bodies: every solid body (connected cells of solid fraction >= 1/2) moves "
+                "rigidly with the fraction-weighted mean velocity of its wetted cell layer, the velocity normal to a "
+                "closed grid face dropped (transfer/bodies.py: the model of the OpenFOAM fluid's bodies, to compare "
+                "the two); none: the solid is penalized towards rest", default="cells", choices=SOLID_VELOCITIES),
         Setting("slab_axis", "string", "with ranks > 1: the direction the grid is cut in slabs along, one per MPI "
                 f"rank (at least {MIN_CELLS} cells each); longest: the direction of the most cells", default="longest",
                 choices=SLAB_AXES)))

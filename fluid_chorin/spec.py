@@ -42,6 +42,7 @@ class ChorinSpec:
     substeps: int
     outer_correctors: int
     poisson: str
+    solid_velocity: str
     slab_axis: str
 
     @property

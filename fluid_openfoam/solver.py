@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from coupler.protocol.exits import describe_exit, oom_kills
+from coupler.protocol.fluid_faces import closed_faces, dropped_velocity
 from coupler.protocol.mpi import mpi_environment
 
 from . import case as _case
@@ -182,18 +183,13 @@ class OpenFOAMSolver:
             vel = np.asarray(velocity, dtype=np.float64).reshape(self.n, 3)
             if not np.all(np.isfinite(vel)):
                 raise ValueError(f"solid_velocity holds NaN/inf at cell {int(np.argmin(np.isfinite(vel).all(1)))}")
-            closed = [f for f, c in self.spec.faces.items() if c["kind"] != "pressure"]
             self.sources = body_sources(np.clip(fraction, 0.0, 1.0), vel, self.spec.grid.shape,
-                                        self.spec.drag_value(), closed)
+                                        self.spec.drag_value(), closed_faces(self.spec.faces))
             for src in self.sources:
                 for face, value in src.dropped.items():
                     if face not in self.warned_faces:
                         self.warned_faces.add(face)
-                        hint = "[flow] inlet_pressure" if face == "xmin" else f"[flow] faces = {{ {face} = " \
-                                                                               f"{{ pressure = p }} }}"
-                        log.warning("a solid body touches the closed grid face %s: its velocity normal to it "
-                                    "(%.3g m/s) is dropped; make the face open (%s) to let the body move "
-                                    "through it", face, value, hint)
+                        log.warning("%s", dropped_velocity(face, value))
         sets = self.case / "constant" / "polyMesh" / "sets"
         for src in self.sources:
             write_cell_set(sets / src.name, src.name, src.cells)

@@ -50,3 +50,16 @@ def face_conditions(config: dict) -> dict[str, dict]:
             raise ValueError(f"unknown face {face!r} in boundaries (faces: {', '.join(BOX_FACES)})")
         out[face] = _face_condition(spec)
     return out
+
+
+def closed_faces(faces: dict) -> list[str]:
+    """The grid faces no flow may cross (every face but the fixed-pressure ones)."""
+    return [f for f, c in faces.items() if c["kind"] != "pressure"]
+
+
+def dropped_velocity(face: str, value: float) -> str:
+    """The warning of a solid body's velocity dropped at the closed grid face ``face``
+    (:func:`transfer.bodies.rigid_bodies`)."""
+    hint = "[flow] inlet_pressure" if face == "xmin" else f"[flow] faces = {{ {face} = {{ pressure = p }} }}"
+    return (f"a solid body touches the closed grid face {face}: its velocity normal to it ({value:.3g} m/s) is "
+            f"dropped; make the face open ({hint}) to let the body move through it")

@@ -200,8 +200,12 @@ def plan(scene, plan) -> None:
             plan.tasks.append(f"fluid: chorin on {solver.ranks} MPI ranks, the grid in slabs along {along} (one per "
                               f"rank, ghost layers exchanged each step, the pressure Poisson solve distributed)")
         if dynamic:
-            plan.notes.append("chorin: the solid velocity is applied per cell (the fluid follows rotating and "
-                              "deforming solids)")
+            plan.notes.append({"cells": "chorin: the solid velocity is applied per cell (the fluid follows rotating "
+                                        "and deforming solids)",
+                               "bodies": "chorin: the solid velocity is applied per solid body (a rigid translation "
+                                         "with the mean velocity of its wetted cells, as the openfoam fluid)",
+                               "none": "chorin: the solid velocity is not applied (penalization towards rest)"}
+                              [s["solid_velocity"]])
     n = scene.time["steps"]
     if elastic:
         plan.iteration = (f"{n} time steps of {scene.time['dt']:g} s{quasi}; implicit fixed point per step "
