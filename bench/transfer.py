@@ -9,7 +9,9 @@ quadrature, and threads. Prints a table and writes every figure to JSON.
 Section 0 is the goal of the parallel transfer issue: the serial CLI end to end (`varcouple
 transfer` in this process: read, assemble, apply, write) against libsupermesh's own parallel
 driver, parallel_supermesh plus the assembly of B, on one rank (bench/supermesh_parallel.py),
-with the kernel split into search, clipping and integration (the kernel's `stages`).
+with the kernel split into search, rejection tests, clipping, integration and rows/CSR (the
+kernel's `stages`), and the previous kernel in the same run with `--previous-kernel SO` (a
+_kernels .so built from an older commit).
 
 Every figure is measured in the same run, on the same machine: the baselines (a P1 mass
 matrix on the target mesh, with our vectorised assembly and with dolfinx) and, when the
@@ -393,25 +395,53 @@ def _parallel_supermesh():
     return module
 
 
-def _kernel_stages(S, T, repeat) -> dict:
-    """Kernel CPU seconds up to the search, the clipping and the whole (stages 1, 2, 3)."""
+#: the kernel's stages (transfer/_kernels/common.hpp, vc::Stage): each run stops after one
+STAGES = {1: "search", 2: "reject", 3: "clip", 4: "integrate", 5: "rows_and_csr"}
+
+
+def _load_kernels(path):
+    """A build of transfer/_kernels from another commit (a .so file), for --previous-kernel."""
+    import importlib.machinery
+    import importlib.util
+    import types
+
+    sys.modules.setdefault("previous", types.ModuleType("previous"))
+    loader = importlib.machinery.ExtensionFileLoader("previous._kernels", str(path))
+    module = importlib.util.module_from_spec(importlib.util.spec_from_file_location("previous._kernels", str(path),
+                                                                                     loader=loader))
+    loader.exec_module(module)
+    return module
+
+
+def _kernel_cpu(kernels, S, T, repeat, **kwargs) -> float:
+    src, dst = S.mesh, T.mesh
+    times = []
+    for _ in range(max(1, repeat)):
+        start = time.process_time()  # CPU time: on a shared machine less disturbed than wall time
+        kernels.assemble_volume(src.points, src.cells, kernels.TET, 1, dst.points, dst.cells, kernels.TET, 1,
+                                np.empty((0, 4)), np.empty(0), False, False, S.num_dofs, T.num_dofs, None, 1, **kwargs)
+        times.append(time.process_time() - start)
+    return min(times)
+
+
+def _kernel_stages(S, T, repeat, previous=None) -> dict:
+    """Kernel CPU seconds of each stage (the difference of runs stopped after it and before
+    it), and of the whole kernel with and without the rejection tests; with `previous`
+    (another build's module) its whole kernel too, measured between these runs."""
     from transfer import _kernels
 
-    src, dst = S.mesh, T.mesh
-    out = {}
-    for stage in (1, 2, 3):
-        times = []
-        for _ in range(max(1, repeat)):
-            start = time.process_time()  # CPU time: on a shared machine less disturbed than wall time
-            _kernels.assemble_volume(src.points, src.cells, _kernels.TET, 1, dst.points, dst.cells, _kernels.TET, 1,
-                                     np.empty((0, 4)), np.empty(0), False, False, S.num_dofs, T.num_dofs, None, 1,
-                                     stages=stage)
-            times.append(time.process_time() - start)
-        out[stage] = min(times)
-    return {"search": out[1], "clip": out[2] - out[1], "integrate_and_rows": out[3] - out[2], "kernel": out[3]}
+    upto = {stage: _kernel_cpu(_kernels, S, T, repeat, stages=stage) for stage in STAGES}
+    out = {name: upto[stage] - upto.get(stage - 1, 0.0) for stage, name in STAGES.items()}
+    out["kernel"] = upto[5]
+    out["kernel_without_rejection"] = _kernel_cpu(_kernels, S, T, repeat, reject=False)
+    if previous is not None:
+        out["previous_kernel"] = _kernel_cpu(previous, S, T, repeat)
+        out["kernel_again"] = _kernel_cpu(_kernels, S, T, repeat)
+        out["previous_over_new"] = out["previous_kernel"] / min(upto[5], out["kernel_again"])
+    return out
 
 
-def bench_end_to_end(label, n_source, n_target, repeat) -> dict:
+def bench_end_to_end(label, n_source, n_target, repeat, previous=None) -> dict:
     """`varcouple transfer` on the pair (files written here), phase by phase, against
     parallel_supermesh + B on one rank, both measured now."""
     import meshio
@@ -451,12 +481,14 @@ def bench_end_to_end(label, n_source, n_target, repeat) -> dict:
         solve, _, v = _best(lambda: operator(u), repeat)
         fields = {"f": ("point", v), "covered": ("point", operator.covered.astype(np.uint8))}
         write, _, _ = _best(lambda: target.write(tmp / "again.vtu", fields), repeat)
-    stages = _kernel_stages(S, T, repeat)
-    res["phases"] = {"read": read, **{k: stages[k] for k in ("search", "clip", "integrate_and_rows")},
+    stages = _kernel_stages(S, T, repeat, previous)
+    res["phases"] = {"read": read, **{name: stages[name] for name in STAGES.values()},
                      "assembly_rest": min(rest), "solve": solve, "write": write,
-                     "what": ("read/write: MeshFile (meshio); search, clip, integrate_and_rows: kernel CPU seconds "
-                              "by stage; assembly_rest: Transfer.assemble beyond the kernel (CSR, coverage, solver "
-                              "set-up); solve: T u (CG on D)")}
+                     "what": ("read/write: MeshFile (meshio); search, reject (separating-plane tests), clip, "
+                              "integrate (moments, local blocks), rows_and_csr (rows of B and D, COO to CSR): kernel "
+                              "CPU seconds by stage; assembly_rest: Transfer.assemble beyond the kernel (scipy "
+                              "matrices, coverage, solver set-up); solve: T u (CG on D)")}
+    res["kernel_stages"] = stages
     res["kernel_seconds"] = operator.stats["assembly_seconds"]
     res["pairs_tested"], res["pairs_intersected"] = operator.stats["pairs_tested"], operator.stats["pairs_intersected"]
     lsm = _parallel_supermesh().ParallelSupermesh()
@@ -464,6 +496,7 @@ def bench_end_to_end(label, n_source, n_target, repeat) -> dict:
     res["libsupermesh_parallel"] = lsm.measure(src, dst, *one, ranks=1, repeat=repeat)
     base = res["libsupermesh_parallel"]
     ratio = base["seconds"] / res["cli_seconds"] if base["available"] else None
+    res["assembly_ratio"] = base["seconds"] / res["kernel_seconds"] if base["available"] else None
     res["goal"] = {"goal": GOAL_END_TO_END_RATIO, "value": ratio,
                    "pass": None if ratio is None else ratio >= GOAL_END_TO_END_RATIO,
                    "what": "libsupermesh parallel_supermesh + B on 1 rank / varcouple transfer end to end (1 thread)"}
@@ -474,19 +507,23 @@ def print_end_to_end(res):
     _say(f"\n== 0. end to end, P1 -> P1, {res['size']}: {res['source_tets']:,} x {res['target_tets']:,} tets, "
          f"1 thread, 1 rank ==")
     ph = res["phases"]
-    rows = [[name, _s(ph[name])] for name in ("read", "search", "clip", "integrate_and_rows", "assembly_rest",
-                                                "solve", "write")]
+    rows = [[name, _s(ph[name])] for name in ("read", *STAGES.values(), "assembly_rest", "solve", "write")]
     rows.append(["varcouple transfer (end to end)", _s(res["cli_seconds"])])
     base = res["libsupermesh_parallel"]
     rows.append(["libsupermesh parallel_supermesh + B", _s(base["seconds"]) if base["available"] else "not available"])
     _say(_table(["phase", "time (min)"], rows))
     _say(f"pairs tested / intersected: {res['pairs_tested']:,} / {res['pairs_intersected']:,}")
+    st = res["kernel_stages"]
+    _say(f"kernel CPU {_s(st['kernel'])}, without the rejection tests {_s(st['kernel_without_rejection'])}"
+         + (f"; previous kernel {_s(st['previous_kernel'])}: {st['previous_over_new']:.2f}x" if "previous_kernel" in st
+            else ""))
     goal = res["goal"]
     if goal["value"] is None:
         _say(f"libsupermesh: {base['reason']}")
     else:
         _say(f"end to end: ours {goal['value']:.2f}x faster than libsupermesh's parallel driver on one rank "
-             f"(goal {goal['goal']:.0f}x): {'PASS' if goal['pass'] else 'MISS'}")
+             f"(goal {goal['goal']:.0f}x): {'PASS' if goal['pass'] else 'MISS'}; Transfer.assemble's kernel "
+             f"{res['assembly_ratio']:.2f}x")
 
 
 # -- 1. P1-P1 tet-tet ------------------------------------------------------------------
@@ -794,6 +831,8 @@ def parse_args(argv=None):
     p.add_argument("-o", "--output", type=Path, default=DEFAULT_OUTPUT, help=f"JSON file (default: {DEFAULT_OUTPUT})")
     p.add_argument("--quick", action="store_true", help="tiny meshes, 1 repeat: a smoke run of every code path")
     p.add_argument("--no-transfer", action="store_true", help="skip the Transfer setup/apply timings")
+    p.add_argument("--previous-kernel", type=Path, metavar="SO",
+                   help="a _kernels .so built from another commit: its kernel is timed in the same run (section 0)")
     args = p.parse_args(argv)
     if any(n < 1 for n in args.threads):
         p.error("--threads must be positive")
@@ -833,7 +872,8 @@ def main(argv=None) -> dict:
 
     result["end_to_end"] = []
     for label, (ns, nt) in sizes.items():
-        res = bench_end_to_end(label, ns, nt, repeat)
+        res = bench_end_to_end(label, ns, nt, repeat, _load_kernels(args.previous_kernel) if args.previous_kernel
+                               else None)
         result["end_to_end"].append(res)
         print_end_to_end(res)
 

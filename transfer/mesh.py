@@ -206,9 +206,11 @@ class Mesh:
     def longest_edges(self) -> np.ndarray:
         """The longest distance between two vertices of each cell."""
         p = self.cell_vertices()
-        i, j = np.triu_indices(p.shape[1], 1)
-        d = p[:, i] - p[:, j]
-        return np.sqrt(np.einsum("mpd,mpd->mp", d, d).max(axis=1))
+        longest = np.zeros(len(p))
+        for i, j in zip(*np.triu_indices(p.shape[1], 1)):  # vertex pairs, over all cells at once
+            d = p[:, i] - p[:, j]
+            longest = np.maximum(longest, d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+        return np.sqrt(longest)
 
     # -- validation -------------------------------------------------------
     def _validate(self, reorient: bool):

@@ -78,13 +78,15 @@ nb::dict to_dict(vc::AssemblyResult&& r) {
 
 NB_MODULE(_kernels, m) {
   m.doc() = "Compiled kernels of varcouple.transfer: search, clipping, quadrature, sparse assembly";
-  // Volume-like kernels: a volume source (mesh or grid); `stages` < 3 stops the volume
-  // kernel after the search (1) or the clipping (2), so that benchmarks see where the time goes.
+  // Volume-like kernels: a volume source (mesh or grid); `stages` < 5 stops the volume
+  // kernel after the search (1), the rejection tests (2), the clipping (3) or the
+  // integration (4) (vc::Stage), so that benchmarks see where the time goes; `reject`
+  // false clips every candidate pair without the separating-plane tests (tests compare).
   auto volume_like = [](auto kernel, int nbary, const char* name) {
     return [kernel, nbary, name](const Points& sp, const Cells& sc, int skind, int sdeg, const Points& tp,
                                  const Cells& tc, int tkind, int tdeg, const Points& bary, const Vector& w, bool dual,
                                  bool lump, int64_t nsd, int64_t ntd, std::optional<Grid> grid, int nthreads,
-                                 int stages) {
+                                 int stages, bool reject) {
       check_dofs(nsd, ntd);
       auto src = element_set(sp, sc, skind, sdeg);
       auto tgt = element_set(tp, tc, tkind, tdeg);
@@ -101,20 +103,21 @@ NB_MODULE(_kernels, m) {
       vc::AssemblyResult r;
       {
         nb::gil_scoped_release release;
-        r = kernel(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads, stages);
+        r = kernel(src, tgt, rule, dual, lump, nsd, ntd, grid ? &g : nullptr, nthreads, stages, reject);
       }
       return to_dict(std::move(r));
     };
   };
   auto trace = [](const vc::ElementSet& src, const vc::ElementSet& tgt, const vc::SimplexRule& rule, bool dual,
-                  bool lump, int64_t nsd, int64_t ntd, const vc::GridInfo* grid, int nthreads, int stages) {
-    if (stages != 3) throw std::invalid_argument("assemble_trace: stages must be 3");
+                  bool lump, int64_t nsd, int64_t ntd, const vc::GridInfo* grid, int nthreads, int stages,
+                  bool reject) {
+    if (stages != vc::kAll || !reject) throw std::invalid_argument("assemble_trace: stages must be 5, reject true");
     return vc::assemble_trace(src, tgt, rule, dual, lump, nsd, ntd, grid, nthreads);
   };
   auto args = std::make_tuple("src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a,
                               "tgt_cells"_a, "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a,
                               "dual"_a, "lump"_a, "n_src_dofs"_a, "n_tgt_dofs"_a, "grid"_a.none(), "nthreads"_a = 1,
-                              "stages"_a = 3);
+                              "stages"_a = static_cast<int>(vc::kAll), "reject"_a = true);
   std::apply([&](auto... a) { m.def("assemble_volume", volume_like(&vc::assemble_volume, 4, "assemble_volume"), a...); },
              args);
   std::apply([&](auto... a) { m.def("assemble_trace", volume_like(trace, 3, "assemble_trace"), a...); }, args);

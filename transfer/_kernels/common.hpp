@@ -315,13 +315,19 @@ struct GridInfo {
 };
 
 
+// How far assemble_volume goes, for benchmarks that split its time: the search for
+// candidate pairs, then the rejection tests, the clipping, the integration, and
+// everything (the rows of B and D in CSR).
+enum Stage : int { kSearch = 1, kReject = 2, kClip = 3, kIntegrate = 4, kAll = 5 };
+
 // Volume-volume (TET, HEX, BOX) by exact polyhedron clipping.
 // `rule` is a rule on the reference tetrahedron (4 barycentric coordinates).
 // `dual`: use the dual basis of eq. 4 on the target (fully covered elements).
-// `stages` < 3 stops after the search (1) or the clipping (2): for benchmarks only.
+// `stages` < kAll stops early (Stage): for benchmarks only. `reject` false clips every
+// candidate pair, without the separating-plane tests (the same result, slower: tests).
 AssemblyResult assemble_volume(const ElementSet& src, const ElementSet& tgt, const SimplexRule& rule,
                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
-                               const GridInfo* src_grid, int nthreads, int stages = 3);
+                               const GridInfo* src_grid, int nthreads, int stages = kAll, bool reject = true);
 
 // Volume-surface: source TET/HEX/BOX cells, target TRI/QUAD surface elements
 // inside the volume (the trace of the source on the surface). `rule` is on the

@@ -30,21 +30,6 @@ struct Moments {
   Vec3 m1{0, 0, 0};
   double m2[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
 
-  void add_tet(const Tet& t, double vol) {
-    // int_K x_i x_j = |K|/20 (sum_k v_k,i v_k,j + s_i s_j), s = sum_k v_k
-    const Vec3* v = t.v;
-    Vec3 s{0, 0, 0};
-    for (int k = 0; k < 4; ++k) s = add(s, v[k]);
-    m0 += vol;
-    m1 = add(m1, scale(s, vol / 4.0));
-    const double c = vol / 20.0;
-    for (int i = 0; i < 3; ++i)
-      for (int j = i; j < 3; ++j) {
-        double q = s[i] * s[j];
-        for (int k = 0; k < 4; ++k) q += v[k][i] * v[k][j];
-        m2[i][j] += c * q;
-      }
-  }
   void merge(const Moments& o) {
     m0 += o.m0;
     m1 = add(m1, o.m1);
@@ -170,9 +155,10 @@ class Polyhedron {
     return true;
   }
 
-  // The tets from vertex 0 to the fan triangles of every face not holding vertex 0.
+  // Calls f(a, b, c) for the fan triangles (vertex indices) of every face not holding
+  // vertex 0: with vertex 0 they are the tets the polyhedron is cut into.
   template <class F>
-  void for_each_tet(F&& f) const {
+  void for_each_fan(F&& f) const {
     bool seen[kMax][3] = {};
     for (int start = 0; start < n_; ++start)
       for (int k0 = 0; k0 < 3; ++k0) {
@@ -193,8 +179,42 @@ class Polyhedron {
           next = nb_[cur][k];
         }
         if (apex) continue;
-        for (int i = 1; i + 1 < m; ++i) f(Tet{{x_[0], x_[face[0]], x_[face[i]], x_[face[i + 1]]}});
+        for (int i = 1; i + 1 < m; ++i) f(face[0], face[i], face[i + 1]);
       }
+  }
+
+  // The tets from vertex 0 to the fan triangles.
+  template <class F>
+  void for_each_tet(F&& f) const {
+    for_each_fan([&](int a, int b, int c) { f(Tet{{x_[0], x_[a], x_[b], x_[c]}}); });
+  }
+
+  // Adds to `m` the moments of the fan tets whose volume exceeds vmin (the pieces
+  // for_each_tet gives, integrated in the frame of vertex 0, then moved back: paper
+  // eq. 3 with exact integrals of products of affine bases); false when there is none.
+  bool add_moments(double vmin, Moments& m) const {
+    Vec3 r[kMax];
+    for (int v = 1; v < n_; ++v) r[v] = sub(x_[v], x_[0]);
+    double p0 = 0.0, p1[3] = {0, 0, 0}, p2[6] = {0, 0, 0, 0, 0, 0};
+    for_each_fan([&](int ia, int ib, int ic) {
+      const Vec3 &a = r[ia], &b = r[ib], &c = r[ic];
+      const double vol = std::fabs(dot(a, cross(b, c))) / 6.0;  // as tet_volume of the piece
+      if (!(vol > vmin)) return;
+      const double s[3] = {a[0] + b[0] + c[0], a[1] + b[1] + c[1], a[2] + b[2] + c[2]};
+      p0 += vol;
+      const double w = vol / 4.0, q = vol / 20.0;
+      for (int i = 0; i < 3; ++i) p1[i] += w * s[i];
+      for (int i = 0, k = 0; i < 3; ++i)
+        for (int j = i; j < 3; ++j, ++k) p2[k] += q * (a[i] * a[j] + b[i] * b[j] + c[i] * c[j] + s[i] * s[j]);
+    });
+    if (!(p0 > 0.0)) return false;
+    // int (y + x0) = P1 + P0 x0,  int (y + x0)(y + x0)^T = P2 + x0 P1^T + P1 x0^T + P0 x0 x0^T
+    const Vec3& o = x_[0];
+    m.m0 += p0;
+    for (int i = 0; i < 3; ++i) m.m1[i] += p1[i] + p0 * o[i];
+    for (int i = 0, k = 0; i < 3; ++i)
+      for (int j = i; j < 3; ++j, ++k) m.m2[i][j] += p2[k] + o[i] * p1[j] + p1[i] * o[j] + p0 * o[i] * o[j];
+    return true;
   }
 
  private:
@@ -203,11 +223,6 @@ class Polyhedron {
   int n_ = 0;
   Vec3 x_[kMax];
   int nb_[kMax][3];
-};
-
-struct ClipBuffers {
-  Polyhedron poly;
-  std::vector<Tet> pieces;
 };
 
 // True when the box [lo, hi] lies outside one plane of convex `c` by more than eps
@@ -222,53 +237,73 @@ bool box_outside(const Vec3& lo, const Vec3& hi, const Convex& c, double eps) {
   return false;
 }
 
-// True when a face plane of tet `t` has all four vertices of tet `u` outside it (by
-// more than eps): the tets are disjoint. With the test of the faces of `u`
-// (clip_convex) these are eight of the separating axes of two tets.
-bool separated_by_faces(const Tet& t, const Tet& u, double eps) {
-  static constexpr int opp[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
-  for (int i = 0; i < 4; ++i) {
-    const Vec3& a = t.v[opp[i][0]];
-    Vec3 n = cross(sub(t.v[opp[i][1]], a), sub(t.v[opp[i][2]], a));
-    if (dot(n, sub(t.v[i], a)) > 0) n = scale(n, -1.0);  // outward: the tet's own vertex is inside
-    const double tol2 = eps * eps * dot(n, n);  // |s| > eps |n|, compared squared
-    bool all_out = true;
-    for (int k = 0; k < 4 && all_out; ++k) {
-      const double s = dot(n, sub(u.v[k], a));
-      all_out = s > 0 && s * s > tol2;
-    }
-    if (all_out) return true;
+// True when every vertex of the `ntets` tets lies outside one plane of `c` by more than
+// eps (a separating plane: nothing of them meets `c`); `inside` tells whether all lie
+// inside every plane. All planes and vertices are evaluated, without branches.
+bool outside_a_plane(const Convex& c, const Tet* tets, int ntets, double eps, bool& inside) {
+  int separated = 0, in = 1;
+  for (int p = 0; p < c.nplanes; ++p) {
+    const Vec3& n = c.p[p].n;
+    int out = 1;
+    for (int t = 0; t < ntets; ++t)
+      for (int k = 0; k < 4; ++k) {
+        const Vec3& x = tets[t].v[k];
+        const double s = n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - c.p[p].d;
+        out &= s > eps;
+        in &= s <= eps;
+      }
+    separated |= out;
   }
-  return false;
+  inside = in;
+  return separated;
 }
 
-// Pieces of (union of `subject` tets) inside convex `c`, appended to buf.pieces; `c`
-// is the tet `other` when not null (then a subject tet its faces separate is skipped).
-void clip_convex(const Tet* subject, int nsubject, const Convex& c, const Tet* other, double eps,
-                 ClipBuffers& buf) {
-  // Quick rejection (all subject vertices outside one plane) and acceptance
-  // (all inside every plane: the subject lies in the convex piece).
-  bool inside_all = true;
-  for (int p = 0; p < c.nplanes; ++p) {
-    bool all_out = true;
-    for (int t = 0; t < nsubject; ++t)
-      for (int k = 0; k < 4; ++k) {
-        const double s = dot(c.p[p].n, subject[t].v[k]) - c.p[p].d;
-        all_out = all_out && s > eps;
-        inside_all = inside_all && s <= eps;
-      }
-    if (all_out) return;
-  }
-  if (inside_all) {
-    buf.pieces.insert(buf.pieces.end(), subject, subject + nsubject);
-    return;
-  }
-  for (int t = 0; t < nsubject; ++t) {
-    if (other && separated_by_faces(subject[t], *other, eps)) continue;
-    buf.poly.assign(subject[t]);
-    for (int p = 0; p < c.nplanes && buf.poly.clip(c.p[p], eps); ++p) {
+// The outward face planes of every tet of a mesh, each relative to the tet's vertex 0:
+// computed once per source cell instead of once per candidate pair.
+class TetFaces {
+ public:
+  TetFaces() = default;
+  explicit TetFaces(const ElementSet& e) : faces_(e.ncells) {
+    for (int64_t c = 0; c < e.ncells; ++c) {
+      const Vec3 v0 = e.vertex(c, 0);
+      Tet local;
+      for (int k = 0; k < 4; ++k) local.v[k] = sub(e.vertex(c, k), v0);
+      const Convex planes = tet_planes(local);
+      for (int i = 0; i < 4; ++i) faces_[c][i] = planes.p[i];
     }
-    buf.poly.for_each_tet([&](const Tet& piece) { buf.pieces.push_back(piece); });
+  }
+  bool empty() const { return faces_.empty(); }
+  // The faces of cell c in a frame where its vertex 0 is at v0.
+  Convex in_frame(int64_t c, const Vec3& v0) const {
+    Convex out;
+    out.nplanes = 4;
+    for (int i = 0; i < 4; ++i) out.p[i] = {faces_[c][i].n, faces_[c][i].d + dot(faces_[c][i].n, v0)};
+    return out;
+  }
+
+ private:
+  std::vector<std::array<Plane, 4>> faces_;
+};
+
+// Clips each of the `nsubject` tets of `subject` by convex `c` and hands every
+// non-empty piece to piece(poly). With `reject`, a plane of `c` that all subject
+// vertices lie outside of rejects the pair, and when `c` holds the planes of the tet
+// `other`, a subject tet whose own faces, faces_of(t), leave all of `other` outside is
+// skipped (both by more than eps): such pairs are those clipping finds empty; without
+// it every pair is clipped (tests). With `clip` false nothing is clipped (benchmarks:
+// the rejection tests alone).
+template <class Faces, class F>
+void clip_convex(const Tet* subject, int nsubject, Faces&& faces_of, const Convex& c, const Tet* other,
+                 double eps, bool reject, bool clip, Polyhedron& poly, F&& piece) {
+  bool inside = false, unused = false;
+  if (reject && outside_a_plane(c, subject, nsubject, eps, inside)) return;
+  for (int t = 0; t < nsubject; ++t) {
+    if (reject && !inside && other && outside_a_plane(faces_of(t), other, 1, eps, unused)) continue;
+    if (!clip) continue;
+    poly.assign(subject[t]);
+    for (int p = 0; !inside && p < c.nplanes && poly.clip(c.p[p], eps); ++p) {
+    }
+    if (!poly.empty()) piece(poly);
   }
 }
 
@@ -276,12 +311,13 @@ void clip_convex(const Tet* subject, int nsubject, const Convex& c, const Tet* o
 
 AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, const SimplexRule& rule,
                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
-                               const GridInfo* src_grid, int nthreads, int stages) {
+                               const GridInfo* src_grid, int nthreads, int stages, bool reject) {
   AssemblyResult result(tgt.ncells);
   ElementSet src = src_in;
   const std::vector<double> coords = src.packed_coords();
   src.cell_coords = coords.data();
   const SourceSearch search(src, src_grid);
+  const TetFaces src_faces = src.kind == TET && tgt.kind == TET ? TetFaces(src) : TetFaces();
 
   const int nth = thread_count(nthreads);
   std::vector<Triplets> Bparts(nth), Dparts(nth);
@@ -303,7 +339,7 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
     Dparts[tid].reserve((lump ? 1 : nt) * nt * (tgt.ncells / nth + 1));
     std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
     LocalAssembly la;
-    ClipBuffers buf;
+    Polyhedron poly;
     ElementGeometry tg, sg;
     Evaluator tev, sev;
     Moments pair, total;
@@ -329,8 +365,8 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
       const double eps_box = 1e-12 * h + 4 * DBL_EPSILON * h;
       search.for_each(search_box, 1e-10 * h, stamp, t, [&](int64_t s) {
         ++tested;
-        if (stages < 2) return;
-        if (tg.nconvex == 1) {
+        if (stages < kReject) return;
+        if (reject && tg.nconvex == 1) {
           const BBox& b = search.box(s);
           if (box_outside(sub(b.lo, origin), sub(b.hi, origin), tg.convex[0], eps_box)) return;
         }
@@ -342,17 +378,16 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
         ElementGeometry& clipper = clip_source ? tg : sg;
         clipper.build_planes();
         const double eps = 1e-12 * std::min(h, sg.box.diagonal()) + 4 * DBL_EPSILON * h;
-        buf.pieces.clear();
         const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
-        for (int c = 0; c < clipper.nconvex; ++c) clip_convex(subj.tets, subj.ntets, clipper.convex[c], other, eps, buf);
-        if (stages < 3) return;
-        bool any = false, moments = false;
+        // the faces of a source tet are computed once, those of other tets here
+        auto faces_of = [&](int k) {
+          return clip_source && !src_faces.empty() ? src_faces.in_frame(s, sg.verts[0]) : tet_planes(subj.tets[k]);
+        };
+        bool prepared = false, any = false, moments = false;
         const SimplexRule* q_rule = &rule;
-        pair = Moments{};
-        for (const Tet& piece : buf.pieces) {
-          const double vol = tet_volume(piece);
-          if (!(vol > vmin)) continue;
-          if (!any) {
+        auto integrate = [&](const Polyhedron& poly) {
+          if (stages < kIntegrate) return;
+          if (!prepared) {
             sev.build(src, sg);
             src.dofs(s, sdofs);
             std::fill(block, block + ns * nt, 0.0);
@@ -361,21 +396,30 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
               moments = moments_t && shape(gs, ns, sg.box.diagonal()) <= kSliverShape;
               if (!moments) q_rule = &kDegree2;
             }
-            any = true;
+            pair = Moments{};
+            prepared = true;
           }
           if (moments) {
-            pair.add_tet(piece, vol);
-            continue;
+            any = poly.add_moments(vmin, pair) || any;
+            return;
           }
-          for (int q = 0; q < q_rule->npts; ++q) {
-            const double* l = &q_rule->bary[4 * q];
-            Vec3 x{0, 0, 0};
-            for (int k = 0; k < 4; ++k) x = add(x, scale(piece.v[k], l[k]));
-            tev.eval(x, phi_t);
-            sev.eval(x, phi_s);
-            la.add_point(q_rule->weights[q] * vol, phi_t, phi_s, ns, block);
-          }
-        }
+          poly.for_each_tet([&](const Tet& piece) {
+            const double vol = tet_volume(piece);
+            if (!(vol > vmin)) return;
+            any = true;
+            for (int q = 0; q < q_rule->npts; ++q) {
+              const double* l = &q_rule->bary[4 * q];
+              Vec3 x{0, 0, 0};
+              for (int k = 0; k < 4; ++k) x = add(x, scale(piece.v[k], l[k]));
+              tev.eval(x, phi_t);
+              sev.eval(x, phi_s);
+              la.add_point(q_rule->weights[q] * vol, phi_t, phi_s, ns, block);
+            }
+          });
+        };
+        for (int c = 0; c < clipper.nconvex; ++c)
+          clip_convex(subj.tets, subj.ntets, faces_of, clipper.convex[c], other, eps, reject, stages >= kClip, poly,
+                      integrate);
         if (!any) return;
         ++intersected;
         if (moments) {  // B block from the moments of the intersection
@@ -392,7 +436,7 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
       }
       result.measure[t] = tg.measure;
       result.overlap[t] = la.overlap;
-      la.finish(tdofs, tg.measure, dual, lump, Bparts[tid], Dparts[tid]);
+      if (stages >= kAll) la.finish(tdofs, tg.measure, dual, lump, Bparts[tid], Dparts[tid]);
     }
   }
   result.pairs_tested = tested;
