@@ -8,8 +8,8 @@ linear in dp (the cubic law Q = W e^3 dp / (12 mu L) between plates, paper 1), s
 is the dp the target needs in the geometry of the iteration, and the fixed point dp = H(dp) is
 Q = Q_target; Aitken or IQN-ILS treat it with the pressure on the faces. A step converges only
 when, besides the interface residual, |Q / Q_target - 1| is below the coupling tolerance
-(:meth:`FlowRateControl.unmet`). A rate no pressure difference can reach (no open path from
-inlet to outlet) and, with a platen, an inlet pressure at the step's confining stress (the
+(:meth:`FlowRateControl.unmet`). A rate no pressure difference can reach (a step that converges
+with no open path from inlet to outlet) and, with a platen, an inlet pressure at the step's confining stress (the
 fracture's faces would separate) stop the run with one line."""
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ class FlowRateControl:
         self.weights = np.array([float(np.sum(self.fs.on_grid.reference_weights)) if wetted else 1.0])
         self.pressure_drop = self.first_guess()  # the dp of the latest delivery
         self.flow_rate: float | None = None  # the Q the fluid passed with it
+        self.blocked: str | None = None  # why the latest Q cannot be adjusted (no open path), or None
 
     def first_guess(self) -> float:
         """dp0 = 12 mu L Q / (W e^3) of the cubic law, e the mean open height of the grid's
@@ -68,22 +69,26 @@ class FlowRateControl:
         return np.array([self.outlet + dp])
 
     def evaluate(self, outputs) -> np.ndarray:
+        """dp Q_target / Q; while no open path connects inlet and outlet (an iterate may close
+        it), dp unchanged: the step stops if it converges so (:meth:`unmet`)."""
         grid = self.ctx.meshes["fluid"]
-        if not percolates(grid, self.fs.update(outputs).fraction):
-            raise CouplerError(f"{self.where}: no open path connects the inlet (xmin) with the outlet (xmax) (every "
-                               f"path crosses cells at least half solid): no pressure difference drives "
-                               f"{self.target:g} m^3/s through the fracture (percolation lost)")
         q = float(section_flow_rates(grid, outputs["fluid"]["velocity"]).mean())
-        self.flow_rate = q
+        self.flow_rate, self.blocked = q, None
         conductance = q / self.pressure_drop if self.pressure_drop else 0.0
-        if not conductance > 0:
-            raise CouplerError(f"{self.where}: the fluid passed {q:.3g} m^3/s under a pressure difference of "
-                               f"{self.pressure_drop:.6g} Pa: the rate {self.target:g} m^3/s cannot be reached by "
-                               f"adjusting it")
-        return np.array([self.target / conductance])
+        if not percolates(grid, self.fs.update(outputs).fraction):
+            self.blocked = (f"no open path connects the inlet (xmin) with the outlet (xmax) (every path crosses cells "
+                            f"at least half solid): no pressure difference drives {self.target:g} m^3/s through the "
+                            f"fracture (percolation lost)")
+        elif not conductance > 0:
+            self.blocked = (f"the fluid passed {q:.3g} m^3/s under a pressure difference of {self.pressure_drop:.6g} "
+                            f"Pa: the rate {self.target:g} m^3/s cannot be reached by adjusting it")
+        return np.array([self.pressure_drop if self.blocked else self.target / conductance])
 
     def unmet(self) -> str | None:
-        """None when the latest flow rate is the target to the coupling tolerance, else why not."""
+        """None when the latest flow rate is the target to the coupling tolerance, else why not;
+        CouplerError when the step converged with no flow to adjust."""
+        if self.blocked:
+            raise CouplerError(f"{self.ctx.window}: {self.where}: {self.blocked}")
         error = abs(self.flow_rate / self.target - 1.0)
         if error <= self.tolerance:
             return None
