@@ -3,7 +3,8 @@
 Config: :mod:`fluid_chorin.spec` (the same grid, fluid and face conditions as the OpenFOAM
 fluid; the flow rule fills them from the scene). Inputs of ``advance``: ``solid_fraction``
 (n_cells,) in [0, 1] (clipped) and ``solid_velocity`` (n_cells, 3) m/s, applied per cell
-(:mod:`fluid_chorin.solver`). Outputs: ``pressure`` (n_cells,) Pa and ``velocity``
+(:mod:`fluid_chorin.solver`), and ``inlet_pressure`` (1,) Pa, the new pressure of the inlet
+face xmin (a flow driven by a rate: the coupler adjusts it each coupling iteration). Outputs: ``pressure`` (n_cells,) Pa and ``velocity``
 (n_cells, 3) m/s at the cell centres, x fastest.
 
 MPI: started on N ranks (``[solvers.fluid] ranks = N``), every rank receives the verbs and
@@ -43,7 +44,7 @@ class ChorinParticipant(Participant):
 
     def announce(self) -> dict:
         return {"kind": self.kind, "provides": ["pressure", "velocity"],
-                "accepts": ["solid_fraction", "solid_velocity"], "location": "cells"}
+                "accepts": ["solid_fraction", "solid_velocity", "inlet_pressure"], "location": "cells"}
 
     def configure(self, config: dict) -> None:
         spec = ChorinSpec.from_config(config)
@@ -67,7 +68,7 @@ class ChorinParticipant(Participant):
         solver = self.solver
         n = solver.spec.grid.num_cells
         arrays = {}
-        for name, want in (("solid_fraction", (n,)), ("solid_velocity", (n, 3))):
+        for name, want in (("solid_fraction", (n,)), ("solid_velocity", (n, 3)), ("inlet_pressure", (1,))):
             if name in inputs:
                 data = np.asarray(inputs[name].data, dtype=float)
                 if data.shape != want:
@@ -75,6 +76,8 @@ class ChorinParticipant(Participant):
                 if not np.all(np.isfinite(data)):
                     raise ValueError(f"input {name!r} holds NaN/inf at index {int(np.argmin(np.isfinite(data)))}")
                 arrays[name] = data
+        if "inlet_pressure" in arrays:
+            solver.set_inlet_pressure(float(arrays.pop("inlet_pressure")[0]))
         if arrays:
             fraction = arrays.get("solid_fraction", solver.solid_fraction)
             solver.set_solid(fraction, arrays.get("solid_velocity"))

@@ -12,7 +12,7 @@ POISSON_METHODS = ("auto", "direct", "gamg")
 SOLID_VELOCITIES = ("cells", "bodies", "none")
 
 PARTICIPANT = ParticipantSpec(
-    kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",),
+    kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",), accepts=("inlet_pressure",),
     memory=(120 * 2**20, 2000),
     description="incompressible flow on the structured grid by Chorin's projection on a staggered grid, in memory, "
                 "the solid immersed by volume penalization towards its velocity cell by cell",

@@ -109,6 +109,15 @@ class ChorinSolver:
         self.warned_faces: set[str] = set()
         self.set_solid(np.zeros(spec.grid.num_cells), None)
 
+    def set_inlet_pressure(self, pressure: float) -> None:
+        """The pressure [Pa] of the inlet face xmin, a fixed-pressure face (on the rank that
+        holds it); the Poisson operator does not depend on it."""
+        if self.spec.faces["xmin"]["kind"] != "pressure":
+            raise ValueError(f"input 'inlet_pressure' needs a fixed-pressure inlet (xmin), got "
+                             f"{self.spec.faces['xmin']['kind']!r}")
+        if (0, 0) in self.pressure_values:
+            self.pressure_values[(0, 0)] = pressure / self.spec.rho
+
     # ------------------------------------------------------------------ the solid
     def set_solid(self, fraction, velocity=None) -> None:
         """Solid fraction per cell (x fastest, clipped to [0, 1]) and the solid's velocity per

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .platen import ContactLost
+
 AXES = {"x": 0, "y": 1, "z": 2}
 
 
@@ -114,7 +116,10 @@ class StaticStep:
         reports, figures = [], {}
         if self.platen is not None:
             closing = max(float(np.nanmin(self.contact.mortar.gap)), 0.0) if self.contact is not None else 0.0
-            result = self.platen.load_to(self.stresses[step], self._solve_once, closing=closing, stale=changed)
+            try:
+                result = self.platen.load_to(self.stresses[step], self._solve_once, closing=closing, stale=changed)
+            except ContactLost as exc:
+                raise ContactLost(f"load step {step}: {exc}") from None
             reports.append(("platen", result.converged, result.solves, result.mismatch, self.platen.tolerance,
                             f"{result.reason}: {result.stress:.6g} Pa for {result.target:.6g} Pa", ()))
             figures.update(stress=result.stress, target_stress=result.target, platen_displacement=result.displacement,

@@ -9,7 +9,10 @@ frictionless contact. :meth:`Platen.load_to` finds ``d`` for a target ``sigma`` 
 bracketing from the last solve (steps of the body's elastic column, ``H sigma / E`` with
 ``H`` its extent along ``n``, doubling until the target is bracketed) and regula falsi
 inside the bracket, each trial a full solve (with contact: from the last contact state).
-The search is an inner solve: converged when ``|sigma / target - 1| <= tolerance``.
+The search is an inner solve: converged when ``|sigma / target - 1| <= tolerance``. When the
+stress no longer changes as the platen opens, the block is free of contact and its other
+loads (a fluid's pressure on a fracture face) alone push it onto the platen with more than the
+target: no displacement reaches it, :class:`ContactLost`.
 """
 
 from __future__ import annotations
@@ -23,6 +26,10 @@ import numpy as np
 
 class PlatenError(ValueError):
     """A platen boundary that is not flat."""
+
+
+class ContactLost(ValueError):
+    """The target stress is below the push of the block's other loads with its contact open."""
 
 
 @dataclass
@@ -115,6 +122,11 @@ class Platen:
                 return result(False, f"the solve at displacement {d:g} m did not converge")
             if abs(s1 - target) <= self.tolerance * abs(target):
                 break
+            if lo is None and abs(s1 - s_hi) <= 1e-6 * abs(s_hi):  # opened, and the stress did not change
+                raise ContactLost(f"the mean normal stress on the platen stays at {s1:.6g} Pa however far it opens "
+                                  f"(to {d:.3g} m): free of contact, the block is pushed onto the platen by its other "
+                                  f"loads (a fluid's pressure on the fracture faces) with more than the target "
+                                  f"{target:.6g} Pa: the faces separate (loss of contact)")
             if s1 < target:
                 lo, s_lo = d, s1
             else:

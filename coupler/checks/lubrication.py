@@ -16,7 +16,7 @@ from __future__ import annotations
 from coupler.fsi.apertures import hydraulic_aperture
 from coupler.fsi.flow_rate import section_flow_rates
 
-from .cubic_law import pressure_drop
+from .cubic_law import found_pressure_drop, pressure_drop
 
 KIND = "lubrication"
 DESCRIPTION = "the hydraulic aperture through a sinusoidal aperture against its lubrication limit (series or parallel)"
@@ -61,7 +61,7 @@ def evaluate(settings, scene, result) -> dict:
     e0, a = settings["aperture"], settings["amplitude"]
     rate = float(section_flow_rates(result.meshes["fluid"], result.fields["fluid"]["velocity"]).mean())
     e_h = hydraulic_aperture(rate, settings["viscosity"], settings["length"], settings["width"],
-                             settings["pressure_drop"])
+                             found_pressure_drop(settings, scene, result))
     series, parallel = series_limit(e0, a), parallel_limit(e0, a)
     limit = series if settings["direction"] == "along" else parallel
     difference = e_h / limit - 1.0

@@ -27,7 +27,7 @@ Per window::
     for k = 0, 1, ...:
         if k > 0: checkpoint.restore(window)
         Hx = iterate(window, k, x)                 # NaN/inf -> NonFiniteInterface at once
-        if ||Hx - x||_M <= tol ||Hx||_M: accept Hx, on_converged(window, Hx, step), next window
+        if ||Hx - x||_M <= tol ||Hx||_M and unmet() is None: accept Hx, on_converged(window, Hx, step), next window
         x = accelerator.update(x, Hx)
     max_iterations reached -> CouplingDiverged (or accept, when allow_unconverged)
 
@@ -219,7 +219,8 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                 on_converged: Callable[[TimeWindow, np.ndarray, "StepRecord"], None] | None = None,
                 progress=None, *, weights=None, abs_tolerance: float = 0.0, allow_unconverged: bool = False,
                 coupling: str = "implicit", t0: float = 0.0, extrapolation: int = 0,
-                divergence_factor: float | None = 1e8) -> CouplingResult:
+                divergence_factor: float | None = 1e8,
+                unmet: Callable[[], str | None] | None = None) -> CouplingResult:
     """Run `steps` time windows of length `dt`, each to convergence of the interface fixed point.
 
     Parameters
@@ -265,6 +266,10 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
     extrapolation:
         prediction of a window's first iterate from the converged values: 0
         (the last one) or 1 (linear, ``2 x_n - x_{n-1}``).
+    unmet:
+        a further condition of convergence (e.g. a target the interface vector carries an
+        unknown for): called once the residual is below tolerance, ``None`` when it holds, else
+        why not (one line, named when the window reaches `max_iterations`); the window goes on.
     divergence_factor:
         raise :class:`CouplingDiverged` at once when ``||H(x) - x||_M`` grows
         beyond this factor times its value in the first iteration of the window
@@ -347,9 +352,12 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                     res = monitor.measure(x, Hx)
                     if hasattr(bar, "iteration"):
                         bar.iteration(n, k, res.relative)
+                    pending = None
                     if monitor.is_converged(res):
-                        converged = True
-                        break
+                        pending = unmet() if unmet is not None else None
+                        if pending is None:
+                            converged = True
+                            break
                     if first_abs is None:
                         first_abs = res.absolute
                     elif divergence_factor is not None and res.absolute > divergence_factor * first_abs:
@@ -368,8 +376,10 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                     x = x_next
                 if not converged:
                     last = history.relative[-1]
+                    reason = (f"the residual is below tolerance but {pending}" if pending else
+                              f"last relative residual {last:.3g} > tolerance {tolerance:g}")
                     message = (f"coupling did not converge in {window}: {history.iterations} iterations "
-                               f"(max_iterations), last relative residual {last:.3g} > tolerance {tolerance:g} "
+                               f"(max_iterations), {reason} "
                                f"({result.norm} norm); residuals of the last iterations: "
                                f"{_fmt(history.relative[-5:])}; acceleration {accelerator.name} "
                                f"{_describe(accelerator)}")

@@ -11,7 +11,9 @@ import numpy as np
 
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
 from .flow_rate import percolates, section_flow_rates
-from .operators import OperatorContext, _fluid_solid, open_faces
+from .context import OperatorContext, _fluid_solid
+from .operators import open_faces
+from .rate_control import FlowRateControl
 from .resolution import cells_across_warning, contact_area_warning
 
 
@@ -22,7 +24,9 @@ class FractureFigures:
         scene, g = ctx.scene, ctx.scene.fluid
         self.ctx, self.fs = ctx, _fluid_solid(ctx)
         flow = scene.effect_settings["flow"]
-        self.pressure_drop = flow["inlet"]["pressure"] - flow["outlet"]["pressure"]
+        # a flow rate: dp is what the rate control found (coupler/fsi/rate_control.py)
+        self.control = ctx.shared("flow_rate_control", FlowRateControl) if "flow_rate" in flow["inlet"] else None
+        self.fixed_drop = flow["inlet"].get("pressure", 0.0) - flow["outlet"]["pressure"]
         self.length, self.width = g.spacing[0] * g.shape[0], g.spacing[1] * g.shape[1]
         self.viscosity = scene.fluid_material["viscosity"]
         self.points = np.asarray(ctx.meshes["solid"].points)
@@ -31,6 +35,10 @@ class FractureFigures:
         self.h = float(g.spacing[across])
         self.cell = tuple(float(g.spacing[d]) for d in range(3) if d != across)
         self.told: set[str] = set()
+
+    @property
+    def pressure_drop(self) -> float:
+        return self.control.pressure_drop if self.control is not None else self.fixed_drop
 
     def figures(self, outputs) -> dict:
         solid, fluid = outputs["solid"], outputs["fluid"]
@@ -53,6 +61,7 @@ class FractureFigures:
         return {"mechanical_aperture": mechanical_aperture(solid["gap"][slave], touching, weights),
                 "hydraulic_aperture": (hydraulic_aperture(rate, self.viscosity, self.length, self.width,
                                                           self.pressure_drop) if self.pressure_drop else 0.0),
+                "pressure_drop": self.pressure_drop,
                 "contact_area_fraction": fraction, "flow_rate": rate, "percolating": connected,
                 "mean_face_pressure": float(np.sum(interface.weights[wet] * pressure[wet]) / area) if area else 0.0,
                 "mean_open_aperture": open_aperture, "cells_across": open_aperture / self.h,

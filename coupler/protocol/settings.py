@@ -330,7 +330,10 @@ class ParticipantSpec:
     ``python -m module`` with ``arguments`` after the protocol's own; ``role``: the
     ``[solvers.X]`` it can fill (``"solid"``, ``"fluid"``; None: none, a test participant);
     ``settings``: its keys; ``needs``: the scene tables it cannot run without (``"flow"``: the
-    grid's boundary conditions); ``memory``: (bytes per MPI rank, bytes per cell) of its peak
+    grid's boundary conditions); ``accepts``: the optional inputs of ``advance`` it takes
+    beyond its role's (``"inlet_pressure"``: the pressure on the grid face xmin, set by the
+    coupler in every coupling iteration of a flow driven by ``[flow] flow_rate``); ``memory``:
+    (bytes per MPI rank, bytes per cell) of its peak
     resident memory, for the coupler's estimate before a run. A participant that declares the
     key ``ranks`` is one process that runs its own solver on that many MPI ranks (the coupler
     does not start it with ``mpirun -n``); otherwise the coupler starts it on ``ranks`` MPI
@@ -343,6 +346,7 @@ class ParticipantSpec:
     settings: Settings = field(default_factory=Settings)
     arguments: tuple[str, ...] = ()
     needs: tuple[str, ...] = ()
+    accepts: tuple[str, ...] = ()
     memory: tuple[int, int] = (50 * 2**20, 100)
 
     @property

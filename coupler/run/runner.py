@@ -265,6 +265,7 @@ class Run:
     def iterate(self, window, iteration: int, x) -> np.ndarray:
         """One pass of Steps 1-6 with the interface vector x; returns H(x)."""
         given = {id(e): value for (e, _), value in zip(self._accelerated(), self._split(x))}
+        self.context.window = window
         try:
             for p in self.plan.participants:
                 inputs = {}
@@ -282,6 +283,12 @@ class Run:
             raise CouplerError(f"{window}, iteration {iteration}: {exc}") from None
         return np.concatenate([np.ravel(h) for h in H]) if H else np.asarray(x)
 
+    def unmet(self) -> str | None:
+        """Why a step whose interface residual is below tolerance is not converged yet (an
+        operator's own condition, e.g. a flow rate to reach), or None."""
+        reasons = [op.unmet() for _, op in self._accelerated() if hasattr(op, "unmet")]
+        return "; ".join(r for r in reasons if r) or None
+
     # -- a converged step -------------------------------------------------------------
     def on_converged(self, window, x, step) -> None:
         inner = self.solves
@@ -296,7 +303,8 @@ class Run:
             for name, series in self.series.items():
                 fields = {**self.outputs[name], **self.inputs.get(name, {})}
                 fields.update({f: v for (n, f), v in accepted.items() if n == name})
-                mesh = self.meshes[name]
+                mesh = self.meshes[name]  # a field of neither size (a boundary's value) is the step's figures'
+                fields = {k: v for k, v in fields.items() if len(v) in (mesh.num_points, mesh.num_cells)}
                 if isinstance(mesh, StructuredGrid):
                     series.write(window.index, window.t_end, cell_data=fields)
                 else:  # per point, or per cell (a P0 field)
@@ -327,7 +335,7 @@ class Run:
         accelerated = self._accelerated()
         if plan.implicit:
             c = scene.coupling
-            x0 = np.zeros(sum(op.size for _, op in accelerated))
+            x0 = np.concatenate([op.initial() if hasattr(op, "initial") else np.zeros(op.size) for _, op in accelerated])
             weights = np.concatenate([op.weights for _, op in accelerated])
             accelerator = make_accelerator(c["acceleration"], relaxation=c["relaxation"], reuse=c["reuse"],
                                            max_columns=c["columns"])
@@ -338,7 +346,8 @@ class Run:
         try:
             result = run_coupled(steps, dt, self.iterate, x0, accelerator, tolerance=scene.coupling["tolerance"],
                                  max_iterations=scene.coupling["max_iterations"], checkpoint=checkpoint,
-                                 on_converged=self.on_converged, progress=bar, weights=weights, coupling=mode)
+                                 on_converged=self.on_converged, progress=bar, weights=weights, coupling=mode,
+                                 unmet=self.unmet)
         finally:
             bar.close()
         self.summary["accelerator"] = result.accelerator

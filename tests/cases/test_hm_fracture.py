@@ -125,7 +125,7 @@ def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("replace, where, reason", [
-    ({"outlet_pressure = 2.0e5": "outlet_pressure = 1.0e6"}, "[flow] inlet_pressure",
+    ({"outlet_pressure = 2.0e5": "outlet_pressure = 1.0e6"}, "[flow] outlet_pressure",
      "reaches the smallest confining stress 1e+06 Pa of [loads.2] stress"),
     ({"inlet_pressure = 3.0e5 ": "inlet_velocity = [0.001, 0.0, 0.0] "}, "[flow] inlet_pressure",
      "missing: contact with 'flow' drives the flow by a pressure difference"),

@@ -305,3 +305,22 @@ def test_on_a_terminal_the_progress_line_follows_every_coupling_iteration():
     assert len(iterations) >= 3 and "residual" in iterations[-1]  # redrawn in place, one frame per iteration
     assert any("step 2: iteration 1," in f for f in frames) and "2/2" in frames[-1]
     assert "<" in iterations[0]  # elapsed < estimated time left
+
+
+def test_a_window_converges_only_when_its_further_condition_holds():
+    """``unmet``: asked once the residual is below tolerance; the window goes on while it gives
+    a reason, and the max_iterations message names the last one."""
+    asked = []
+
+    def unmet():
+        asked.append(len(asked))
+        return None if len(asked) > 2 else f"target missed ({len(asked)})"
+
+    result = run_coupled(1, 1.0, lambda window, k, x: np.ones(3), np.ones(3), tolerance=1e-8, max_iterations=10,
+                         unmet=unmet)
+    assert result.iterations == [3] and asked == [0, 1, 2]
+    asked.clear()
+    with pytest.raises(CouplingDiverged, match=r"2 iterations \(max_iterations\), the residual is below tolerance "
+                                               r"but target missed \(2\)"):
+        run_coupled(1, 1.0, lambda window, k, x: np.ones(3), np.ones(3), tolerance=1e-8, max_iterations=2,
+                    unmet=unmet)

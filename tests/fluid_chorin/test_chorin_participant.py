@@ -41,7 +41,7 @@ def inputs(fraction, velocity=None):
 def test_announce_geometry_and_the_outputs_of_an_advance():
     p = channel_participant()
     a = p.announce()
-    assert a["provides"] == ["pressure", "velocity"] and a["accepts"] == ["solid_fraction", "solid_velocity"]
+    assert a["provides"] == ["pressure", "velocity"] and a["accepts"] == ["solid_fraction", "solid_velocity", "inlet_pressure"]
     header, arrays = p.geometry()
     assert header["grid"] == {"origin": [0.0, 0.0, 0.0], "spacing": [1e-3] * 3, "shape": [8, 6, 1]} and arrays is None
     f = np.zeros(48)

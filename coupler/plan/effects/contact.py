@@ -113,18 +113,23 @@ def _check_with_flow(scene, cfg: dict) -> None:
 
 
 def check_fluid_below_confinement(scene) -> None:
-    """Contact with flow (after [flow] is read): the flow is driven by a pressure difference,
-    and no boundary pressure of the fluid reaches a platen's confining stress, where the
-    faces would separate and the platen could no longer reach its stress."""
+    """Contact with flow (after [flow] is read): the flow is driven by a pressure difference
+    (or a flow rate, the inlet pressure then found in the run and stopped there at the
+    confining stress: coupler/fsi/rate_control.py), and no boundary pressure of the fluid
+    (inlet, outlet, open faces) reaches a platen's confining stress, where the faces would
+    separate and the platen could no longer reach its stress."""
     path, flow = scene.path, scene.effect_settings.get("flow") or {}
-    if "pressure" not in flow.get("inlet", {}):
+    inlet = flow.get("inlet", {})
+    if "pressure" not in inlet and "flow_rate" not in inlet:
         raise SceneError(f"{path}: [flow] inlet_pressure: missing: contact with 'flow' drives the flow by a pressure "
-                         f"difference (inlet_pressure on xmin, outlet_pressure on xmax); the fracture's hydraulic "
-                         f"aperture needs it")
-    fluid = max(flow["inlet"]["pressure"], flow["outlet"]["pressure"])
+                         f"difference (inlet_pressure on xmin, outlet_pressure on xmax) or a flow rate (flow_rate); "
+                         f"the fracture's hydraulic aperture needs it")
+    given = {"inlet_pressure": inlet.get("pressure"), "outlet_pressure": flow["outlet"]["pressure"],
+             **{f"faces.{face}": c["pressure"] for face, c in flow["faces"].items() if isinstance(c, dict)}}
+    key, fluid = max(((k, p) for k, p in given.items() if p is not None), key=lambda kp: kp[1])
     for i, load in enumerate(scene.loads, start=1):
         if load.type == "platen" and fluid >= min(load.value):
-            raise SceneError(f"{path}: [flow] inlet_pressure: the fluid's pressure {fluid:g} Pa reaches the smallest "
+            raise SceneError(f"{path}: [flow] {key}: the fluid's pressure {fluid:g} Pa reaches the smallest "
                              f"confining stress {min(load.value):g} Pa of [loads.{i}] stress: the faces would "
                              f"separate; keep the fluid's pressure below the confining stress")
 
@@ -193,11 +198,13 @@ def plan_with_flow(scene, plan) -> None:
                       "(12 mu Q L / (W dp))^(1/3) and mean fluid pressure on the open faces "
                       "(coupler/fsi/fracture.py)")
     plan.monitors.append("fracture")
-    dp = flow["inlet"]["pressure"] - flow["outlet"]["pressure"]
+    inlet = flow["inlet"]
+    drive = (f"pressure difference {inlet['pressure'] - flow['outlet']['pressure']:g} Pa" if "pressure" in inlet else
+             f"flow rate {inlet['flow_rate']:g} m^3/s, the pressure difference an unknown of the fixed point,")
     plan.iteration = (f"hydro-mechanical fracture (flow solver {scene.solvers['fluid'].kind}, not the "
                       f"fluid at rest of 'fluid_pressure'): {steps} load step{'s' * (steps > 1)}, each one implicit "
                       f"coupling ({coupling['acceleration']} on the fluid pressure at the faces, tolerance "
                       f"{coupling['tolerance']:g}, at most {coupling['max_iterations']} iterations): the fluid "
-                      f"(pressure difference {dp:g} Pa from xmin to xmax) in the deformed, contact-closed blocks, "
+                      f"({drive} from xmin to xmax) in the deformed, contact-closed blocks, "
                       f"the solid's contact ({c['solver']}) from the step's start under {loading} and the fluid's "
                       f"pressure")

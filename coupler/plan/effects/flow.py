@@ -23,6 +23,7 @@ import math
 
 from coupler.errors import SceneError
 from coupler.protocol.slabs import slab_bounds
+from coupler.scene.participants import for_role
 from coupler.scene.tables import Table
 from transfer.grid import BOX_FACES
 
@@ -36,9 +37,14 @@ DOMAINS = ("solid", "fluid")  # the [geometry.X] tables it needs: the solid, ela
 FACE_CONDITIONS = ("wall", "slip", "symmetry", "empty")
 #: how the solid fraction of a grid cell is sampled ([flow] solid_fraction; coupler/fsi/operators.py)
 FRACTIONS = ("exact", "cell_centre")
+#: what drives the flow at the inlet xmin ([flow]: exactly one)
+INLETS = ("inlet_velocity", "inlet_pressure", "flow_rate")
 TABLES = {"flow": {
     "inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
     "inlet_pressure": "fixed inlet pressure on the grid face xmin [Pa]",
+    "flow_rate": "the volume flow rate Q from xmin to xmax instead of a fixed inlet [m^3/s]: the inlet pressure is "
+                 "an unknown of the coupling, adjusted each iteration until Q is reached (fluids that accept "
+                 "'inlet_pressure': chorin)",
     "outlet_pressure": "fixed outlet pressure on the grid face xmax [Pa] (default 0)",
     "walls": f"condition of the other grid faces: one of {', '.join(FACE_CONDITIONS)} (default wall)",
     "faces": "table: face (ymin ... zmax) -> condition ({ pressure = p } for an open face), overriding walls",
@@ -67,6 +73,7 @@ def parse(scene, data: dict) -> None:
     _check_slabs(scene)
     if "flow" in data:
         scene.effect_settings[NAME] = _boundary_conditions(path, data["flow"], scene.fluid)
+        _check_rate_control(scene)
     elif NAME in scene.solvers["fluid"].spec.needs:
         raise SceneError(f"{path}: [flow] inlet_velocity: missing: the {scene.solvers['fluid'].kind} fluid needs a "
                          f"[flow] table with "
@@ -83,16 +90,28 @@ def _check_slabs(scene) -> None:
             raise SceneError(f"{scene.path}: [solvers.fluid] ranks: {exc} ([geometry.fluid] shape)") from None
 
 
+def _check_rate_control(scene) -> None:
+    """A flow rate needs a fluid whose inlet pressure the coupler may set in every iteration."""
+    solver = scene.solvers["fluid"]
+    if "flow_rate" in scene.effect_settings[NAME]["inlet"] and "inlet_pressure" not in solver.spec.accepts:
+        raise SceneError(f"{scene.path}: [flow] flow_rate: the {solver.kind} fluid does not take a new inlet pressure "
+                         f"in every coupling iteration (a participant that accepts 'inlet_pressure': "
+                         f"{', '.join(k for k, p in for_role('fluid').items() if 'inlet_pressure' in p.accepts)}); give "
+                         f"inlet_pressure instead")
+
+
 def _boundary_conditions(path, data, fluid) -> dict:
     """The fluid's boundary conditions on the faces of its grid ([flow])."""
     t = Table(path, "flow", data, TABLES["flow"])
-    if ("inlet_velocity" in t.data) == ("inlet_pressure" in t.data):
-        raise t.error("inlet_velocity", "give exactly one of inlet_velocity = [u, v, w] (m/s) or "
-                                        "inlet_pressure = p (Pa)")
+    if sum(key in t.data for key in INLETS) != 1:
+        raise t.error("inlet_velocity", "give exactly one of inlet_velocity = [u, v, w] (m/s), inlet_pressure = p "
+                                        "(Pa) or flow_rate = Q (m^3/s)")
     if "inlet_velocity" in t.data:
         inlet = {"velocity": t.vector("inlet_velocity")}
-    else:
+    elif "inlet_pressure" in t.data:
         inlet = {"pressure": t.number("inlet_pressure")}
+    else:
+        inlet = {"flow_rate": t.number("flow_rate", positive=True)}
     outlet = {"pressure": t.number("outlet_pressure", 0.0)}
     walls = t.string("walls", "wall", FACE_CONDITIONS)
     faces_data = t.data.get("faces", {})
@@ -143,7 +162,9 @@ def fluid_config(scene) -> dict:
         config["case_dir"] = str((Path(scene.output_dir) / "logs" / "fluid_case").resolve())
     f = scene.effect_settings.get(NAME)
     if f:
-        config.update(inlet=f["inlet"], outlet=f["outlet"], walls=f["walls"], boundaries=dict(f["faces"]))
+        # a flow rate: a fixed-pressure inlet whose value the coupler sends with every advance
+        inlet = {"pressure": f["outlet"]["pressure"]} if "flow_rate" in f["inlet"] else f["inlet"]
+        config.update(inlet=inlet, outlet=f["outlet"], walls=f["walls"], boundaries=dict(f["faces"]))
     return config
 
 
@@ -164,6 +185,14 @@ def plan(scene, plan) -> None:
     dynamic = "dynamics" in scene.effects
     if elastic:
         _loading(scene, plan)
+    rate = (scene.effect_settings.get(NAME) or {}).get("inlet", {}).get("flow_rate")
+    if rate is not None:
+        plan.exchanges.append(Exchange(
+            ["fluid.velocity", "solid.displacement"], "fluid.inlet_pressure", "flow_rate_control", "before 1",
+            accelerated=True, description=f"the pressure difference dp that passes [flow] flow_rate = {rate:g} m^3/s: "
+                                          f"an unknown of the fixed point, H(dp) = dp Q_target / Q (Stokes: Q linear "
+                                          f"in dp); converged when also |Q / Q_target - 1| <= tolerance "
+                                          f"(coupler/fsi/rate_control.py)"))
     fraction = (scene.effect_settings.get(NAME) or {}).get("solid_fraction", "exact")
     deformed = ("the fixed solid" if not elastic else "the deformed solid" if c["deformation"] else
                 "the undeformed solid ([coupling] deformation = false)")
@@ -207,7 +236,7 @@ def plan(scene, plan) -> None:
                                "none": "chorin: the solid velocity is not applied (penalization towards rest)"}
                               [s["solid_velocity"]])
     n = scene.time["steps"]
-    if elastic:
+    if elastic or rate is not None:
         plan.iteration = (f"{n} time steps of {scene.time['dt']:g} s{quasi}; implicit fixed point per step "
                           f"({c['acceleration']}, tolerance {c['tolerance']:g}, at most {c['max_iterations']} "
                           f"iterations)")
