@@ -238,23 +238,26 @@ bool box_outside(const Vec3& lo, const Vec3& hi, const Convex& c, double eps) {
 }
 
 // True when every vertex of the `ntets` tets lies outside one plane of `c` by more than
-// eps (a separating plane: nothing of them meets `c`); `inside` tells whether all lie
-// inside every plane. All planes and vertices are evaluated, without branches.
-bool outside_a_plane(const Convex& c, const Tet* tets, int ntets, double eps, bool& inside) {
-  int separated = 0, in = 1;
+// eps (a separating plane: nothing of them meets `c`); bit p of `cuts` is set when some
+// vertex lies outside plane p by more than eps (no bit: all lie inside `c`, and a plane
+// without its bit leaves them whole). All planes and vertices are evaluated, without
+// branches.
+bool outside_a_plane(const Convex& c, const Tet* tets, int ntets, double eps, unsigned& cuts) {
+  int separated = 0;
+  cuts = 0;
   for (int p = 0; p < c.nplanes; ++p) {
     const Vec3& n = c.p[p].n;
-    int out = 1;
+    int out = 1, some = 0;
     for (int t = 0; t < ntets; ++t)
       for (int k = 0; k < 4; ++k) {
         const Vec3& x = tets[t].v[k];
         const double s = n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - c.p[p].d;
         out &= s > eps;
-        in &= s <= eps;
+        some |= s > eps;
       }
     separated |= out;
+    cuts |= static_cast<unsigned>(some) << p;
   }
-  inside = in;
   return separated;
 }
 
@@ -289,20 +292,21 @@ class TetFaces {
 // non-empty piece to piece(poly). With `reject`, a plane of `c` that all subject
 // vertices lie outside of rejects the pair, and when `c` holds the planes of the tet
 // `other`, a subject tet whose own faces, faces_of(t), leave all of `other` outside is
-// skipped (both by more than eps): such pairs are those clipping finds empty; without
-// it every pair is clipped (tests). With `clip` false nothing is clipped (benchmarks:
+// skipped (both by more than eps): such pairs are those clipping finds empty; a plane
+// no subject vertex lies outside of is not clipped by. Without it every pair is clipped
+// by every plane (tests). With `clip` false nothing is clipped (benchmarks:
 // the rejection tests alone).
 template <class Faces, class F>
 void clip_convex(const Tet* subject, int nsubject, Faces&& faces_of, const Convex& c, const Tet* other,
                  double eps, bool reject, bool clip, Polyhedron& poly, F&& piece) {
-  bool inside = false, unused = false;
-  if (reject && outside_a_plane(c, subject, nsubject, eps, inside)) return;
+  unsigned cuts = ~0u, unused = 0;  // the planes of `c` that cut the subject (all without `reject`)
+  if (reject && outside_a_plane(c, subject, nsubject, eps, cuts)) return;
   for (int t = 0; t < nsubject; ++t) {
-    if (reject && !inside && other && outside_a_plane(faces_of(t), other, 1, eps, unused)) continue;
+    if (reject && cuts && other && outside_a_plane(faces_of(t), other, 1, eps, unused)) continue;
     if (!clip) continue;
     poly.assign(subject[t]);
-    for (int p = 0; !inside && p < c.nplanes && poly.clip(c.p[p], eps); ++p) {
-    }
+    for (int p = 0; p < c.nplanes; ++p)
+      if ((cuts >> p & 1u) && !poly.clip(c.p[p], eps)) break;
     if (!poly.empty()) piece(poly);
   }
 }
@@ -335,7 +339,8 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
     tid = omp_get_thread_num();
 #endif
     std::vector<int32_t> slot(n_src_dofs, -1);
-    Bparts[tid].reserve(8 * nt * (tgt.ncells / nth + 1));
+    // about 14 source dofs per target cell of P1 tet pairs of similar size: room for 16
+    Bparts[tid].reserve(16 * nt * (tgt.ncells / nth + 1));
     Dparts[tid].reserve((lump ? 1 : nt) * nt * (tgt.ncells / nth + 1));
     std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
     LocalAssembly la;
