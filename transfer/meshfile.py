@@ -13,7 +13,10 @@ file order, as :meth:`transfer.Mesh.from_meshio` joins their cells.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import threading
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +32,38 @@ _DIMENSIONS = (("vertex", 0), ("line", 1), ("triangle", 2), ("quad", 2), ("polyg
                ("tetra", 3), ("hexahedron", 3), ("wedge", 3), ("pyramid", 3), ("polyhedron", 3))
 
 KINDS = ("point", "cell")
+
+#: zlib level of the .vtu files MeshFile writes: meshio compresses at zlib's default, 6,
+#: and offers no level; level 1 writes the same standard zlib-compressed VTU about three
+#: times faster, a few per cent larger
+VTU_ZLIB_LEVEL = 1
+_vtu_lock = threading.Lock()
+
+
+class _Zlib:
+    """The zlib module with `compress` at `level`: meshio's VTU writer calls it."""
+
+    def __init__(self, level: int):
+        self.level = level
+
+    def compress(self, data: bytes) -> bytes:
+        return zlib.compress(data, self.level)
+
+    def __getattr__(self, name):
+        return getattr(zlib, name)
+
+
+@contextlib.contextmanager
+def vtu_zlib_level(level: int):
+    """meshio's VTU writer compresses at zlib `level` inside this block."""
+    from meshio.vtu import _vtu
+
+    with _vtu_lock:
+        saved, _vtu.zlib = _vtu.zlib, _Zlib(level)
+        try:
+            yield
+        finally:
+            _vtu.zlib = saved
 
 
 def cell_dimension(cell_type: str) -> int | None:
@@ -317,6 +352,7 @@ class MeshFile:
         out = meshio.Mesh(self.mesh.points, [(self.mesh.cell_type, self.mesh.cells)],
                           point_data=point_data, cell_data=cell_data)
         try:
-            meshio.write(Path(path), out)
+            with vtu_zlib_level(VTU_ZLIB_LEVEL):
+                meshio.write(Path(path), out)
         except Exception as exc:  # meshio raises many exception types (format, I/O)
             raise MeshFileError(f"{path}: cannot write the mesh: {one_line(exc)}") from exc
