@@ -177,8 +177,14 @@ class Mesh:
         return self.cell_type in ("tetra", "triangle")
 
     def bounding_box(self) -> tuple[np.ndarray, np.ndarray]:
-        used = self.points[self.cells.ravel()] if self.num_cells else self.points
-        return used.min(axis=0), used.max(axis=0)
+        """Lowest and highest coordinates of the points the cells use."""
+        if "box" not in self._cache:
+            used = np.zeros(self.num_points, bool)
+            used[self.cells.ravel()] = True
+            points = self.points[used] if self.num_cells else self.points
+            self._cache["box"] = points.min(axis=0), points.max(axis=0)
+        lo, hi = self._cache["box"]
+        return lo.copy(), hi.copy()
 
     def cell_vertices(self) -> np.ndarray:
         """(m, k, 3) coordinates of the vertices of each cell."""
@@ -191,6 +197,9 @@ class Mesh:
         the same decomposition the intersection kernels use."""
         key = ("measures", signed)
         if key not in self._cache:
+            if not signed and self.cell_type in ("tetra", "hexahedron"):
+                self._cache[key] = np.abs(self.cell_measures(signed=True))
+                return self._cache[key]
             p = self.cell_vertices()
             if self.cell_type == "tetra":
                 m = _signed_tet_volumes(p)
@@ -241,9 +250,9 @@ class Mesh:
 
     def _corner_volumes(self) -> np.ndarray:
         """(m, 1) signed volumes of tetrahedra, (m, 8) of the corner tetrahedra of hexahedra."""
-        p = self.cell_vertices()
         if self.cell_type == "tetra":
-            return _signed_tet_volumes(p)[:, None]
+            return self.cell_measures(signed=True)[:, None]
+        p = self.cell_vertices()
         return np.stack([_signed_tet_volumes(p[:, c]) for c in HEX_CORNERS], axis=1)
 
     def _check_orientation(self, small: np.ndarray, reorient: bool):

@@ -219,3 +219,17 @@ def test_q1_mass_matrix_of_distorted_hexes_has_the_trilinear_volume():
     M = FunctionSpace(m, "Q1").mass_matrix()
     np.testing.assert_allclose(M.sum(), 1.0, rtol=1e-13)
     assert np.all(np.linalg.eigvalsh(M.toarray()) > 0)
+
+
+def test_bounding_box_of_the_used_points_computed_once():
+    """Points no cell uses are outside the box; the box is cached (Transfer.assemble asks
+    for it several times), and what a caller does to the arrays returned stays its own."""
+    t = box_tetrahedra((2, 2, 2), jitter=0.1, seed=1)
+    far = Mesh(np.vstack([t.points, [[5.0, -7.0, 9.0]]]), t.cells, "tetra")
+    lo, hi = far.bounding_box()
+    np.testing.assert_array_equal(lo, [0, 0, 0])
+    np.testing.assert_array_equal(hi, [1, 1, 1])
+    lo[:] = -1.0
+    np.testing.assert_array_equal(far.bounding_box()[0], [0, 0, 0])
+    assert "box" in far._cache
+    np.testing.assert_array_equal(far.cell_measures(), np.abs(far.cell_measures(signed=True)))
