@@ -261,31 +261,60 @@ bool outside_a_plane(const Convex& c, const Tet* tets, int ntets, double eps, un
   return separated;
 }
 
-// The outward face planes of every tet of a mesh, each relative to the tet's vertex 0:
-// computed once per source cell instead of once per candidate pair.
-class TetFaces {
+// What a source tet needs in every candidate pair, computed once per cell instead of once
+// per pair: its outward face planes relative to its vertex 0, the diagonal of its box, and
+// its affine basis phi_a = c_a + g_a.x (paper eq. 3) with the shape number h max |g_a|.
+class SourceTets {
  public:
-  TetFaces() = default;
-  explicit TetFaces(const ElementSet& e) : faces_(e.ncells) {
-    for (int64_t c = 0; c < e.ncells; ++c) {
-      const Vec3 v0 = e.vertex(c, 0);
-      Tet local;
-      for (int k = 0; k < 4; ++k) local.v[k] = sub(e.vertex(c, k), v0);
-      const Convex planes = tet_planes(local);
-      for (int i = 0; i < 4; ++i) faces_[c][i] = planes.p[i];
+  SourceTets() = default;
+  explicit SourceTets(const ElementSet& e) : cells_(e.ncells), nbasis_(e.nbasis()) {
+    ElementGeometry g;
+    Evaluator ev;
+    double c[4];
+    for (int64_t k = 0; k < e.ncells; ++k) {
+      Cell& out = cells_[k];
+      g.build(e, k, e.vertex(k, 0), false);
+      const Convex planes = tet_planes(g.tets[0]);
+      for (int i = 0; i < 4; ++i) out.faces[i] = planes.p[i];
+      ev.build(e, g);
+      ev.affine(c, out.grad);
+      out.diagonal = g.box.diagonal();
+      out.shape = shape(out.grad, nbasis_, out.diagonal);
     }
   }
-  bool empty() const { return faces_.empty(); }
-  // The faces of cell c in a frame where its vertex 0 is at v0.
-  Convex in_frame(int64_t c, const Vec3& v0) const {
+  bool empty() const { return cells_.empty(); }
+  double diagonal(int64_t k) const { return cells_[k].diagonal; }
+  double shape_number(int64_t k) const { return cells_[k].shape; }
+  // The faces of cell k in a frame where its vertex 0 is at v0.
+  Convex faces(int64_t k, const Vec3& v0) const {
     Convex out;
     out.nplanes = 4;
-    for (int i = 0; i < 4; ++i) out.p[i] = {faces_[c][i].n, faces_[c][i].d + dot(faces_[c][i].n, v0)};
+    for (int i = 0; i < 4; ++i) {
+      const Plane& f = cells_[k].faces[i];
+      out.p[i] = {f.n, f.d + dot(f.n, v0)};
+    }
     return out;
+  }
+  // The basis of cell k in that frame, as Evaluator::affine gives it.
+  void affine(int64_t k, const Vec3& v0, double* c, Vec3* g) const {
+    const Vec3* grad = cells_[k].grad;
+    c[0] = 1.0;
+    g[0] = grad[0];
+    for (int i = 1; i < nbasis_; ++i) {
+      g[i] = grad[i];
+      c[i] = -dot(grad[i], v0);
+      c[0] -= c[i];
+    }
   }
 
  private:
-  std::vector<std::array<Plane, 4>> faces_;
+  struct Cell {
+    std::array<Plane, 4> faces;
+    Vec3 grad[4];
+    double diagonal, shape;
+  };
+  std::vector<Cell> cells_;
+  int nbasis_ = 0;
 };
 
 // Clips each of the `nsubject` tets of `subject` by convex `c` and hands every
@@ -321,7 +350,7 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
   const std::vector<double> coords = src.packed_coords();
   src.cell_coords = coords.data();
   const SourceSearch search(src, src_grid);
-  const TetFaces src_faces = src.kind == TET && tgt.kind == TET ? TetFaces(src) : TetFaces();
+  const SourceTets src_tets = src.kind == TET && tgt.kind == TET ? SourceTets(src) : SourceTets();
 
   const int nth = thread_count(nthreads);
   std::vector<Triplets> Bparts(nth), Dparts(nth);
@@ -382,25 +411,30 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
         const ElementGeometry& subj = clip_source ? sg : tg;
         ElementGeometry& clipper = clip_source ? tg : sg;
         clipper.build_planes();
-        const double eps = 1e-12 * std::min(h, sg.box.diagonal()) + 4 * DBL_EPSILON * h;
+        const double eps =
+            1e-12 * std::min(h, src_tets.empty() ? sg.box.diagonal() : src_tets.diagonal(s)) + 4 * DBL_EPSILON * h;
         const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
         // the faces of a source tet are computed once, those of other tets here
         auto faces_of = [&](int k) {
-          return clip_source && !src_faces.empty() ? src_faces.in_frame(s, sg.verts[0]) : tet_planes(subj.tets[k]);
+          return clip_source && !src_tets.empty() ? src_tets.faces(s, sg.verts[0]) : tet_planes(subj.tets[k]);
         };
         bool prepared = false, any = false, moments = false;
         const SimplexRule* q_rule = &rule;
         auto integrate = [&](const Polyhedron& poly) {
           if (stages < kIntegrate) return;
           if (!prepared) {
-            sev.build(src, sg);
             src.dofs(s, sdofs);
             std::fill(block, block + ns * nt, 0.0);
-            if (exact) {
+            if (exact && !src_tets.empty()) {
+              src_tets.affine(s, sg.verts[0], cs, gs);
+              moments = moments_t && src_tets.shape_number(s) <= kSliverShape;
+            } else if (exact) {
+              sev.build(src, sg);
               sev.affine(cs, gs);
               moments = moments_t && shape(gs, ns, sg.box.diagonal()) <= kSliverShape;
-              if (!moments) q_rule = &kDegree2;
             }
+            if (exact && !moments) q_rule = &kDegree2;
+            if (!moments) sev.build(src, sg);
             pair = Moments{};
             prepared = true;
           }
