@@ -95,5 +95,5 @@ class FluidSolid:
         return {"interface": self.interface, "geometry_update": self.on_grid.describe()}
 
 
-def _fluid_solid(ctx: OperatorContext) -> FluidSolid:
+def fluid_solid(ctx: OperatorContext) -> FluidSolid:
     return ctx.shared("fluid_solid", FluidSolid)

@@ -11,7 +11,7 @@ import numpy as np
 
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
 from .flow_rate import percolates, section_flow_rates
-from .context import OperatorContext, _fluid_solid
+from .context import OperatorContext, fluid_solid
 from .operators import open_faces
 from .rate_control import FlowRateControl
 from .resolution import cells_across_warning, contact_area_warning
@@ -22,7 +22,7 @@ class FractureFigures:
 
     def __init__(self, ctx: OperatorContext):
         scene, g = ctx.scene, ctx.scene.fluid
-        self.ctx, self.fs = ctx, _fluid_solid(ctx)
+        self.ctx, self.fs = ctx, fluid_solid(ctx)
         flow = scene.effect_settings["flow"]
         # a flow rate: dp is what the rate control found (coupler/fsi/rate_control.py)
         self.control = ctx.shared("flow_rate_control", FlowRateControl) if "flow_rate" in flow["inlet"] else None

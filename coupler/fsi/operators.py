@@ -23,7 +23,7 @@ import numpy as np
 from transfer import FunctionSpace, OverlapWarning, StructuredGrid, Transfer
 
 from .centres import centres_inside
-from .context import OperatorContext, _fluid_solid
+from .context import OperatorContext, fluid_solid
 from .open_gap import touching
 from .rate_control import FlowRateControl
 from .viscous import FluidTraction, traction_figures
@@ -36,7 +36,7 @@ class PressureTrace:
     units = "Pa"
 
     def __init__(self, ctx: OperatorContext, exchange=None):
-        self.fs = _fluid_solid(ctx)
+        self.fs = fluid_solid(ctx)
         interface = self.fs.on_grid.interface
         self.size, self.weights = interface.size, self.fs.on_grid.reference_weights
 
@@ -76,7 +76,7 @@ class ViscousTraction:
     units = "Pa"
 
     def __init__(self, ctx: OperatorContext, exchange=None):
-        self.fs = _fluid_solid(ctx)
+        self.fs = fluid_solid(ctx)
         self.traction = FluidTraction(ctx.scene.fluid_material["viscosity"])
         interface = self.fs.on_grid.interface
         self.size, self.weights = 3 * interface.size, np.repeat(self.fs.on_grid.reference_weights, 3)
@@ -106,7 +106,7 @@ class SolidFraction:
     units = "1"
 
     def __init__(self, ctx: OperatorContext, exchange=None):
-        self.fs = _fluid_solid(ctx)
+        self.fs = fluid_solid(ctx)
         self.centres = (exchange.options.get("fraction", "exact") == "cell_centre") if exchange else False
         self._mask = None  # (the solid mesh it was sampled on, the mask)
 
@@ -129,7 +129,7 @@ class SolidVelocity:
     units = "m/s"
 
     def __init__(self, ctx: OperatorContext, exchange=None):
-        self.fs = _fluid_solid(ctx)
+        self.fs = fluid_solid(ctx)
 
     def evaluate(self, outputs) -> np.ndarray:
         return self.fs.update(outputs).to_fluid.apply(outputs["solid"]["velocity"], fill=0.0)

@@ -19,7 +19,7 @@ import numpy as np
 from coupler.errors import CouplerError
 
 from .flow_rate import percolates, section_flow_rates
-from .context import OperatorContext, _fluid_solid
+from .context import OperatorContext, fluid_solid
 
 
 class FlowRateControl:
@@ -32,7 +32,7 @@ class FlowRateControl:
     def __init__(self, ctx: OperatorContext, exchange=None):
         scene = ctx.scene
         flow = scene.effect_settings["flow"]
-        self.ctx, self.fs, self.scene = ctx, _fluid_solid(ctx), scene
+        self.ctx, self.fs, self.scene = ctx, fluid_solid(ctx), scene
         self.target, self.outlet = flow["inlet"]["flow_rate"], flow["outlet"]["pressure"]
         self.tolerance = scene.coupling["tolerance"]
         self.where = f"{scene.path}: [flow] flow_rate"
