@@ -303,8 +303,8 @@ class Run:
             for name, series in self.series.items():
                 fields = {**self.outputs[name], **self.inputs.get(name, {})}
                 fields.update({f: v for (n, f), v in accepted.items() if n == name})
-                mesh = self.meshes[name]  # a field of neither size (a boundary's value) is the step's figures'
-                fields = {k: v for k, v in fields.items() if len(v) in (mesh.num_points, mesh.num_cells)}
+                mesh = self.meshes[name]
+                fields = mesh_fields(fields, mesh, name)
                 if isinstance(mesh, StructuredGrid):
                     series.write(window.index, window.t_end, cell_data=fields)
                 else:  # per point, or per cell (a P0 field)
@@ -384,3 +384,15 @@ class Run:
     def restore(self, window) -> None:
         for client in self.clients.values():
             self.phases.remote("checkpoint", client, "restore_state", window.index)
+
+
+def mesh_fields(fields: dict, mesh, participant: str) -> dict:
+    """The fields of a participant that live on its mesh (one value per point or per cell), for
+    its VTU series; a single value (a boundary's, e.g. the inlet pressure of a flow-rate
+    control) is left to the step's figures. Any other length is a defect, not dropped silently."""
+    sizes = (mesh.num_points, mesh.num_cells)
+    wrong = [f"{k} ({len(v)})" for k, v in fields.items() if len(v) not in sizes and len(v) != 1]
+    if wrong:
+        raise CouplerError(f"participant {participant!r}: field(s) {', '.join(wrong)} match neither its "
+                           f"{mesh.num_points} points nor its {mesh.num_cells} cells")
+    return {k: v for k, v in fields.items() if len(v) in sizes}

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from coupler.cli import main
+from coupler.errors import CouplerError
 from vc_helpers import CASES, copy_case
 
 CASE = CASES / "standin_flow"
@@ -119,3 +120,17 @@ def test_swapping_the_solid_is_one_line(tmp_path, capsys):
     np.testing.assert_allclose(last.point_data["pressure"][top], 1e5, rtol=1e-9)
     np.testing.assert_array_equal(last.point_data["pressure"][~top], 0.0)
     assert last.point_data["displacement"][:, 2].min() < 0
+
+
+def test_the_vtu_series_takes_mesh_fields_and_leaves_single_values_to_the_figures():
+    """A participant's fields of one value per point or cell go to its VTU series, a single
+    value (the inlet pressure of a flow-rate control) does not, any other length is an error."""
+    from coupler.run.runner import mesh_fields
+    from transfer import StructuredGrid
+
+    grid = StructuredGrid.from_bounds((0, 0, 0), (1, 1, 1), (2, 2, 2))  # 27 points, 8 cells
+    fields = {"pressure": np.zeros(8), "phi": np.zeros(27), "inlet_pressure": np.ones(1)}
+    assert set(mesh_fields(fields, grid, "fluid")) == {"pressure", "phi"}
+    with pytest.raises(CouplerError, match=r"participant 'fluid': field\(s\) velocity \(5\) match neither its 27 "
+                                           r"points nor its 8 cells"):
+        mesh_fields({**fields, "velocity": np.zeros((5, 3))}, grid, "fluid")
