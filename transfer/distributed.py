@@ -115,8 +115,12 @@ def _cell_boxes(mesh) -> np.ndarray:
     """(m, 2, 3) lower and upper corners of every cell."""
     if mesh.num_cells == 0:
         return np.zeros((0, 2, 3))
-    p = mesh.points[mesh.cells]
-    return np.stack([p.min(axis=1), p.max(axis=1)], axis=1)
+    corners = [mesh.points[c] for c in mesh.cells.T]  # a reduction over the short axis is slow
+    lower, upper = corners[0].copy(), corners[0].copy()
+    for c in corners[1:]:
+        np.minimum(lower, c, out=lower)
+        np.maximum(upper, c, out=upper)
+    return np.stack([lower, upper], axis=1)
 
 
 def _union(boxes) -> np.ndarray:
@@ -139,10 +143,28 @@ def _clusters(boxes, bins: int = CLUSTER_BINS) -> np.ndarray:
 
 
 def _meets(boxes, others) -> np.ndarray:
-    """Mask of `boxes` (m, 2, 3) that overlap at least one of `others` (b, 2, 3)."""
+    """Mask of `boxes` (m, 2, 3) that overlap at least one of `others` (b, 2, 3).
+
+    The boxes are sorted by their lower x once; each of `others` tests only those whose lower
+    x lies within its x range widened by the widest box (a contiguous run of the order)."""
     hit = np.zeros(len(boxes), dtype=bool)
-    for lo, hi in others:
-        hit |= np.all(boxes[:, 0] <= hi, axis=1) & np.all(boxes[:, 1] >= lo, axis=1)
+    if len(boxes) == 0 or len(others) == 0:
+        return hit
+    order = np.argsort(boxes[:, 0, 0], kind="stable")
+    lo = [np.ascontiguousarray(boxes[order, 0, d]) for d in range(3)]
+    hi = [np.ascontiguousarray(boxes[order, 1, d]) for d in range(3)]
+    scale = max(np.abs(lo[0]).max(), np.abs(hi[0]).max(), np.abs(others[:, :, 0]).max())
+    width = float(np.max(hi[0] - lo[0])) + 8 * np.spacing(scale)  # rounding of the subtraction below
+    sorted_hit = np.zeros(len(boxes), dtype=bool)
+    for (olo, ohi) in others:
+        run = slice(np.searchsorted(lo[0], olo[0] - width, side="left"),
+                    np.searchsorted(lo[0], ohi[0], side="right"))
+        meets = hi[0][run] >= olo[0]
+        for d in (1, 2):
+            meets &= lo[d][run] <= ohi[d]
+            meets &= hi[d][run] >= olo[d]
+        sorted_hit[run] |= meets
+    hit[order] = sorted_hit
     return hit
 
 
@@ -163,23 +185,38 @@ class _Extent:
 
 
 # -- step 2: the source cells a rank needs -----------------------------------------------------
-def _cells_of(part: Part, mask=None) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex coordinates (n, k, 3) and global dof ids (n, nb) of the part's cells (or `mask`)."""
+def _cells_of(part: Part, mask) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex coordinates (n, k, 3) and global dof ids (n, nb) of the part's cells in `mask`."""
+    return part.mesh.points[part.mesh.cells[mask]], part.global_dofs[part.space.cell_dofs[mask]]
+
+
+def _held_part(part: Part, coords: np.ndarray, dofs: np.ndarray) -> Part:
+    """The source cells a rank holds: its own `part` followed by the received cells
+    (vertex coordinates (n, k, 3), global dof ids (n, nb)). With vertex dofs the own points
+    keep their numbers and a received vertex is added once, unless the rank has it already."""
+    if len(coords) == 0:
+        return part
     mesh = part.mesh
-    cells = mesh.cells if mask is None else mesh.cells[mask]
-    dofs = part.global_dofs[part.space.cell_dofs if mask is None else part.space.cell_dofs[mask]]
-    return mesh.points[cells], dofs
-
-
-def _local_mesh(part: Part, coords: np.ndarray, dofs: np.ndarray) -> Part:
-    """The source cells a rank holds (its own and those received) as one part."""
     n, k, _ = coords.shape
-    if FAMILIES[part.family]:  # dofs are the vertices: one point per global id
-        ids, first, local = np.unique(dofs.ravel(), return_index=True, return_inverse=True)
-        points, cells = coords.reshape(-1, 3)[first], local.reshape(n, k)
+    if not FAMILIES[part.family]:  # cell dofs: each received cell brings its own points
+        points = np.concatenate([mesh.points, coords.reshape(-1, 3)])
+        cells = np.concatenate([mesh.cells, len(mesh.points) + np.arange(n * k).reshape(n, k)])
+        ids = np.concatenate([part.global_dofs, dofs.ravel()])
     else:
-        ids, points, cells = dofs.ravel(), coords.reshape(-1, 3), np.arange(n * k).reshape(n, k)
-    return Part(Mesh.trusted(points, cells, part.mesh.cell_type, part.mesh.name), part.family, ids)
+        own = part.global_dofs
+        order = np.argsort(own, kind="stable")
+        ids, first, inverse = np.unique(dofs.ravel(), return_index=True, return_inverse=True)
+        local = np.zeros(len(ids), np.int64)
+        known = np.zeros(len(ids), bool)
+        if len(own):
+            at = order[np.minimum(np.searchsorted(own[order], ids), len(own) - 1)]
+            known = own[at] == ids
+            local[known] = at[known]
+        local[~known] = len(own) + np.arange(np.count_nonzero(~known))
+        points = np.concatenate([mesh.points, coords.reshape(-1, 3)[first[~known]]])
+        cells = np.concatenate([mesh.cells, local[inverse].reshape(n, k)])
+        ids = np.concatenate([own, ids[~known]])
+    return Part(Mesh.trusted(points, cells, mesh.cell_type, mesh.name), part.family, ids)
 
 
 def _grid_cover(part: Part, box) -> Part:
@@ -204,9 +241,11 @@ class Exchange:
     bytes_received: int = 0
 
 
-def gather_source(source: Part, target_clusters: np.ndarray, comm, boxes: np.ndarray) -> tuple[Part, Exchange]:
+def gather_source(source: Part, target_clusters: np.ndarray, comm, boxes: np.ndarray,
+                  cell_boxes: np.ndarray) -> tuple[Part, Exchange]:
     """The source cells that meet this rank's `target_clusters` (boxes grown by the margin),
-    from every rank. `boxes` (size, 2, 2, 3) are all ranks' [target box, source box]."""
+    from every rank. `boxes` (size, 2, 2, 3) are all ranks' [target box, source box];
+    `cell_boxes` those of the own source cells."""
     rank, size = comm.rank, comm.size
     log = Exchange()
     if source.grid is not None:
@@ -215,29 +254,23 @@ def gather_source(source: Part, target_clusters: np.ndarray, comm, boxes: np.nda
     log.received_from = [q for q in range(size) if q != rank and _overlap(boxes[q, 1], mine[0])]
     log.sent_to = [q for q in range(size) if q != rank and _overlap(mine[1], boxes[q, 0])]
     requests = [comm.isend(target_clusters, dest=q, tag=1) for q in log.received_from]
-    cell_boxes = _cell_boxes(source.mesh)
-    coords, dofs = [], []
     for q in log.sent_to:
         theirs = comm.recv(source=q, tag=1)
         c, d = _cells_of(source, _meets(cell_boxes, theirs))
         requests.append(comm.isend((c, d), dest=q, tag=2))
         log.cells_sent += len(c)
         log.bytes_sent += c.nbytes + d.nbytes
-    c, d = _cells_of(source)  # all own cells: the kernel's search passes over those it does not need
-    coords.append(c)
-    dofs.append(d)
-    for q in log.received_from:
+    k, nb = source.mesh.cells.shape[1], source.space.basis_per_cell
+    coords, dofs = [np.zeros((0, k, 3))], [np.zeros((0, nb), np.int64)]
+    for q in log.received_from:  # the own cells stay: the kernel's search passes over those it does not need
         c, d = comm.recv(source=q, tag=2)
-        coords.append(c)
-        dofs.append(d)
+        coords.append(c.reshape(-1, k, 3))
+        dofs.append(d.reshape(-1, nb))
         log.cells_received += len(c)
         log.bytes_received += c.nbytes + d.nbytes
     for r in requests:
         r.wait()
-    k, nb = source.mesh.cells.shape[1], source.space.basis_per_cell
-    coords = np.concatenate([c.reshape(-1, k, 3) for c in coords])
-    dofs = np.concatenate([d.reshape(-1, nb) for d in dofs])
-    return _local_mesh(source, coords, dofs), log
+    return _held_part(source, np.concatenate(coords), np.concatenate(dofs)), log
 
 
 # -- the whole assembly ---------------------------------------------------------------------
@@ -289,7 +322,7 @@ def assemble(source: Part, target: Part, method: str, comm, *, quadrature_degree
                _global_extent(comm, target, _union(target_boxes)))
     if not surface and not boxes_overlap(*extents):
         raise NoOverlapError(no_overlap_message(*extents))
-    held, exchange = gather_source(source, clusters, comm, boxes)
+    held, exchange = gather_source(source, clusters, comm, boxes, source_boxes)
     exchange_seconds = time.perf_counter() - start
 
     start = time.perf_counter()

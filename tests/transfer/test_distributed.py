@@ -116,3 +116,24 @@ def test_partitions_balance_the_cells():
     assert centres[owner == 0, 2].max() <= centres[owner == 1, 2].min()
     part = Part.of_cells(mesh, np.flatnonzero(owner == 1), "P1")
     np.testing.assert_array_equal(part.mesh.points, mesh.points[part.global_dofs])
+
+
+def test_box_search_finds_every_overlap_touching_ones_too():
+    """Step 2's selection of the source cells a neighbour needs (a sorted sweep in x) equals
+    the brute-force test of every box against every cluster, boxes that only touch included."""
+    from transfer.distributed import _meets
+
+    rng = np.random.default_rng(4)
+    lower = np.round(rng.uniform(-5, 5, (2000, 3)), 1)  # on a 0.1 lattice: many exact touches
+    size = np.round(rng.uniform(0, 1.5, (2000, 3)), 1)
+    size[:, 0] = 1.5  # all as wide as the widest: the sweep's bound is met exactly
+    boxes = np.stack([lower, lower + size], axis=1) + 1e6
+    lo = np.round(rng.uniform(-5, 5, (40, 3)), 1)
+    others = np.stack([lo, lo + np.round(rng.uniform(0, 2, (40, 3)), 1)], axis=1) + 1e6
+    brute = np.zeros(len(boxes), bool)
+    for a, b in others:
+        brute |= np.all(boxes[:, 0] <= b, axis=1) & np.all(boxes[:, 1] >= a, axis=1)
+    touching = np.any(np.isin(boxes[:, 1, 0], others[:, 0, 0]))
+    assert touching and 0 < brute.sum() < len(boxes)
+    np.testing.assert_array_equal(_meets(boxes, others), brute)
+    assert not _meets(boxes, others[:0]).any() and len(_meets(boxes[:0], others)) == 0
