@@ -254,7 +254,7 @@ class ChorinSolver:
             self.state = State(new.q, new.p, self.state.t)
             if residual < spec.tolerance:
                 break
-            if time.monotonic() - shown > PROGRESS_SECONDS:  # a long solve shows it is moving
+            if self.slabs.rank == 0 and time.monotonic() - shown > PROGRESS_SECONDS:  # a long solve shows it moves
                 shown = time.monotonic()
                 log.info("pseudo-time step %d of at most %d: residual %.3g (tolerance %g), dt %.3g s",
                          it, spec.max_iterations, residual, spec.tolerance, dt)

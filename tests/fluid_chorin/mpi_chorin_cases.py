@@ -1,6 +1,7 @@
 """Flows of the Chorin fluid solved on the ranks of MPI.COMM_WORLD (tests/fluid_chorin/test_chorin_mpi.py):
-``mpirun -n N python tests/fluid_chorin/mpi_chorin_cases.py CASE POISSON SLAB_AXIS OUT.npz`` writes
-rank 0's gathered pressure and velocity to OUT.npz and prints the run's figures as JSON.
+``mpirun -n N python tests/fluid_chorin/mpi_chorin_cases.py CASE POISSON SLAB_AXIS OUT.npz [progress]`` writes
+rank 0's gathered pressure and velocity to OUT.npz and prints the run's figures as JSON (with
+``progress``: a progress line due at every pseudo-time step, and the lines each rank logged).
 :func:`solve` with ``comm=None`` is the serial reference."""
 
 from __future__ import annotations
@@ -67,17 +68,29 @@ def solve(case: str, poisson: str, slab_axis: str, comm=None) -> tuple[ChorinSol
     return solver, run
 
 
-def main(case: str, poisson: str, slab_axis: str, out: str) -> None:
+def main(case: str, poisson: str, slab_axis: str, out: str, progress: str = "") -> None:
+    import logging
+
     from mpi4py import MPI
 
+    import fluid_chorin.solver
+
     comm = MPI.COMM_WORLD
+    lines = []
+    if progress:
+        fluid_chorin.solver.PROGRESS_SECONDS = 0.0
+        handler = logging.Handler()
+        handler.emit = lambda record: lines.append(record.getMessage())
+        logging.getLogger("varcouple.fluid_chorin").addHandler(handler)
+        logging.getLogger("varcouple.fluid_chorin").setLevel(logging.INFO)
     solver, run = solve(case, poisson, slab_axis, comm)
+    logged = comm.gather(sum("pseudo-time step" in line for line in lines), root=0)
     pressure, velocity = solver.cell_pressure(), solver.cell_velocity()
     if comm.rank == 0:
         np.savez(out, pressure=pressure, velocity=velocity)
         print(json.dumps({"ranks": comm.size, "converged": run.converged, "iterations": run.report.iterations,
                           "poisson": run.poisson[-1].method, "poisson_converged": all(p.converged for p in run.poisson),
-                          "slabs": solver.slabs.bounds, "direction": solver.slabs.d}))
+                          "slabs": solver.slabs.bounds, "direction": solver.slabs.d, "progress_lines": logged}))
 
 
 if __name__ == "__main__":

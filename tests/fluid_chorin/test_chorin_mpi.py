@@ -58,6 +58,13 @@ def test_slabs_on_several_ranks_give_the_serial_fields(tmp_path, case, poisson, 
     assert_equal(parallel["velocity"], serial.cell_velocity())
 
 
+def test_rank_0_alone_logs_the_progress_of_a_steady_solve(tmp_path):
+    """Progress lines of a long steady solve come from rank 0, not once per rank."""
+    figures = run_mpi(SCRIPT, 2, "cavity", "direct", "longest", tmp_path / "fields.npz", "progress")
+    assert figures["progress_lines"][0] >= figures["iterations"] - 1 > 10
+    assert figures["progress_lines"][1:] == [0]
+
+
 def test_small_fracture_with_two_chorin_ranks_gives_the_one_rank_run(tmp_path):
     """varcouple run with [solvers.fluid] ranks = 2 (mpirun -n 2, slabs along x): the same coupling
     iterations, displacements and fluid fields as one rank, to EQUAL."""
