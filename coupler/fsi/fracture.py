@@ -12,7 +12,7 @@ import numpy as np
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
 from .flow_rate import percolates, section_flow_rates
 from .context import OperatorContext, fluid_solid
-from .operators import open_faces
+from .operators import open_share
 from .rate_control import FlowRateControl
 from .resolution import cells_across_warning, contact_area_warning
 
@@ -52,9 +52,9 @@ class FractureFigures:
             self.ctx.warn(["fracture: no connected open path from the inlet (xmin) to the outlet (xmax): every path "
                            "crosses cells at least half solid; flow rate and hydraulic aperture reported as 0"])
         interface = on_grid.interface
-        wet = open_faces(interface, self.points, solid)
+        wet = interface.weights * open_share(interface, self.points, solid)  # the open area per vertex
         pressure = interface.from_fluid(fluid["pressure"])
-        area = float(interface.weights[wet].sum())
+        area = float(wet.sum())
         open_aperture = mean_open_aperture(solid["gap"][slave], touching, weights)
         fraction = contact_area_fraction(touching, weights)
         warnings = self.warnings(fraction, open_aperture)
@@ -63,7 +63,7 @@ class FractureFigures:
                                                           self.pressure_drop) if self.pressure_drop else 0.0),
                 "pressure_drop": self.pressure_drop,
                 "contact_area_fraction": fraction, "flow_rate": rate, "percolating": connected,
-                "mean_face_pressure": float(np.sum(interface.weights[wet] * pressure[wet]) / area) if area else 0.0,
+                "mean_face_pressure": float(np.sum(wet * pressure) / area) if area else 0.0,
                 "mean_open_aperture": open_aperture, "cells_across": open_aperture / self.h,
                 **({"warnings": warnings} if warnings else {})}
 

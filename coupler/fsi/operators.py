@@ -24,7 +24,7 @@ from transfer import FunctionSpace, OverlapWarning, StructuredGrid, Transfer
 
 from .centres import centres_inside
 from .context import OperatorContext, fluid_solid
-from .open_gap import touching
+from .open_gap import contact_share
 from .rate_control import FlowRateControl
 from .viscous import FluidTraction, traction_figures
 
@@ -48,24 +48,26 @@ class PressureTrace:
 
 
 class OpenPressureTrace(PressureTrace):
-    """Steps 2-3 in a fracture with contact: the pressure trace where the gap is open and zero
-    where the faces touch (:func:`coupler.fsi.open_gap.touching`, from the solid's latest
-    ``in_contact``): there the contact pressure carries the load and no fluid acts."""
+    """Steps 2-3 in a fracture with contact: the pressure trace times the open share of each
+    interface vertex, zero where the faces touch (:func:`coupler.fsi.open_gap.contact_share`,
+    from the solid's latest ``in_contact``): there the contact pressure carries the load and no
+    fluid acts."""
 
     def __init__(self, ctx: OperatorContext, exchange=None):
         super().__init__(ctx, exchange)
         self.points = np.asarray(ctx.meshes["solid"].points)
 
     def evaluate(self, outputs) -> np.ndarray:
-        return np.where(open_faces(self.fs.on_grid.interface, self.points, outputs["solid"]),
-                        super().evaluate(outputs), 0.0)
+        return open_share(self.fs.on_grid.interface, self.points, outputs["solid"]) * super().evaluate(outputs)
 
 
-def open_faces(interface, points: np.ndarray, solid: dict) -> np.ndarray:
-    """Per interface vertex: whether the fluid acts there (the faces do not touch), from the
-    solid's outputs (displacement, slave, in_contact)."""
-    deformed = points + solid["displacement"]
-    return ~touching(deformed, interface.vertices, solid["slave"] > 0.5, solid["in_contact"] > 0.5)
+def open_share(interface, points: np.ndarray, solid: dict) -> np.ndarray:
+    """Per interface vertex: the share of it where the fluid acts (the faces do not touch), 1 - chi
+    of :func:`coupler.fsi.open_gap.contact_share`, from the solid's outputs (displacement, slave,
+    in_contact)."""
+    v = interface.vertices
+    deformed = points[v] + solid["displacement"][v]
+    return 1.0 - contact_share(deformed, interface.triangles, solid["slave"][v] > 0.5, solid["in_contact"][v] > 0.5)
 
 
 class ViscousTraction:

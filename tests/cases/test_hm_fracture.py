@@ -43,9 +43,10 @@ def test_platen_force_is_contact_plus_fluid_force_at_every_stress(coarse):
         assert -f["force_z"] + fluid == pytest.approx(f["platen_force"], rel=1e-6)
         # the fluid (0.2 to 0.3 MPa over the open part of the 20 mm square) carries a real share
         assert 0.2e6 * 0.02 ** 2 * 0.8 < fluid < 0.3e6 * 0.02 ** 2
-        # the lower face gets the opposite push from the same fluid, to the discretisation: the
-        # coarser upper face (4 x 4 lattice) and its contact mask from the nearest slave node
-        assert f["fluid_force_fracture_lower_z"] == pytest.approx(-fluid, rel=0.1)
+        # the lower face gets the opposite push from the same fluid: the coarser upper face (4 x 4
+        # lattice) loses the slave's contact area (coupler/fsi/open_gap.py), not a nodal mask's
+        # (with the nearest slave node's contact the two differed by up to 7 %)
+        assert f["fluid_force_fracture_lower_z"] == pytest.approx(-fluid, rel=2e-3)
 
 
 def test_rough_fracture_apertures_and_flow_fall_with_stress(coarse):

@@ -1,5 +1,5 @@
 """The per-step figures of the hydro-mechanical fracture (coupler/fsi/apertures.py, flow_rate.py,
-open_gap.py): exact values on small arrays."""
+open_gap.py): exact values on small arrays, conservation of the contact area."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 
 from coupler.fsi.apertures import contact_area_fraction, hydraulic_aperture, mechanical_aperture
 from coupler.fsi.flow_rate import percolates, section_flow_rates
-from coupler.fsi.open_gap import touching
-from transfer import StructuredGrid
+from coupler.fsi.open_gap import contact_share
+from transfer import FunctionSpace, Mesh, StructuredGrid
 
 
 def test_mechanical_aperture_counts_contacts_as_zero():
@@ -49,9 +49,47 @@ def test_percolation_needs_an_open_path_through_shared_faces():
     assert not percolates(grid, fraction.ravel())
 
 
-def test_touching_takes_the_slaves_contact_and_the_nearest_slave_for_the_master():
-    points = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0.1, 0, 1e-6], [1.9, 0, 1e-6]], float)
-    slave = np.array([True, True, True, False, False])
-    in_contact = np.array([True, False, False, False, False])
-    vertices = np.array([0, 1, 2, 3, 4])
-    np.testing.assert_array_equal(touching(points, vertices, slave, in_contact), [True, False, False, True, False])
+def square_face(n: int, m: int, z: float, shift: int) -> tuple[np.ndarray, np.ndarray]:
+    """The unit square at height z, n x m cells of two triangles; vertex ids from `shift`."""
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, m + 1), indexing="ij")
+    points = np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], axis=1)
+    ids = np.arange(x.size).reshape(n + 1, m + 1)
+    a, b, c, d = ids[:-1, :-1].ravel(), ids[1:, :-1].ravel(), ids[1:, 1:].ravel(), ids[:-1, 1:].ravel()
+    return points, shift + np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def lumped(points, triangles) -> np.ndarray:
+    vertices, local = np.unique(triangles, return_inverse=True)
+    D = FunctionSpace(Mesh(points[vertices], local.reshape(-1, 3), "triangle"), "P1").mass_matrix()
+    out = np.zeros(len(points))
+    out[vertices] = np.asarray(D.sum(axis=1)).ravel()
+    return out
+
+
+def test_the_other_face_loses_the_slaves_contact_area():
+    """A fine slave face (7 x 6) in contact on a patch, the coarse face (3 x 2) above it: the
+    slave nodes keep their in_contact, the other face's shares lie in [0, 1] and its contact
+    area (lumped areas times chi) equals the slave's to round-off, so a uniform fluid pressure
+    pushes both faces with the same force; no contact, or full contact, is 0 or 1 everywhere."""
+    sp, st = square_face(7, 6, 0.0, 0)
+    mp, mt = square_face(3, 2, 1e-4, len(sp))
+    points, triangles = np.concatenate([sp, mp]), np.concatenate([st, mt])
+    on_slave = np.arange(len(points)) < len(sp)
+    in_contact = on_slave & (points[:, 0] < 0.45) & (points[:, 1] > 0.3)
+    chi = contact_share(points, triangles, on_slave, in_contact)
+    np.testing.assert_array_equal(chi[on_slave], in_contact[on_slave])
+    assert np.all((chi >= 0) & (chi <= 1)) and 0 < chi[~on_slave].max() < 1
+    area = lumped(points, triangles) * chi
+    assert area[~on_slave].sum() == pytest.approx(area[on_slave].sum(), rel=1e-12)
+    np.testing.assert_array_equal(contact_share(points, triangles, on_slave, np.zeros(len(points), bool)), 0.0)
+    np.testing.assert_allclose(contact_share(points, triangles, on_slave, on_slave), 1.0, rtol=0, atol=1e-14)
+
+
+def test_a_face_that_does_not_face_the_slave_stays_open():
+    sp, st = square_face(4, 4, 0.0, 0)
+    far, ft = square_face(2, 2, 0.0, len(sp))
+    far[:, 0] += 5.0  # beside the slave, not across it
+    points, triangles = np.concatenate([sp, far]), np.concatenate([st, ft])
+    on_slave = np.arange(len(points)) < len(sp)
+    chi = contact_share(points, triangles, on_slave, on_slave)
+    assert np.all(chi[on_slave] == 1) and np.all(chi[~on_slave] == 0)

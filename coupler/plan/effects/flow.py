@@ -266,8 +266,8 @@ def _loading(scene, plan) -> None:
         plan.exchanges.append(Exchange(
             ["fluid.pressure", "solid.in_contact"], "solid.pressure", "open_pressure_trace", "2-3", accelerated=True,
             description=f"Q0 (grid) -> P1 on the contact faces '{interface}' moved half a fluid cell into the gap, "
-                        f"pseudo_l2 trace, zero where the faces touch (slave nodes in contact, master vertices "
-                        f"whose nearest slave node is in contact)"))
+                        f"pseudo_l2 trace, times the open share of each vertex: zero at slave nodes in contact, "
+                        f"on the master face one minus the L2 projection of the slave's contact indicator"))
     else:
         plan.exchanges.append(Exchange(
             ["fluid.pressure"], "solid.pressure", "pressure_trace", "2-3", accelerated=True,
