@@ -15,10 +15,16 @@ def residual_plot(path: Path, result) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
+    zeros = []
     for step in result.steps:
-        ax.semilogy(range(1, len(step.residuals) + 1), step.residuals, marker="o", ms=3,
+        r = np.asarray(step.residuals, float)
+        zeros += [(step.window, i + 1) for i in np.flatnonzero(r == 0)]
+        ax.semilogy(range(1, len(r) + 1), np.where(r > 0, r, np.nan), marker="o", ms=3,
                     label=f"step {step.window}" if len(result.steps) <= 10 else None)
     ax.axhline(result.tolerance, color="k", ls="--", lw=0.8, label="tolerance")
+    if zeros:  # a log scale cannot show them: say so on the plot
+        ax.text(0.02, 0.02, "residual exactly 0 (not drawn): " + ", ".join(f"step {w} it. {i}" for w, i in zeros[:6])
+                + (" ..." if len(zeros) > 6 else ""), transform=ax.transAxes, fontsize=7)
     ax.set_xlabel("coupling iteration")
     ax.set_ylabel("relative interface residual (mass-weighted L2)")
     ax.set_title(f"fixed-point residuals ({result.accelerator.get('name', '')})")
