@@ -14,8 +14,11 @@ Methods: ``"gamg"``, conjugate gradients preconditioned by PETSc's algebraic mul
 relative residual ``rtol``; ``"direct"``, PETSc's sparse Cholesky factorization (nested
 dissection ordering; one cell pinned when singular; on several MPI ranks MUMPS's), cheaper per
 solve on small grids, where multigrid's fixed cost per cycle dominates; ``"auto"`` takes the
-direct one up to :data:`DIRECT_CELLS` cells. Either is set up once per matrix (a new ``dt`` or
-solid) and reused for every solve with it. On several ranks (:mod:`fluid_chorin.slabs`) the
+direct one up to :data:`DIRECT_CELLS` cells, and up to :data:`DIRECT_CELLS_ANISOTROPIC` on
+anisotropic cells (a fracture's grid, much finer across the aperture than along it), where
+multigrid needs its threshold for weak couplings (:data:`GAMG_THRESHOLD`) to converge at all and
+is still far slower than a factorization (bench/poisson.py). Either is set up once per matrix
+(a new ``dt`` or solid) and reused for every solve with it. On several ranks (:mod:`fluid_chorin.slabs`) the
 matrix and vectors are distributed by slabs, each rank holding the rows of its cells.
 """
 
@@ -32,6 +35,14 @@ from .staggered import AXIS, Staggered, along
 
 #: ``"auto"`` factorizes up to this many cells and uses multigrid beyond
 DIRECT_CELLS = 30000
+#: cells whose longest side is at least this many times their shortest are anisotropic
+ANISOTROPIC = 10.0
+#: ``"auto"`` on anisotropic cells: the factorization up to this many cells (its memory grows as
+#: cells^(4/3), about 0.8 GB at 170,000 cells)
+DIRECT_CELLS_ANISOTROPIC = 300000
+#: GAMG drops couplings weaker than this in its coarsening on anisotropic cells (PETSc's
+#: ``-pc_gamg_threshold``; without it CG stalls there)
+GAMG_THRESHOLD = 0.02
 
 
 #: the relative residual a factorization's solve must reach (it is rounding error, else a bad matrix)
@@ -65,7 +76,10 @@ class PressurePoisson:
         local = local[rows]
         matrix = sp.csr_matrix((local.data, slabs.numbering.ravel()[local.indices], local.indptr), shape=(n, N))
         self.singular = not any(f["kind"] == "pressure" for f in slabs.grid_faces.values())
-        self.method = ("direct" if N <= DIRECT_CELLS else "gamg") if method == "auto" else method
+        h = grid.h[np.asarray(grid.active)]
+        anisotropic = len(h) > 1 and h.max() >= ANISOTROPIC * h.min()
+        limit = DIRECT_CELLS_ANISOTROPIC if anisotropic else DIRECT_CELLS
+        self.method = ("direct" if N <= limit else "gamg") if method == "auto" else method
         self.pinned = self.method == "direct" and self.singular and slabs.offset == 0
         if self.method == "direct" and self.singular:  # pin cell 0 (the solution is shifted to zero mean)
             first = np.ones(n)
@@ -97,6 +111,10 @@ class PressurePoisson:
                 A.setNullSpace(PETSc.NullSpace().create(constant=True, comm=comm))
             ksp.setType("cg")
             ksp.getPC().setType("gamg")
+            if anisotropic:
+                ksp.setOptionsPrefix("varcouple_poisson_")
+                PETSc.Options("varcouple_poisson_")["pc_gamg_threshold"] = GAMG_THRESHOLD
+                ksp.getPC().setFromOptions()
             ksp.setTolerances(rtol=rtol, atol=1e-300, max_it=max_iterations)
             ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         ksp.setUp()

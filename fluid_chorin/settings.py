@@ -27,8 +27,9 @@ PARTICIPANT = ParticipantSpec(
                 "at most", default=50, minimum=1),
         Setting("cfl", "number", "Courant number of the explicit convection", default=0.5, positive=True,
                 maximum=1.0),
-        Setting("poisson", "string", "the pressure solver: auto (PETSc's sparse Cholesky up to 30000 cells, CG + "
-                "GAMG beyond), direct (on several ranks MUMPS's Cholesky), gamg", default="auto",
+        Setting("poisson", "string", "the pressure solver: auto (PETSc's sparse Cholesky up to 30000 cells, up to "
+                "300000 on anisotropic cells (sides 10:1 or more), CG + GAMG beyond), direct (on several ranks "
+                "MUMPS's Cholesky), gamg", default="auto",
                 choices=POISSON_METHODS),
         Setting("solid_velocity", "string", "cells: the projected solid velocity per cell (rotating and deforming "
                 "solids move the fluid); bodies: every solid body (connected cells of solid fraction >= 1/2) moves "
