@@ -221,35 +221,38 @@ class SpringSolid(Participant):
         if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
             raise ValueError(f"points must be finite, of shape (n, 3), got {pts.shape}")
         self.points, self.stiffness = pts, SPRING_SOLID.configuration(config)["stiffness"]
-        self.displacement = np.zeros_like(pts)
+        self.ids = np.arange(self.rank, len(pts), self.size)  # this rank's points
+        self.displacement = np.zeros((len(self.ids), 3))
         self.checkpoints = {}
         log.info("spring_solid: %d points, stiffness %g Pa/m", len(pts), self.stiffness)
 
     def geometry(self):
+        """This rank's part (docs/protocol.md, "Parts"): on several ranks, rank r owns the points
+        and cells r, r + size, ..."""
         if self.points is None:
             raise RuntimeError("geometry before configure")
         n = len(self.points)
-        if self.tets is not None:
-            return ({"cell_type": "tetra", "boundaries": {}},
-                    {"points": Field("points", self.points, "m"), "cells": Field("cells", self.tets)})
-        return ({"cell_type": "vertex", "boundaries": {}},
-                {"points": Field("points", self.points, "m"),
-                 "cells": Field("cells", np.arange(n, dtype=np.int64).reshape(n, 1))})
+        cells = self.tets if self.tets is not None else np.arange(n, dtype=np.int64).reshape(n, 1)
+        own = np.arange(self.rank, len(cells), self.size)
+        return ({"cell_type": "tetra" if self.tets is not None else "vertex", "boundaries": {}},
+                {"point_ids": self.ids, "points": Field("points", self.points[self.ids], "m"),
+                 "cell_ids": own, "cells": Field("cells", cells[own])})
 
     def advance(self, window, iteration, t, dt, inputs):
         if self.points is None:
             raise RuntimeError("advance before configure")
+        n = len(self.ids)
         if "traction" in inputs:
             traction = inputs["traction"].data
         elif "pressure" in inputs:
             p = inputs["pressure"].data
-            if p.shape != self.points.shape[:1]:
-                raise ValueError(f"pressure has shape {p.shape}, expected ({len(self.points)},)")
+            if p.shape != (n,):
+                raise ValueError(f"pressure has shape {p.shape}, expected ({n},)")
             traction = np.outer(p, [0.0, 0.0, 1.0])
         else:
             raise ValueError(f"advance needs input 'traction' or 'pressure', got {sorted(inputs)}")
-        if traction.shape != self.points.shape:
-            raise ValueError(f"traction has shape {traction.shape}, expected {self.points.shape}")
+        if traction.shape != (n, 3):
+            raise ValueError(f"traction has shape {traction.shape}, expected ({n}, 3)")
         if not dt > 0:
             raise ValueError(f"dt must be positive, got {dt!r}")
         if iteration == 0 or self.start is None:

@@ -37,6 +37,8 @@ from pathlib import Path
 from typing import Callable, Mapping
 
 from coupler.errors import CouplerError
+from coupler.protocol.errors import ProtocolError
+from coupler.protocol.transport import PART_VERBS
 from coupler.protocol.wire import Field, SolveReport
 
 log = logging.getLogger("varcouple.participant")
@@ -151,8 +153,23 @@ def _mpi_world_size() -> int:
     return 1
 
 
+#: seconds a rank waits for the coupler's request for its part once rank 0 has the verb (the
+#: coupler sends the ranks' requests before rank 0's: they are normally there already)
+PART_WAIT = 30.0
+
+
+def _agree(comm, problem: str | None) -> None:
+    """Every rank learns whether each has its request (collective): ProtocolError on all ranks,
+    naming each rank that has none, so none enters the solver's collective code without it."""
+    problems = [(r, p) for r, p in enumerate(comm.allgather(problem)) if p]
+    if problems:
+        raise ProtocolError("; ".join(f"rank {r}: {p}" for r, p in problems))
+
+
 class _MpiRoot:
-    """Rank 0's handler: broadcasts each call to the other ranks, then runs it."""
+    """Rank 0's handler: broadcasts each call (a small header, never the inputs) to the other
+    ranks, then runs it. Rank 0's part of ``geometry`` and ``advance`` is its reply; the other
+    ranks answer their own parts (:class:`coupler.protocol.server.PartServer`)."""
 
     def __init__(self, handler: Participant, comm):
         self.handler, self.comm = handler, comm
@@ -166,9 +183,9 @@ class _MpiRoot:
         method = getattr(self.handler, verb)
 
         def call(*args):
-            if verb == "advance":  # views of the zenoh payload: pickle plain arrays
-                args = (*args[:4], {k: Field(f.name, f.data, f.units) for k, f in args[4].items()})
-            self._send((verb, args))
+            self._send((verb, args[:4] if verb == "advance" else args))  # rank 0's inputs stay here
+            if verb in PART_VERBS:
+                _agree(self.comm, None)
             return method(*args)
 
         return call
@@ -191,18 +208,40 @@ def _wait_for_root(comm, poll: float = 1e-3) -> None:
         time.sleep(poll)
 
 
-def _mpi_worker(handler: Participant, comm) -> None:
+def _mpi_worker(handler: Participant, comm, parts) -> None:
+    """A rank other than 0: run each verb rank 0 broadcasts; for :data:`PART_VERBS` take this
+    rank's request from ``parts`` (a :class:`~coupler.protocol.server.PartServer`) and answer it
+    with this rank's part."""
     while True:
         _wait_for_root(comm)
         verb, args = comm.bcast(None, root=0)
         if verb == "__stop__":
             return
+        request = None
+        if verb in PART_VERBS:
+            expect = {"window": args[0], "iteration": args[1]} if verb == "advance" else {}
+            problem = None
+            try:
+                request = parts.take(verb, expect, PART_WAIT)
+            except ProtocolError as exc:
+                problem = str(exc)
+            try:
+                _agree(comm, problem)
+            except ProtocolError as exc:
+                if request is not None:
+                    parts.reply(*request[:3], error=exc)
+                continue
+            if verb == "advance":
+                args = (*args, request[3])
         try:
-            getattr(handler, verb)(*args)
+            out = getattr(handler, verb)(*args)
             handler.take_reports()  # rank 0 reports for all ranks
         except Exception:  # noqa: BLE001
             log.exception("rank %d: %s failed; aborting the MPI job", comm.Get_rank(), verb)
             comm.Abort(1)
+        if request is not None:
+            header, fields = out if verb == "geometry" else ({}, out)
+            parts.reply(*request[:3], header=header, fields=fields)
         if verb == "finish":
             return
 
@@ -247,7 +286,7 @@ def run(participant_factory: Callable[[], Participant], argv=None, prog: str | N
     """Parse ``argv``, serve the participant made by ``participant_factory()``, return the
     exit code: 0 after ``finish``, 1 on an error, 128 + signal number on SIGTERM/SIGINT."""
     args, extra = build_parser(prog).parse_known_args(argv)
-    from coupler.protocol.server import CouplerGone, ParticipantServer
+    from coupler.protocol.server import CouplerGone, ParticipantServer, PartServer
     from coupler.protocol.transport import check_name, open_session
 
     size = _mpi_world_size()
@@ -269,17 +308,22 @@ def run(participant_factory: Callable[[], Participant], argv=None, prog: str | N
             raise CouplerError("give at least one --connect ENDPOINT (where the coupler listens)")
         handler = participant_factory()
         handler.bind(args.run_id, args.name, comm, extra)
-        if rank != 0:
-            _mpi_worker(handler, comm)
-            return 0
         t0 = time.perf_counter()
-        session = open_session(args.mode, args.connect, args.listen, not args.no_shm,
+        # every rank has its own session (its parts travel from it); only rank 0 listens where asked
+        session = open_session(args.mode, args.connect, args.listen if rank == 0 else (), not args.no_shm,
                                connect_timeout=args.connect_timeout)
-        log.info("%s: zenoh session open (%s) in %.2f s, pid %d, %d rank(s)",
-                 who, ", ".join(args.connect + args.listen), time.perf_counter() - t0, os.getpid(), size)
+        log.info("%s: zenoh session open (%s) in %.2f s, pid %d, rank %d of %d",
+                 who, ", ".join(args.connect + args.listen), time.perf_counter() - t0, os.getpid(), rank, size)
+        if rank != 0:
+            server = PartServer(session, args.run_id, args.name, rank, shared_memory=not args.no_shm)
+            comm.Barrier()  # every rank's queryables before rank 0's liveliness token
+            _mpi_worker(handler, comm, server)
+            return 0
+        if comm is not None:
+            comm.Barrier()
         server = ParticipantServer(session, args.run_id, args.name,
                                    _MpiRoot(handler, comm) if comm is not None else handler,
-                                   extra_announce={"ranks": size}, shared_memory=not args.no_shm)
+                                   extra_announce={"ranks": size, "parts": size}, shared_memory=not args.no_shm)
         server.serve_forever()
         log.info("%s: finished", who)
         return 0

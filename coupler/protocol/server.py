@@ -14,8 +14,8 @@ from typing import Mapping
 import zenoh
 
 from .errors import ProtocolError
-from .transport import (COUPLER, SHM_THRESHOLD, VERBS, alive_key, callback, check_name, is_shm, key,
-                        payload_bytes, warm_up_shm, zbytes)
+from .transport import (COUPLER, PART_VERBS, SHM_THRESHOLD, VERBS, alive_key, callback, check_name, is_shm, key,
+                        part_key, payload_bytes, rank_alive_key, warm_up_shm, zbytes)
 from .wire import Field, as_fields, decode, encode, json_number
 
 log = logging.getLogger("varcouple.server")
@@ -23,6 +23,58 @@ log = logging.getLogger("varcouple.server")
 class _Stop:
     def __init__(self, reason: str):
         self.reason = reason
+
+
+def answer(query, reply_key: str, base: dict, shared_memory: bool, run) -> None:
+    """Decode ``query``, reply ``run(request, fields)`` -> ``(header, fields)`` under ``reply_key``
+    with ``base`` (run id, participant, verb; :func:`send_reply`); any failure becomes an error
+    reply ``{"error": "<Type>: <message>"}`` (never raises for them)."""
+    t0 = time.perf_counter()
+    header = out = error = None
+    try:
+        request, fields = request_of(query, base)
+        header, out = run(request, fields)
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 - every failure becomes an error reply
+        # (SystemExit: library code that calls sys.exit, e.g. meshio on a file no reader accepts)
+        error = exc
+    send_reply(query, reply_key, base, shared_memory, t0, header, out, error)
+
+
+def request_of(query, base: dict) -> tuple[dict, dict[str, Field]]:
+    """The request header and fields of ``query``; copies its window and iteration into the
+    reply's ``base``; ProtocolError when it was meant for another run, participant or verb."""
+    if query.payload is not None and len(query.payload) >= SHM_THRESHOLD:
+        base["rx_shm"] = is_shm(query.payload)
+    request, fields = decode(payload_bytes(query.payload)) if query.payload else ({}, {})
+    for k in ("window", "iteration"):
+        if k in request:
+            base[k] = request[k]
+    for k in ("run_id", "participant", "verb"):
+        if k in request and request[k] != base[k]:
+            raise ProtocolError(f"request for {k}={request[k]!r} reached {base[k]!r}")
+    return request, fields
+
+
+def send_reply(query, reply_key: str, base: dict, shared_memory: bool, t0: float, header=None, fields=None,
+               error: BaseException | None = None) -> None:
+    """Reply ``header`` and ``fields`` (or ``error``) to ``query`` with ``base`` and ``elapsed``
+    (seconds since ``t0``); a reply that cannot be encoded (NaN in a field) becomes the error."""
+    payload = None
+    if error is None:
+        try:
+            payload = encode({**(header or {}), **base, "elapsed": time.perf_counter() - t0}, fields)
+        except (Exception, SystemExit) as exc:  # noqa: BLE001
+            error = exc
+    if error is not None:
+        log.error("%s: %s failed: %s: %s", base["participant"], reply_key, type(error).__name__, error,
+                  exc_info=error)
+        payload = encode({**base, "elapsed": time.perf_counter() - t0, "error": f"{type(error).__name__}: {error}"})
+    try:
+        query.reply(reply_key, zbytes(payload, shared_memory))
+    finally:
+        query.drop()
+    log.debug("%s: %s answered in %.3f s (%d bytes)", base["participant"], reply_key, time.perf_counter() - t0,
+              len(payload))
 
 
 class CouplerGone(ConnectionError):
@@ -93,33 +145,10 @@ class ParticipantServer:
         """Run the handler for one query and reply (never raises for handler errors)."""
         verb = str(query.key_expr).rsplit("/", 1)[-1]
         base = {"run_id": self.run_id, "participant": self.name, "verb": verb}
-        t0 = time.perf_counter()
-        if query.payload is not None and len(query.payload) >= SHM_THRESHOLD:
-            base["rx_shm"] = is_shm(query.payload)
-        try:
-            request, fields = decode(payload_bytes(query.payload)) if query.payload else ({}, {})
-            for k in ("window", "iteration"):
-                if k in request:
-                    base[k] = request[k]
-            for k in ("run_id", "participant", "verb"):
-                if k in request and request[k] != base[k]:
-                    raise ProtocolError(f"request for {k}={request[k]!r} reached {base[k]!r}")
-            header, out = self.dispatch(verb, request, fields)
-            base["elapsed"] = time.perf_counter() - t0
-            payload = encode({**header, **base}, out)
-        except (Exception, SystemExit) as exc:  # noqa: BLE001 - every failure becomes an error reply
-            # (SystemExit: library code that calls sys.exit, e.g. meshio on a file no reader accepts)
-            message = f"{type(exc).__name__}: {exc}"
-            log.exception("%s: %s failed", self.name, verb)
-            base["elapsed"] = time.perf_counter() - t0
-            payload = encode({**base, "error": message})
-            if verb == "finish":
-                self.finished = True
-        try:
-            query.reply(key(self.run_id, self.name, verb), zbytes(payload, self.shared_memory))
-        finally:
-            query.drop()
-        log.debug("%s: %s answered in %.3f s (%d bytes)", self.name, verb, base["elapsed"], len(payload))
+        answer(query, key(self.run_id, self.name, verb), base, self.shared_memory,
+               lambda request, fields: self.dispatch(verb, request, fields))
+        if verb == "finish":
+            self.finished = True
 
     def dispatch(self, verb: str, request: dict, fields: dict[str, Field]):
         """Call the handler for ``verb``: returns ``(reply_header, reply_fields)``."""
@@ -149,7 +178,6 @@ class ParticipantServer:
             return {}, None
         if verb == "finish":
             h.finish()
-            self.finished = True
             return {}, None
         raise ProtocolError(f"unknown verb {verb!r}")
 
@@ -170,3 +198,61 @@ class ParticipantServer:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class PartServer:
+    """Rank ``rank`` (1 and above) of a participant on several MPI ranks: the queryables of its
+    parts of :data:`PART_VERBS` (``varcouple/<run>/<participant>/<verb>/<rank>``) and its own
+    liveliness token (``.../alive/<rank>``). The coupler sends each rank's request (its inputs)
+    before rank 0's; when rank 0 broadcasts the verb, :meth:`take` finds the rank's request, the
+    handler runs, and :meth:`reply` answers it with the rank's part."""
+
+    def __init__(self, session: zenoh.Session, run_id: str, name: str, rank: int, shared_memory: bool = True):
+        self.run_id, self.name, self.rank = check_name("run id", run_id), check_name("participant name", name), rank
+        self.shared_memory = shared_memory
+        self._queue: queue.Queue = queue.Queue()
+        self._queryables = [session.declare_queryable(part_key(run_id, name, verb, rank), callback(self._queue.put),
+                                                      complete=True) for verb in PART_VERBS]
+        if shared_memory:
+            warm_up_shm()
+        self._token = session.liveliness().declare_token(rank_alive_key(run_id, name, rank))
+
+    def key(self, verb: str) -> str:
+        return part_key(self.run_id, self.name, verb, self.rank)
+
+    def take(self, verb: str, expect: Mapping, timeout: float):
+        """``(query, base, t0, fields)``: the coupler's request for this rank's part of ``verb`` whose
+        window and iteration are those of ``expect`` (rank 0's request); an older one (a call the
+        coupler gave up) is answered with an error and skipped. ProtocolError naming the key when
+        none comes within ``timeout`` seconds or it is malformed."""
+        deadline = time.monotonic() + timeout
+        want = self.key(verb)
+        while True:
+            try:
+                query = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise ProtocolError(f"no request on {want} within {timeout:g} s") from None
+            t0 = time.perf_counter()
+            base = {"run_id": self.run_id, "participant": self.name, "verb": verb, "rank": self.rank}
+            try:
+                request, fields = request_of(query, base)
+            except ProtocolError as exc:
+                send_reply(query, str(query.key_expr), base, self.shared_memory, t0, error=exc)
+                raise ProtocolError(f"{query.key_expr}: {exc}") from None
+            stale = [k for k in ("window", "iteration") if request.get(k) != expect.get(k)]
+            if str(query.key_expr) != want or stale:
+                send_reply(query, str(query.key_expr), base, self.shared_memory, t0, error=ProtocolError(
+                    f"stale request (window {request.get('window')}, iteration {request.get('iteration')}) "
+                    f"while serving {want}"))
+                continue
+            return query, base, t0, fields
+
+    def reply(self, query, base: dict, t0: float, header=None, fields=None, error=None) -> None:
+        send_reply(query, str(query.key_expr), base, self.shared_memory, t0, header, as_fields(fields), error)
+
+    def close(self) -> None:
+        for entity in [self._token, *self._queryables]:
+            try:
+                entity.undeclare()
+            except Exception:  # noqa: BLE001 - session may be closed already
+                pass

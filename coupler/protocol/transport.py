@@ -40,6 +40,8 @@ log = logging.getLogger("varcouple.transport")
 PREFIX = "varcouple"
 #: The verbs a participant serves, in the order of a run.
 VERBS = ("announce", "configure", "geometry", "advance", "save_state", "restore_state", "finish")
+#: The verbs whose arrays travel per rank of a participant on several MPI ranks (docs/protocol.md, "Parts").
+PART_VERBS = ("geometry", "advance")
 #: Name under which the coupler declares its own liveliness token.
 COUPLER = "coupler"
 #: Default size of the shared-memory pool of each process (bytes; lazily allocated).
@@ -90,6 +92,18 @@ def key(run_id: str, name: str, verb: str) -> str:
 def alive_key(run_id: str, name: str) -> str:
     """``varcouple/<run_id>/<participant>/alive``: the liveliness token."""
     return f"{PREFIX}/{run_id}/{name}/alive"
+
+
+def part_key(run_id: str, name: str, verb: str, rank: int) -> str:
+    """``varcouple/<run_id>/<participant>/<verb>/<rank>``: rank ``rank``'s part of a verb of
+    :data:`PART_VERBS` (rank 0's part travels under :func:`key`)."""
+    return f"{PREFIX}/{run_id}/{name}/{verb}/{int(rank)}"
+
+
+def rank_alive_key(run_id: str, name: str, rank: int) -> str:
+    """``varcouple/<run_id>/<participant>/alive/<rank>``: the liveliness token of rank ``rank``
+    (1 and above) of a participant on several MPI ranks."""
+    return f"{alive_key(run_id, name)}/{int(rank)}"
 
 
 def new_run_id() -> str:

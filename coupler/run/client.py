@@ -19,12 +19,23 @@ from typing import Callable, Iterable, Mapping
 import zenoh
 
 from coupler.protocol.errors import ParticipantDied, ParticipantError, ParticipantTimeout, ProtocolError
+from coupler.protocol.parts import Layout, Part
 from coupler.protocol.transport import (COUPLER, DEFAULT_TIMEOUT, SHM_THRESHOLD, VERBS, alive_key, callback,
                                         check_name, is_shm, key, new_run_id, open_listening_session,
-                                        open_session, payload_bytes, warm_up_shm, zbytes)
-from coupler.protocol.wire import Field, SolveReport, check_reply, decode, encode
+                                        open_session, part_key, payload_bytes, warm_up_shm, zbytes)
+from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite, check_reply, decode, encode
 
 log = logging.getLogger("varcouple.client")
+
+
+class _Call:
+    """One query of :meth:`ParticipantClient.exchange`: its key, replies and state."""
+
+    def __init__(self, query_key: str):
+        self.key, self.replies, self.done = query_key, [], threading.Event()
+        self.cancel = zenoh.CancellationToken()
+        self.nbytes = self.shm = 0
+
 
 class ParticipantClient:
     """The coupler's handle on one participant: its verbs as methods.
@@ -60,8 +71,15 @@ class ParticipantClient:
         self._alive_event = threading.Event()
         self._alive = False
         self._lost_at: float | None = None
+        #: ranks of the participant (its parts; from announce) and the layout of its fields (from geometry)
+        self.parts: int | None = None
+        self.layout: Layout | None = None
+        self._ranks_alive: set[int] = set()
+        self._ranks_lost: set[int] = set()
         self._sub = session.liveliness().declare_subscriber(
             alive_key(run_id, name), callback(self._on_liveliness), history=True)
+        self._rank_sub = session.liveliness().declare_subscriber(
+            f"{alive_key(run_id, name)}/*", callback(self._on_rank_liveliness), history=True)
 
     # -- liveliness
     def _on_liveliness(self, sample):
@@ -74,6 +92,17 @@ class ParticipantClient:
                 self._lost_at = time.monotonic()
         if sample.kind != zenoh.SampleKind.PUT and not self.finished:
             log.warning("participant %s: liveliness token lost", self.name)
+
+    def _on_rank_liveliness(self, sample):
+        rank = int(str(sample.key_expr).rsplit("/", 1)[-1])
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._ranks_alive.add(rank)
+            else:
+                self._ranks_alive.discard(rank)
+                self._ranks_lost.add(rank)
+        if sample.kind != zenoh.SampleKind.PUT and not self.finished:
+            log.warning("participant %s: liveliness token of rank %d lost", self.name, rank)
 
     @property
     def alive(self) -> bool:
@@ -123,6 +152,13 @@ class ParticipantClient:
         an error), :class:`ParticipantDied`, :class:`ParticipantTimeout`,
         :class:`ProtocolError` (a reply that does not answer the request),
         :class:`transfer.errors.FieldError` (NaN/inf in an input field)."""
+        part = self.exchange(verb, header, [fields], timeout)[0]
+        return part.header, part.fields
+
+    def exchange(self, verb: str, header: Mapping | None, parts: list, timeout: float | None = None) -> list[Part]:
+        """Send ``verb`` with ``header`` to each rank, with ``parts[r]`` (rank r's fields): rank 0 on
+        the verb's key, rank r >= 1 on its part key (docs/protocol.md, "Parts"), those first; return
+        every rank's checked reply (see :meth:`request` for the errors; a rank's names it and its key)."""
         if verb not in VERBS:
             raise ProtocolError(f"unknown verb {verb!r}")
         timeout = self.timeout if timeout is None else timeout
@@ -132,31 +168,75 @@ class ParticipantClient:
             if reason:
                 raise ParticipantDied(self.name, reason)
             self.wait_alive(timeout)
+        self._wait_ranks(len(parts), timeout)
         req = {**(header or {}), "run_id": self.run_id, "participant": self.name, "verb": verb}
-        payload = encode(req, fields)
-        replies: list = []
-        done = threading.Event()
-        cancel = zenoh.CancellationToken()
-        self.session.get(
-            key(self.run_id, self.name, verb),
-            callback(replies.append, done.set),
-            payload=zbytes(payload, self.shared_memory),
-            timeout=timeout + 5.0,  # ours below fires first
-            cancellation_token=cancel,
-        )
+        payloads = [encode(req, f) for f in parts]
+        calls = [self._query(key(self.run_id, self.name, verb) if r == 0 else part_key(self.run_id, self.name, verb, r),
+                             payloads[r], timeout) for r in reversed(range(len(parts)))][::-1]
         deadline = time.monotonic() + timeout
         try:
-            while not done.wait(self.poll):
+            while not all(c.done.is_set() for c in calls):
+                if next(c for c in calls if not c.done.is_set()).done.wait(self.poll):
+                    continue
                 if not self._alive:
                     raise ParticipantDied(self.name, self._death_reason() or f"lost while answering {verb!r}")
                 if self.process_check and (reason := self.process_check()):
                     raise ParticipantDied(self.name, reason)
+                for r, c in enumerate(calls):
+                    if r and c.done.is_set() and not c.replies:
+                        raise ParticipantDied(self.name, self._rank_gone(r, c.key))
                 if time.monotonic() > deadline:
                     raise ParticipantTimeout(self.name, verb, timeout)
         except BaseException:
-            cancel.cancel()
+            for c in calls:
+                c.cancel.cancel()
             raise
-        if not replies:
+        out = [self._checked(r, c, req, verb) for r, c in enumerate(calls)]
+        st = self.stats
+        st["calls"] += 1
+        st["seconds"] += time.perf_counter() - t0
+        st["remote_seconds"] += float(out[0].header.get("elapsed", 0.0))
+        st["bytes_out"] += sum(len(p) for p in payloads)
+        st["bytes_in"] += sum(c.nbytes for c in calls)
+        st["shm_out"] += bool(out[0].header.get("rx_shm"))
+        st["shm_in"] += sum(c.shm for c in calls)
+        return out
+
+    def _wait_ranks(self, count: int, timeout: float) -> None:
+        """Wait until the tokens of ranks 1..count-1 are seen (rank 0 declares its own after their
+        queryables, but each travels on its rank's session); a lost one is :meth:`_rank_gone`."""
+        deadline = time.monotonic() + timeout
+        while missing := [r for r in range(1, count) if r not in self._ranks_alive]:
+            lost = [r for r in missing if r in self._ranks_lost]
+            if lost:
+                raise ParticipantDied(self.name, self._rank_gone(lost[0], part_key(self.run_id, self.name, "*", lost[0])))
+            if time.monotonic() > deadline:
+                raise ParticipantTimeout(self.name, f"start of rank {missing[0]}", timeout)
+            time.sleep(0.01)
+
+    def _query(self, query_key: str, payload, timeout: float) -> "_Call":
+        call = _Call(query_key)
+        self.session.get(query_key, callback(call.replies.append, call.done.set),
+                         payload=zbytes(payload, self.shared_memory),
+                         timeout=timeout + 5.0,  # ours fires first
+                         cancellation_token=call.cancel)
+        return call
+
+    def _rank_gone(self, rank: int, query_key: str) -> str:
+        """Why rank ``rank`` gave no reply on ``query_key`` (its process or connection gone)."""
+        end = time.monotonic() + 2.0
+        while rank not in self._ranks_lost and time.monotonic() < end and not self._death_reason(grace=0.0):
+            time.sleep(0.01)
+        reason = self._death_reason()
+        return (f"rank {rank} gave no reply on {query_key}"
+                + (" (its liveliness token is gone)" if rank in self._ranks_lost else "")
+                + (f": {reason}" if reason else ""))
+
+    def _checked(self, rank: int, call: "_Call", req: dict, verb: str) -> Part:
+        where = f"rank {rank} ({call.key})"
+        if not call.replies:
+            if rank:
+                raise ParticipantDied(self.name, self._rank_gone(rank, call.key))
             # zenoh ends a query without reply when the participant's session goes away;
             # its liveliness token follows within milliseconds.
             end = time.monotonic() + 2.0
@@ -166,49 +246,70 @@ class ParticipantClient:
             if reason or not self._alive:
                 raise ParticipantDied(self.name, reason or f"no reply to {verb!r}")
             raise ProtocolError(f"participant {self.name!r} gave no reply to {verb!r} (no queryable)")
-        if len(replies) > 1:
-            raise ProtocolError(f"{len(replies)} processes answered {verb!r} as participant {self.name!r}")
-        reply = replies[0]
+        if len(call.replies) > 1:
+            raise ProtocolError(f"{len(call.replies)} processes answered {verb!r} as participant {self.name!r}, "
+                                f"{where}")
+        reply = call.replies[0]
         if reply.ok is None:
             err = reply.err.payload.to_string() if reply.err is not None else "unknown"
-            raise ProtocolError(f"participant {self.name!r}: zenoh error reply to {verb!r}: {err}")
+            raise ProtocolError(f"participant {self.name!r}: zenoh error reply to {verb!r} from {where}: {err}")
         data = payload_bytes(reply.ok.payload)
-        rheader, rfields = decode(data)
+        call.nbytes = len(data)
+        call.shm = is_shm(reply.ok.payload) if len(data) >= SHM_THRESHOLD else 0
+        try:
+            rheader, rfields = decode(data)
+        except ProtocolError as exc:
+            raise ProtocolError(f"participant {self.name!r}, {where}: {exc}") from None
         if "error" in rheader:
-            raise ParticipantError(self.name, str(rheader["error"]))
-        check_reply(req, rheader)
-        st = self.stats
-        st["calls"] += 1
-        st["seconds"] += time.perf_counter() - t0
-        st["remote_seconds"] += float(rheader.get("elapsed", 0.0))
-        st["bytes_out"] += len(payload)
-        st["bytes_in"] += len(data)
-        st["shm_out"] += bool(rheader.get("rx_shm"))
-        st["shm_in"] += is_shm(reply.ok.payload) if len(data) >= SHM_THRESHOLD else 0
-        return rheader, rfields
+            raise ParticipantError(self.name, str(rheader["error"]) if not rank else f"{where}: {rheader['error']}")
+        try:
+            check_reply(req, rheader)
+        except ProtocolError as exc:
+            raise ProtocolError(f"{exc} ({where})" if rank else str(exc)) from None
+        return Part(rank, call.key, rheader, rfields)
 
     def announce(self, timeout: float | None = None) -> dict:
-        """The participant's self-description (``name, kind, pid, ranks, provides, accepts``)."""
+        """The participant's self-description (``name, kind, pid, ranks, parts, provides, accepts``)."""
         header, _ = self.request("announce", timeout=timeout)
+        self.parts = int(header.get("parts", 1))
         return {k: v for k, v in header.items() if k not in ("run_id", "participant", "verb", "arrays", "v", "elapsed")}
 
     def configure(self, config: Mapping, timeout: float | None = None) -> None:
         self.request("configure", {"config": dict(config)}, timeout=timeout)
 
+    def _count_parts(self, timeout: float | None) -> int:
+        if self.parts is None:
+            self.announce(timeout)
+        return self.parts
+
     def geometry(self, timeout: float | None = None) -> tuple[dict, dict[str, Field]]:
-        header, fields = self.request("geometry", timeout=timeout)
+        """The header and arrays of the participant's geometry, its parts joined
+        (:meth:`coupler.protocol.parts.Layout.join_geometry`): the layout of its fields is kept for
+        :meth:`advance`."""
+        parts = self.exchange("geometry", None, [None] * self._count_parts(timeout), timeout)
+        self.layout, fields = Layout.join_geometry(self.name, parts)
+        header = parts[0].header
         return {k: v for k, v in header.items() if k not in ("run_id", "participant", "verb", "arrays", "v", "elapsed")}, fields
 
     def advance(self, window: int, iteration: int, t: float, dt: float, inputs=None,
                 timeout: float | None = None) -> dict[str, Field]:
-        """The participant's output fields; how its inner solves ended and its figures of
-        the step are in :attr:`last_solves` and :attr:`last_figures` until the next call."""
-        header, fields = self.request(
+        """The participant's output fields (its parts joined); how its inner solves ended and its
+        figures of the step are in :attr:`last_solves` and :attr:`last_figures` until the next call."""
+        inputs = as_fields(inputs)
+        for f in inputs:  # refused before anything goes out (announce included)
+            check_finite(f.name, f.data)
+        count = self._count_parts(timeout)
+        if self.layout is None and count > 1:
+            raise ProtocolError(f"participant {self.name!r} on {count} ranks: advance before geometry "
+                                f"(the layout of its parts comes from geometry)")
+        parts = self.layout.split({f.name: f for f in inputs}) if self.layout is not None else [inputs]
+        replies = self.exchange(
             "advance", {"window": int(window), "iteration": int(iteration), "t": float(t), "dt": float(dt)},
-            inputs, timeout=timeout)
+            parts, timeout=timeout)
+        header = replies[0].header
         self.last_solves = [SolveReport.from_dict(d) for d in header.get("solves", [])]
         self.last_figures = {str(k): float(v) for k, v in header.get("figures", {}).items()}
-        return fields
+        return self.layout.join(replies) if self.layout is not None else replies[0].fields
 
     def save_state(self, window: int, timeout: float | None = None) -> None:
         self.request("save_state", {"window": int(window)}, timeout=timeout)
@@ -226,12 +327,12 @@ class ParticipantClient:
             raise
 
     def close(self) -> None:
-        if self._sub is not None:
+        for sub in (self._sub, self._rank_sub):
             try:
-                self._sub.undeclare()
+                sub.undeclare()
             except Exception:  # noqa: BLE001
                 pass
-            self._sub = None
+        self._sub = self._rank_sub = None
 
     def __enter__(self):
         return self

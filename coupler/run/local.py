@@ -18,6 +18,7 @@ import os
 import time
 
 from coupler.protocol.errors import ParticipantError
+from coupler.protocol.parts import Layout, Part
 from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite
 from transfer.errors import FieldError
 
@@ -28,6 +29,7 @@ class LocalClient:
     def __init__(self, name: str, handler):
         self.name, self.handler = name, handler
         self.finished = False
+        self.layout = None
         self.last_solves: list[SolveReport] = []
         self.last_figures: dict[str, float] = {}
         self.stats = {"calls": 0, "seconds": 0.0, "remote_seconds": 0.0, "bytes_out": 0, "bytes_in": 0,
@@ -57,14 +59,21 @@ class LocalClient:
 
     def geometry(self, timeout: float | None = None) -> tuple[dict, dict[str, Field]]:
         header, fields = self._call("geometry")
-        return dict(header or {}), {f.name: f for f in as_fields(fields)}
+        part = Part(0, "in process", dict(header or {}), {f.name: f for f in as_fields(fields)})
+        self.layout, joined = Layout.join_geometry(self.name, [part])
+        return part.header, joined
 
     def advance(self, window: int, iteration: int, t: float, dt: float, inputs=None,
                 timeout: float | None = None) -> dict[str, Field]:
-        out = self._call("advance", int(window), int(iteration), float(t), float(dt), dict(inputs or {}))
+        inputs = {f.name: f for f in as_fields(inputs)}
+        if self.layout is not None:  # the participant's rows in its order (ids from its geometry)
+            inputs = self.layout.split(inputs)[0]
+        out = self._call("advance", int(window), int(iteration), float(t), float(dt), inputs)
         solves, figures = self.handler.take_reports()
         self.last_solves, self.last_figures = list(solves), {str(k): float(v) for k, v in figures.items()}
         fields = {f.name: f for f in as_fields(out)}
+        if self.layout is not None:
+            fields = self.layout.join([Part(0, "in process", {}, fields)])
         for f in fields.values():
             try:
                 check_finite(f.name, f.data)

@@ -24,6 +24,7 @@ from transfer import FieldError
 from coupler.run.launch import Launcher, descendants
 from coupler.run.client import CouplerSession, ParticipantClient
 from coupler.protocol.wire import Field
+from transfer.generate import box_tetrahedra
 
 BOX = {"box": {"lower": [0, 0, 0], "upper": [1, 2, 3], "shape": [3, 4, 5]}, "stiffness": 4.0}
 N_BOX = 4 * 5 * 6
@@ -296,11 +297,20 @@ def test_sigterm_ends_a_participant_promptly(run):
 
 
 @pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
-def test_mpi_participant_serves_from_rank_0(run):
+def test_mpi_participant_answers_per_rank(run):
+    """Each rank of a 2-rank spring_solid answers its own points (r, r + 2, ...; docs/protocol.md,
+    "Parts"): the client joins them into the serial arrays, exactly, and sends each rank its rows."""
     solid = run.start("solid", "spring_solid", BOX, ranks=2, timeout=60)
-    assert solid.announce()["ranks"] == 2
+    assert solid.announce()["ranks"] == 2 and solid.parts == 2
+    _, geo = solid.geometry()
+    serial = box_tetrahedra(BOX["box"]["shape"], BOX["box"]["lower"], BOX["box"]["upper"])
+    assert np.array_equal(geo["points"].data, serial.points) and np.array_equal(geo["cells"].data, serial.cells)
+    assert sorted(geo) == ["cells", "points"]  # the ids placed the rows and are gone
+    assert [len(ids) for ids in solid.layout.ids] == [N_BOX // 2, N_BOX // 2]
     out = solid.advance(0, 0, 0.0, 1.0, {"traction": traction(N_BOX)})
-    np.testing.assert_allclose(out["displacement"].data, traction(N_BOX) / 4.0)
+    assert np.array_equal(out["displacement"].data, traction(N_BOX) / 4.0)
+    # rank 1's reply travelled on its own key, half the field
+    assert solid.stats["bytes_in"] > N_BOX * 3 * 8 * 2
     solid.finish()
     assert run.launcher.wait("solid", 30) == 0
 

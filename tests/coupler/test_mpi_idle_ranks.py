@@ -35,7 +35,7 @@ if comm.rank == 0:
     root.configure({"E": 2.0})
     root.stop()
 else:
-    _mpi_worker(handler, comm)
+    _mpi_worker(handler, comm, None)  # configure only: no parts
 found = comm.gather({"cpu": time.process_time() - cpu, "wall": time.perf_counter() - wall, "calls": handler.calls})
 if comm.rank == 0:
     print(json.dumps(found))
