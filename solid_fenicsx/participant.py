@@ -179,24 +179,22 @@ class SolidParticipant(Participant):
         self.static = None if self.dynamic else StaticStep(s, loads, self.steps, platen, stresses, self.contact)
 
     def geometry(self):
-        """The mesh in input numbering: ``points`` (n, 3), ``cells`` (m, 4) and, with a
-        wetted boundary, ``interface_triangles`` (k, 3): its facets as triangles in the
-        numbering of ``points``, oriented with the outward normal (right-hand rule), for
-        the coupler's volume -> surface transfer of the fluid pressure."""
+        """This rank's part of the mesh (docs/protocol.md, "Parts"; nothing gathered): its owned
+        vertices (``point_ids``, ``points``), its own tetrahedra (``cell_ids``, ``cells`` in input
+        vertex ids) and, with a wetted boundary, its facets there as ``interface_triangles``
+        (outward oriented, right-hand rule), for the coupler's volume -> surface transfer of the
+        fluid pressure. The coupler joins the ranks' parts in input numbering."""
         io = self.solver.vertices
-        points, cells = io.points(), io.tetrahedra()
-        interface = None
-        if self.wetted_boundary is not None:
-            interface = io.boundary_triangles(self.wetted_boundary)
-        if self.rank != 0:
-            return {}, None
-        fields = {"points": Field("points", points, "m"), "cells": Field("cells", np.asarray(cells, np.int64))}
+        point_ids, points = io.part_points()
+        cell_ids, cells = io.part_tetrahedra()
+        fields = {"point_ids": point_ids, "points": Field("points", points, "m"),
+                  "cell_ids": cell_ids, "cells": Field("cells", np.asarray(cells, np.int64))}
         header = {"cell_type": "tetra", "boundaries": dict(self.solver.solid.boundaries)}
-        if interface is not None:
-            triangles = np.ascontiguousarray(interface[0], dtype=np.int64)
-            if len(triangles) == 0:
+        if self.wetted_boundary is not None:
+            triangles = io.part_boundary_triangles(self.wetted_boundary)[:, :3]
+            if io.comm.allreduce(len(triangles)) == 0 and self.rank == 0:
                 raise ValueError(f"the wetted boundary {self.wetted!r} has no facets on the mesh boundary")
-            fields["interface_triangles"] = Field("interface_triangles", triangles)
+            fields["interface_triangles"] = Field("interface_triangles", np.ascontiguousarray(triangles))
             header["interface"] = self.wetted
         return header, fields
 
@@ -208,7 +206,7 @@ class SolidParticipant(Participant):
             if name not in s.fields:
                 raise ValueError(f"input {name!r} needs a wetted boundary (config 'wetted') with "
                                  f"traction = {'full' if name == 'traction' else 'pressure'!r}")
-            s.set_vertex_field(name, inputs[name].data if self.rank == 0 else None)
+            s.vertices.set_part(s.fields[name], inputs[name].data)
         extra = {}
         if self.static is not None:
             reports, figures, slave = self.static.run(int(window))
@@ -226,10 +224,8 @@ class SolidParticipant(Participant):
             for r in s.info.solves:
                 self.report_solve(f"{r.solver} {r.what}", r.converged, r.iterations, r.residual, r.tolerance,
                                   detail=r.reason)
-        out = {what: s.vertex_values(what) for what in ("displacement", "velocity", "von_mises")}
-        out.update({k: s.vertices.gather(f) for k, f in extra.items()})
-        if self.rank != 0:
-            return {}
+        out = {what: s.vertices.part_values(s.output(what)) for what in ("displacement", "velocity", "von_mises")}
+        out.update({k: s.vertices.part_values(f) for k, f in extra.items()})
         units = {"displacement": "m", "velocity": "m/s", "von_mises": "Pa", "contact_pressure": "Pa", "gap": "m",
                  "in_contact": "1", "slave": "1", "mortar_weight": "m^2"}
         return {k: Field(k, v, units[k]) for k, v in out.items()}

@@ -5,6 +5,11 @@ arrays), so the solid publishes its mesh as plain arrays and exchanges fields
 as values at its vertices, all in the *input numbering* of
 :mod:`solid_fenicsx.mesh` (the order of the points the mesh was built from):
 
+- :meth:`VertexIO.part_points`, :meth:`VertexIO.part_tetrahedra`,
+  :meth:`VertexIO.part_values`, :meth:`VertexIO.set_part`: this rank's part, with no
+  communication (the participant's parts of docs/protocol.md): its owned vertices in
+  increasing input id (on one rank the input numbering itself), its own cells in
+  increasing input cell index;
 - :meth:`VertexIO.points`, :meth:`VertexIO.tetrahedra`,
   :meth:`VertexIO.boundary_triangles` gather the geometry on one rank;
 - :meth:`VertexIO.gather` collects a field's vertex values (P1 functions
@@ -13,7 +18,8 @@ as values at its vertices, all in the *input numbering* of
   :meth:`solid_fenicsx.elasticity.Elasticity.add_traction_field`) from values given
   at all vertices on one rank.
 
-Every method is collective over the mesh communicator.
+Every method but the ``part_`` ones and :meth:`VertexIO.set_part` (which updates the
+ghosts) is collective over the mesh communicator.
 """
 
 from __future__ import annotations
@@ -40,6 +46,9 @@ class VertexIO:
         self.input_ids = np.asarray(geom.input_global_indices, dtype=np.int64)  # local node -> input id
         self.num_owned = geom.index_map().size_local
         self.num_points = solid.num_points
+        #: this rank's owned geometry nodes in increasing input id, and those ids
+        self.owned = np.argsort(self.input_ids[: self.num_owned], kind="stable")
+        self.owned_ids = self.input_ids[self.owned]
         self._p1_maps: dict = {}
         self._interp: dict = {}
 
@@ -129,6 +138,42 @@ class VertexIO:
         out[all_ids] = all_vals
         return out
 
+    # -- this rank's part ------------------------------------------------------------
+    def part_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(ids, points)``: the input ids and coordinates of this rank's owned vertices, in
+        increasing input id."""
+        return self.owned_ids, self.solid.mesh.geometry.x[self.owned, :3]
+
+    def part_tetrahedra(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(ids, cells)``: the input indices of this rank's own tetrahedra (increasing) and their
+        vertices in input ids."""
+        mesh = self.solid.mesh
+        n_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        original = np.asarray(mesh.topology.original_cell_index[:n_owned], dtype=np.int64)
+        order = np.argsort(original, kind="stable")
+        geo = mesh.geometry.dofmap.array.reshape(-1, 4)[:n_owned]
+        return original[order], self.input_ids[geo[order]]
+
+    def part_values(self, f: dolfinx.fem.Function) -> np.ndarray:
+        """The values of a field at this rank's owned vertices (the order of :meth:`part_points`):
+        (n,) or (n, k); P2 interpolated, DG0 averaged as :meth:`gather`."""
+        g = self._as_p1(f)
+        bs = g.function_space.dofmap.index_map_bs
+        values = g.x.array.reshape(-1, bs)[self._node_to_dof(g.function_space)[self.owned]]
+        return values[:, 0] if not f.ufl_shape else values
+
+    def set_part(self, f: dolfinx.fem.Function, values) -> None:
+        """Set a P1 function from its values at this rank's owned vertices (the order of
+        :meth:`part_points`), the ghosts from their owners (collective)."""
+        V = f.function_space
+        bs = V.dofmap.index_map_bs
+        given = np.asarray(values, dtype=np.float64)
+        if given.size != len(self.owned) * bs:
+            raise ValueError(f"{f.name}: expected {len(self.owned)} x {bs} values at this rank's vertices, "
+                             f"got shape {given.shape}")
+        f.x.array.reshape(-1, bs)[self._node_to_dof(V)[self.owned]] = given.reshape(-1, bs)
+        f.x.scatter_forward()
+
     # -- geometry --------------------------------------------------------------
     def points(self, root: int | None = 0) -> np.ndarray | None:
         """(num_points, 3) coordinates in input numbering on ``root`` (all ranks if None)."""
@@ -146,11 +191,10 @@ class VertexIO:
         out = self._gatherv(original, cells, root, self.solid.num_cells)
         return None if out is None else out.astype(np.int64)
 
-    def boundary_triangles(self, boundary=None, root: int | None = 0):
-        """Exterior facets as triangles in input numbering, oriented with the
-        outward normal (right-hand rule), and their tags (0 for untagged
-        facets): ``(triangles (k, 3), tags (k,))`` on ``root``.
-        ``boundary`` (name, tag or list) keeps only those tags."""
+    def part_boundary_triangles(self, boundary=None) -> np.ndarray:
+        """This rank's exterior facets as triangles in input numbering, oriented with the
+        outward normal (right-hand rule), and their tags (0 for untagged facets): (k, 4) rows
+        (three vertices, tag). ``boundary`` (name, tag or list) keeps only those tags."""
         mesh = self.solid.mesh
         tdim = mesh.topology.dim
         mesh.topology.create_connectivity(tdim - 1, tdim)
@@ -165,17 +209,19 @@ class VertexIO:
             exterior, tags = exterior[keep], tags[keep]
         nodes = dolfinx.cpp.mesh.entities_to_geometry(mesh._mesh, tdim - 1, exterior, True)
         tris = self.input_ids[np.asarray(nodes).reshape(-1, 3)]
-        data = np.column_stack([tris, tags]).astype(np.int64)
-        gathered = self.comm.gather(data, root=root if root is not None else 0)
+        return np.column_stack([tris, tags]).astype(np.int64).reshape(-1, 4)
+
+    def boundary_triangles(self, boundary=None, root: int | None = 0):
+        """Every rank's :meth:`part_boundary_triangles` on ``root``: ``(triangles (k, 3), tags
+        (k,))`` in a canonical order (sorted by vertex triple, independent of the partition)."""
+        gathered = self.comm.gather(self.part_boundary_triangles(boundary), root=root if root is not None else 0)
         if root is None:
             gathered = self.comm.bcast(gathered, root=0)
         elif self.comm.rank != root:
             return None
         data = np.concatenate(gathered)
-        # a canonical order (sorted by vertex triple), independent of the partition
         key = np.sort(data[:, :3], axis=1)
-        order = np.lexsort(key.T[::-1])
-        data = data[order]
+        data = data[np.lexsort(key.T[::-1])]
         return data[:, :3], data[:, 3]
 
     def boundary_vertices(self, boundary=None, root: int | None = 0) -> np.ndarray | None:
