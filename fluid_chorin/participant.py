@@ -8,8 +8,10 @@ face xmin (a flow driven by a rate: the coupler adjusts it each coupling iterati
 (n_cells, 3) m/s at the cell centres, x fastest.
 
 MPI: started on N ranks (``[solvers.fluid] ranks = N``), every rank receives the verbs and
-the whole input fields, steps its slab of the grid (:mod:`fluid_chorin.slabs`), and rank 0
-answers with the fields gathered from all.
+the whole input fields (its ``input_ids``: the penalization's wall drag reads the neighbours'
+fractions, and rigid bodies, ``solid_velocity = "bodies"``, the whole grid), steps its slab of the
+grid (:mod:`fluid_chorin.slabs`) and answers with its own cells' fields (``cell_ids``;
+docs/protocol.md, "Parts"): nothing is gathered.
 
 Steady (no ``transient``): each ``advance`` makes pseudo-time steps from the current state
 (a warm start) to the tolerance. Transient: from ``t`` over ``dt``. Both report the
@@ -59,8 +61,9 @@ class ChorinParticipant(Participant):
         if self.solver is None:
             raise RuntimeError("geometry before configure")
         g = self.solver.spec.grid
-        return {"grid": {"origin": g.origin.tolist(), "spacing": g.spacing.tolist(), "shape": list(g.shape)},
-                "location": "cells"}, None
+        return ({"grid": {"origin": g.origin.tolist(), "spacing": g.spacing.tolist(), "shape": list(g.shape)},
+                 "location": "cells"},
+                {"cell_ids": self.solver.slabs.cell_ids(), "input_ids": np.arange(g.num_cells, dtype=np.int64)})
 
     def advance(self, window, iteration, t, dt, inputs):
         if self.solver is None:
@@ -87,9 +90,7 @@ class ChorinParticipant(Participant):
                  iteration, run.report.solver, run.report.iterations, run.report.residual, len(run.poisson),
                  time.perf_counter() - t0)
         self.report(run)
-        pressure, velocity = solver.cell_pressure(), solver.cell_velocity()  # gathered on rank 0
-        if pressure is None:
-            return {}
+        pressure, velocity = solver.part_fields()
         return {"pressure": Field("pressure", pressure, "Pa"), "velocity": Field("velocity", velocity, "m/s")}
 
     def report(self, run: Run) -> None:

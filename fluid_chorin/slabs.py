@@ -10,7 +10,8 @@ an owned value computed on the local grid from correct ghost values is the seria
 Owned faces of the component normal to the slabs: ``[lo_r, hi_r)``, and the last face too on
 the last rank (a face between two slabs belongs to the upper one). :meth:`Slabs.exchange`
 copies the owned planes next to a neighbour into its ghost planes; :meth:`Slabs.gather`
-collects owned cell values on rank 0 in the grid's order (x fastest). The pressure unknowns
+collects owned cell values on rank 0 in the grid's order (x fastest) (tests and benchmarks; the
+participant answers each rank's owned cells, numbered by :meth:`Slabs.cell_ids`). The pressure unknowns
 are numbered rank by rank (:attr:`Slabs.numbering`), each slab's cells in the grid's order.
 
 One rank (``comm`` None or of size 1) is the whole grid: no ghosts, every exchange and sum
@@ -104,6 +105,11 @@ class Slabs:
                            source=MPI.PROC_NULL if source is None else source)
         if source is not None:
             array[receive] = into
+
+    def cell_ids(self) -> np.ndarray:
+        """The grid index (x fastest) of each owned cell, in the order of ``array[self.owned()].ravel()``."""
+        return self.cells(np.arange(int(np.prod(self.shape)), dtype=np.int64).reshape(self.shape[::-1]))[
+            self.owned()].ravel()
 
     def gather(self, array: np.ndarray) -> np.ndarray | None:
         """The owned cells of a local cell array from every rank, joined on rank 0 (None elsewhere)."""

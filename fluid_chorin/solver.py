@@ -41,7 +41,7 @@ the OpenFOAM fluid's pimpleFoam.
 On several MPI ranks (``comm``) each rank steps its slab of the grid (:mod:`fluid_chorin.slabs`):
 the predictor and correction on its local grid, the ghost layers exchanged after each
 correction, the Poisson equation solved on a distributed matrix, and the norms and step
-bounds reduced over the ranks; the fields are gathered on rank 0.
+bounds reduced over the ranks; each rank gives its owned cells' fields (:meth:`ChorinSolver.part_fields`).
 """
 
 from __future__ import annotations
@@ -309,15 +309,25 @@ class ChorinSolver:
         return size / scale if scale > 0 else (0.0 if size == 0 else math.inf)
 
     # ------------------------------------------------------------------ fields
-    def cell_velocity(self) -> np.ndarray | None:
-        """(n, 3) m/s at the cell centres (mean of the two faces), x fastest; on rank 0 (None on
-        the others: every rank must call it)."""
+    def _centre_velocity(self) -> list[np.ndarray]:
+        """Each component of the velocity at the local cell centres (mean of the two faces)."""
         q = self.state.q
-        parts = [self.slabs.gather(0.5 * (q[c][along(AXIS[c], slice(None, -1))] + q[c][along(AXIS[c], slice(1, None))]))
-                 for c in range(3)]
+        return [0.5 * (q[c][along(AXIS[c], slice(None, -1))] + q[c][along(AXIS[c], slice(1, None))]) for c in range(3)]
+
+    def cell_velocity(self) -> np.ndarray | None:
+        """(n, 3) m/s at the cell centres, x fastest; on rank 0 (None on the others: every rank
+        must call it)."""
+        parts = [self.slabs.gather(a) for a in self._centre_velocity()]
         return None if parts[0] is None else np.stack([a.ravel() for a in parts], axis=1)
 
     def cell_pressure(self) -> np.ndarray | None:
         """(n,) Pa on rank 0 (None on the others: every rank must call it)."""
         p = self.slabs.gather(self.state.p)
         return None if p is None else p.ravel() * self.spec.rho
+
+    def part_fields(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(pressure, velocity)`` of this rank's owned cells, in the order of
+        :meth:`fluid_chorin.slabs.Slabs.cell_ids`: (k,) Pa and (k, 3) m/s (no communication)."""
+        owned = self.slabs.owned()
+        velocity = np.stack([a[owned].ravel() for a in self._centre_velocity()], axis=1)
+        return self.state.p[owned].ravel() * self.spec.rho, velocity

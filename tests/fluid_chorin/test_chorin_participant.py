@@ -43,7 +43,9 @@ def test_announce_geometry_and_the_outputs_of_an_advance():
     a = p.announce()
     assert a["provides"] == ["pressure", "velocity"] and a["accepts"] == ["solid_fraction", "solid_velocity", "inlet_pressure"]
     header, arrays = p.geometry()
-    assert header["grid"] == {"origin": [0.0, 0.0, 0.0], "spacing": [1e-3] * 3, "shape": [8, 6, 1]} and arrays is None
+    assert header["grid"] == {"origin": [0.0, 0.0, 0.0], "spacing": [1e-3] * 3, "shape": [8, 6, 1]}
+    # one rank: its part is the whole grid (docs/protocol.md, "Parts")
+    assert np.array_equal(arrays["cell_ids"], np.arange(48)) and np.array_equal(arrays["input_ids"], np.arange(48))
     f = np.zeros(48)
     f[:16] = 1.0  # two solid rows
     out = p.advance(0, 0, 0.0, 1.0, inputs(f))
