@@ -65,8 +65,8 @@ def _numbering(participant: str, parts: list[Part], name: str) -> tuple[int, lis
     if np.any(seen != 1):
         twice = np.flatnonzero(seen > 1)
         owners = [p.rank for p, a in zip(parts, ids) if np.isin(twice[:1], a).any()]
-        raise parts[0].fail(participant, f"{name!r} of ranks {owners} both hold id {twice[0]} "
-                                          f"({len(twice)} ids given twice): each row must have one owner")
+        raise parts[owners[-1]].fail(participant, f"{name!r} of ranks {owners} both hold id {twice[0]} "
+                                                  f"({len(twice)} ids given twice): each row must have one owner")
     return count, ids
 
 

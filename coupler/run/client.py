@@ -178,13 +178,13 @@ class ParticipantClient:
             while not all(c.done.is_set() for c in calls):
                 if next(c for c in calls if not c.done.is_set()).done.wait(self.poll):
                     continue
+                for r, c in enumerate(calls):  # a rank that died first is named (mpirun then ends the others)
+                    if r and ((c.done.is_set() and not c.replies) or r in self._ranks_lost):
+                        raise ParticipantDied(self.name, self._rank_gone(r, c.key))
                 if not self._alive:
                     raise ParticipantDied(self.name, self._death_reason() or f"lost while answering {verb!r}")
                 if self.process_check and (reason := self.process_check()):
                     raise ParticipantDied(self.name, reason)
-                for r, c in enumerate(calls):
-                    if r and c.done.is_set() and not c.replies:
-                        raise ParticipantDied(self.name, self._rank_gone(r, c.key))
                 if time.monotonic() > deadline:
                     raise ParticipantTimeout(self.name, verb, timeout)
         except BaseException:
