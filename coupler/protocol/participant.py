@@ -14,10 +14,12 @@ A participant module ends with::
 and the coupler starts it as ``[mpirun -n N] python -m my_module --run-id R --name NAME
 --connect tcp/127.0.0.1:PORT`` (see :class:`coupler.launch.Launcher`).
 
-MPI: when the process is one of several MPI ranks, rank 0 alone talks zenoh; every verb
-it receives is broadcast to the other ranks, which call the same method of their own
-participant object with the same arguments (so collective solver code runs on all
-ranks). The reply is rank 0's return value. A non-root rank whose method raises aborts
+MPI: when the process is one of several MPI ranks, every rank has its own zenoh session; rank 0
+serves the verbs and broadcasts each (its header, never the inputs) to the other ranks, which call
+the same method of their own participant object (so collective solver code runs on all ranks).
+``geometry`` and ``advance`` are answered per rank: each rank takes the coupler's request for its
+part (its own rows of the inputs) and answers with its own part (docs/protocol.md, "Parts"); the
+other verbs' reply is rank 0's return value. A non-root rank whose method raises aborts
 the MPI job (the coupler then sees the participant die, with the log). Between verbs the other
 ranks sleep (:func:`_wait_for_root`) instead of spinning in the broadcast: a waiting rank leaves
 its core to the solvers that run meanwhile (the other participant, its ranks).
@@ -114,7 +116,9 @@ class Participant(abc.ABC):
         """Verb ``geometry``: the mesh or grid the participant's fields live on.
 
         Either ``({"cell_type": ..., "boundaries": {...}}, {"points": (n,3), "cells": (m,k)})``
-        or ``({"grid": {"origin": [...], "spacing": [...], "shape": [...]}}, None)``."""
+        or ``({"grid": {"origin": [...], "spacing": [...], "shape": [...]}}, None)``. On several
+        ranks, each rank's part with its ids (``point_ids``, ``cell_ids``; docs/protocol.md,
+        "Parts"): ``advance`` then gets and returns the rows of those ids."""
 
     @abc.abstractmethod
     def advance(self, window: int, iteration: int, t: float, dt: float,
