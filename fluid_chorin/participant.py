@@ -7,10 +7,11 @@ fluid; the flow rule fills them from the scene). Inputs of ``advance``: ``solid_
 face xmin (a flow driven by a rate: the coupler adjusts it each coupling iteration). Outputs: ``pressure`` (n_cells,) Pa and ``velocity``
 (n_cells, 3) m/s at the cell centres, x fastest.
 
-MPI: started on N ranks (``[solvers.fluid] ranks = N``), every rank receives the verbs and
-the whole input fields (its ``input_ids``: the penalization's wall drag reads the neighbours'
-fractions, and rigid bodies, ``solid_velocity = "bodies"``, the whole grid), steps its slab of the
-grid (:mod:`fluid_chorin.slabs`) and answers with its own cells' fields (``cell_ids``;
+MPI: started on N ranks (``[solvers.fluid] ranks = N``), every rank receives the verbs and the
+rows of its input cells (``input_ids``: its slab, the ghost layer and the cells the drag of a
+ghost reads, one more plane on each side with the "wall" penalization; with rigid bodies,
+``solid_velocity = "bodies"``, the whole grid), steps its slab of the grid
+(:mod:`fluid_chorin.slabs`) and answers with its own cells' fields (``cell_ids``;
 docs/protocol.md, "Parts"): nothing is gathered.
 
 Steady (no ``transient``): each ``advance`` makes pseudo-time steps from the current state
@@ -63,19 +64,23 @@ class ChorinParticipant(Participant):
         g = self.solver.spec.grid
         return ({"grid": {"origin": g.origin.tolist(), "spacing": g.spacing.tolist(), "shape": list(g.shape)},
                  "location": "cells"},
-                {"cell_ids": self.solver.slabs.cell_ids(), "input_ids": np.arange(g.num_cells, dtype=np.int64)})
+                {"cell_ids": self.solver.slabs.cell_ids(), "input_ids": self.solver.slabs.input_ids()})
 
     def advance(self, window, iteration, t, dt, inputs):
         if self.solver is None:
             raise RuntimeError("advance before configure")
         solver = self.solver
-        n = solver.spec.grid.num_cells
+        slabs = solver.slabs
+        n = int(np.prod(slabs.input_shape))
         arrays = {}
         for name, want in (("solid_fraction", (n,)), ("solid_velocity", (n, 3)), ("inlet_pressure", (1,))):
             if name in inputs:
                 data = np.asarray(inputs[name].data, dtype=float)
                 if data.shape != want:
-                    raise ValueError(f"input {name!r} has shape {data.shape}, expected {want}")
+                    mine = "" if want == (1,) or self.size == 1 else (
+                        f" (rank {self.rank}'s input_ids: planes {slabs.input_planes[0]} to "
+                        f"{slabs.input_planes[1] - 1} along {'xyz'[slabs.d]})")
+                    raise ValueError(f"input {name!r} has shape {data.shape}, expected {want}{mine}")
                 if not np.all(np.isfinite(data)):
                     raise ValueError(f"input {name!r} holds NaN/inf at index {int(np.argmin(np.isfinite(data)))}")
                 arrays[name] = data

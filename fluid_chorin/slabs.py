@@ -14,6 +14,11 @@ collects owned cell values on rank 0 in the grid's order (x fastest) (tests and 
 participant answers each rank's owned cells, numbered by :meth:`Slabs.cell_ids`). The pressure unknowns
 are numbered rank by rank (:attr:`Slabs.numbering`), each slab's cells in the grid's order.
 
+The inputs (the solid's fraction and velocity per cell) reach a rank for its *input cells*
+only: the planes ``[lo_r - L, hi_r + L)`` within the grid, ``L = input_layers`` (the ghost layer
+plus the reach of the drag's stencil: :data:`transfer.penalization.REACH`; None: the whole grid),
+numbered by :meth:`Slabs.input_ids`; :meth:`Slabs.from_inputs` cuts the local part out of them.
+
 One rank (``comm`` None or of size 1) is the whole grid: no ghosts, every exchange and sum
 local.
 """
@@ -30,9 +35,10 @@ from .staggered import AXIS, along
 
 class Slabs:
     """The slabs of a grid of ``shape`` with face conditions ``faces`` over the ranks of ``comm``,
-    cut along ``slab_axis`` (:data:`coupler.protocol.slabs.SLAB_AXES`)."""
+    cut along ``slab_axis`` (:data:`coupler.protocol.slabs.SLAB_AXES`), each rank receiving its
+    inputs on ``input_layers`` planes beyond its slab (None: the whole grid)."""
 
-    def __init__(self, shape, faces: dict, comm=None, slab_axis: str = "longest"):
+    def __init__(self, shape, faces: dict, comm=None, slab_axis: str = "longest", input_layers: int | None = 1):
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
         self.rank = self.comm.Get_rank() if self.comm else 0
         self.size = self.comm.Get_size() if self.comm else 1
@@ -59,6 +65,15 @@ class Slabs:
         self.offset, self.count = layer * self.lo, layer * (self.hi - self.lo)
         #: the PETSc number of every local cell (ghosts: the neighbour's number)
         self.numbering = self.cells(self._numbers())
+        if input_layers is not None and input_layers < 1:
+            raise ValueError(f"input_layers must reach the ghost layer (at least 1), got {input_layers}")
+        #: the planes [first, end) along the slab direction of this rank's input cells
+        self.input_planes = (0, n) if input_layers is None else (max(0, self.lo - input_layers),
+                                                                 min(n, self.hi + input_layers))
+        inputs = list(self.shape)
+        inputs[self.d] = self.input_planes[1] - self.input_planes[0]
+        #: (nx, ny, nz) of the block of input cells
+        self.input_shape = tuple(inputs)
 
     def _numbers(self) -> np.ndarray:
         cells = self.shape[::-1]
@@ -74,6 +89,26 @@ class Slabs:
     def cells(self, array: np.ndarray) -> np.ndarray:
         """The local part (ghosts included) of a cell array of the whole grid, ``(nz, ny, nx, ...)``."""
         return array[along(self.axis, slice(self.start, self.hi + self.ghost[1]))]
+
+    def _grid_ids(self, first: int, end: int) -> np.ndarray:
+        """The grid index (x fastest) of each cell of the planes [first, end) along the slab
+        direction, in the grid's order (without an array of the whole grid)."""
+        ranges = [np.arange(n, dtype=np.int64) for n in self.shape]
+        ranges[self.d] = np.arange(first, end, dtype=np.int64)
+        nx, ny, _ = self.shape
+        return ((ranges[2][:, None, None] * ny + ranges[1][None, :, None]) * nx + ranges[0][None, None, :]).ravel()
+
+    def input_ids(self) -> np.ndarray:
+        """The grid index (x fastest) of each input cell, in the grid's order."""
+        return self._grid_ids(*self.input_planes)
+
+    def from_inputs(self, values: np.ndarray) -> np.ndarray:
+        """The local part (ghosts included) of per-cell ``values`` of the input cells (the order
+        of :meth:`input_ids`; ``(n,)`` or ``(n, k)``)."""
+        values = np.asarray(values)
+        block = values.reshape(*self.input_shape[::-1], *values.shape[1:])
+        first = self.start - self.input_planes[0]
+        return block[along(self.axis, slice(first, first + self.local_shape[self.d]))]
 
     def owned(self, c: int | None = None) -> tuple:
         """The index of the owned values in a local array: cells (``c`` None) or the faces of component c."""
@@ -108,8 +143,7 @@ class Slabs:
 
     def cell_ids(self) -> np.ndarray:
         """The grid index (x fastest) of each owned cell, in the order of ``array[self.owned()].ravel()``."""
-        return self.cells(np.arange(int(np.prod(self.shape)), dtype=np.int64).reshape(self.shape[::-1]))[
-            self.owned()].ravel()
+        return self._grid_ids(self.lo, self.hi)
 
     def gather(self, array: np.ndarray) -> np.ndarray | None:
         """The owned cells of a local cell array from every rank, joined on rank 0 (None elsewhere)."""

@@ -56,7 +56,7 @@ import numpy as np
 from coupler.protocol.fluid_faces import closed_faces, dropped_velocity
 from coupler.protocol.wire import SolveReport
 from transfer.bodies import rigid_bodies, rigid_velocity
-from transfer.penalization import drag_fraction
+from transfer.penalization import REACH, drag_fraction
 
 from .poisson import PoissonReport, PressurePoisson
 from .slabs import Slabs
@@ -96,7 +96,10 @@ class ChorinSolver:
 
     def __init__(self, spec: ChorinSpec, comm=None):
         self.spec = spec
-        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis)
+        # the inputs of a rank: its cells, the ghost layer and the cells the drag of a ghost reads;
+        # rigid bodies (connected across the slabs) the whole grid
+        layers = None if spec.solid_velocity == "bodies" else 1 + REACH[spec.penalization]
+        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis, layers)
         #: this rank's part of the grid, ghosts included (the whole grid on one rank)
         self.grid = Staggered(self.slabs.local_shape, spec.grid.spacing, self.slabs.faces)
         self.state = State(self.grid.zeros(), np.zeros(self.grid.cells))
@@ -107,7 +110,7 @@ class ChorinSolver:
         self._poisson: PressurePoisson | None = None
         self._poisson_dt = None
         self.warned_faces: set[str] = set()
-        self.set_solid(np.zeros(spec.grid.num_cells), None)
+        self.set_solid(np.zeros(int(np.prod(self.slabs.input_shape))), None)
 
     def set_inlet_pressure(self, pressure: float) -> None:
         """The pressure [Pa] of the inlet face xmin, a fixed-pressure face (on the rank that
@@ -120,27 +123,33 @@ class ChorinSolver:
 
     # ------------------------------------------------------------------ the solid
     def set_solid(self, fraction, velocity=None) -> None:
-        """Solid fraction per cell (x fastest, clipped to [0, 1]) and the solid's velocity per
-        cell ((n, 3) m/s, None: at rest), both of the whole grid: drag, target velocity and
-        dilatation on this rank's grid. The velocity as ``solid_velocity`` says: per cell, each
-        body's rigid velocity (:func:`transfer.bodies.rigid_bodies`), or none."""
-        g, spec, cut = self.grid, self.spec, self.slabs.cells
+        """Solid fraction per input cell of this rank (:meth:`fluid_chorin.slabs.Slabs.input_ids`,
+        the whole grid on one rank; x fastest, clipped to [0, 1]) and the solid's velocity there
+        ((n, 3) m/s, None: at rest): drag, target velocity and dilatation on this rank's grid. The
+        velocity as ``solid_velocity`` says: per cell, each body's rigid velocity
+        (:func:`transfer.bodies.rigid_bodies`, whose inputs are the whole grid), or none. The drag
+        of a cell reads the fractions :data:`transfer.penalization.REACH` cells away, all among
+        the input cells for every local cell, so each equals the serial one bit for bit."""
+        g, spec, slabs = self.grid, self.spec, self.slabs
+        n = int(np.prod(slabs.input_shape))
         f = np.clip(np.asarray(fraction, dtype=float).reshape(-1), 0.0, 1.0)
+        if f.size != n:
+            raise ValueError(f"the solid fraction has {f.size} values, this rank's input cells {n} (planes "
+                             f"{slabs.input_planes[0]} to {slabs.input_planes[1] - 1} along {'xyz'[slabs.d]})")
         if velocity is not None and spec.solid_velocity == "none":
             velocity = None
         if velocity is not None and spec.solid_velocity == "bodies":
             bodies = rigid_bodies(f, velocity, spec.grid.shape, closed_faces(spec.faces))
             for face, value in ((face, value) for b in bodies for face, value in b.dropped.items()):
-                if face not in self.warned_faces and self.slabs.rank == 0:
+                if face not in self.warned_faces and slabs.rank == 0:
                     log.warning("%s", dropped_velocity(face, value))
                 self.warned_faces.add(face)
             velocity = rigid_velocity(bodies, f.size)
-        T = drag_fraction(f, spec.grid.shape, spec.grid.spacing, spec.nu, self.d_max, spec.penalization,
+        T = drag_fraction(f, slabs.input_shape, spec.grid.spacing, spec.nu, self.d_max, spec.penalization,
                           spec.penalization_exponent)
-        cells = spec.grid.shape[::-1]
-        drag = cut((T * self.d_max).reshape(cells))
+        drag = slabs.from_inputs(T * self.d_max)
         self.solid_fraction = f
-        self.fraction = cut(f.reshape(cells))
+        self.fraction = slabs.from_inputs(f)
         g.set_mask(1.0 - self.fraction)
         rate = self.viscous_rate() + (spec.substeps / spec.dt if spec.transient else 0.0)
         self.drag = [1.0 / to_faces(1.0 / (rate + drag), c) - rate for c in range(3)]
@@ -148,7 +157,7 @@ class ChorinSolver:
             self.target = g.zeros()
             self.source = np.zeros(g.cells)
         else:
-            v = cut(np.asarray(velocity, dtype=float).reshape(*cells, 3))
+            v = slabs.from_inputs(np.asarray(velocity, dtype=float).reshape(n, 3))
             weight = [to_faces(self.fraction, c) for c in range(3)]
             self.target = [np.divide(to_faces(self.fraction * v[..., c], c), weight[c],
                                      out=np.zeros(g.face_shape(c)), where=weight[c] > 0) for c in range(3)]

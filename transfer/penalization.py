@@ -38,6 +38,8 @@ from .grid import wall_distance
 
 #: how solid volume fractions become drag (the modes above)
 PENALIZATIONS = ("wall", "linear", "power")
+#: how many cells away along each axis :func:`drag_fraction` of a cell reads fractions, per mode
+REACH = {"wall": 1, "linear": 0, "power": 0}
 
 
 def default_drag(nu: float, h_min: float, u_ref: float = 0.0, rate: float = 0.0) -> float:

@@ -13,6 +13,7 @@ import numpy as np
 
 from fluid_chorin.solver import ChorinSolver
 from fluid_chorin.spec import ChorinSpec
+from fluid_chorin.staggered import along
 
 
 def cavity(n: int = 16, re: float = 100.0) -> tuple[dict, tuple]:
@@ -56,16 +57,51 @@ def box(n: int = 12) -> tuple[dict, tuple]:
              "substeps": 4, "tolerance": 1e-10}, (fraction, velocity))
 
 
-CASES = {"cavity": cavity, "plates": plates, "box": box}
+def bodies() -> tuple[dict, tuple]:
+    """The box with its block moving as a rigid body (``solid_velocity = "bodies"``: the mean of
+    its wetted layer's velocity, from the whole grid)."""
+    config, solid = box()
+    return {**config, "solid_velocity": "bodies"}, solid
+
+
+def plates_power() -> tuple[dict, tuple]:
+    """The plates under the "power" penalization (a cell's drag from its own fraction alone)."""
+    config, solid = plates()
+    return {**config, "penalization": "power", "penalization_exponent": 2.0}, solid
+
+
+CASES = {"cavity": cavity, "plates": plates, "plates_power": plates_power, "box": box, "bodies": bodies}
 
 
 def solve(case: str, poisson: str, slab_axis: str, comm=None) -> tuple[ChorinSolver, object]:
+    """The case solved on the ranks of ``comm``, each given the rows of its input cells only."""
     config, solid = CASES[case]()
     solver = ChorinSolver(ChorinSpec.from_config({**config, "poisson": poisson, "slab_axis": slab_axis}), comm)
     if solid:
-        solver.set_solid(*solid)
+        rows = solver.slabs.input_ids()
+        solver.set_solid(*(a[rows] for a in solid))
     run = solver.transient(0.0, config["dt"]) if config.get("transient") else solver.steady()
     return solver, run
+
+
+def same_solid(solver: ChorinSolver, case: str) -> bool:
+    """Whether this rank's drag, solid velocity (on the faces of its own cells) and dilatation
+    (its own cells) equal, bit for bit, those of one process given the whole grid."""
+    config, solid = CASES[case]()
+    whole = ChorinSolver(solver.spec)
+    if solid:
+        whole.set_solid(*solid)
+    slabs = solver.slabs
+    g0, m, axis = slabs.ghost[0], slabs.hi - slabs.lo, slabs.axis
+
+    def equal(local, serial, faces):
+        extra = int(faces)  # the faces of the own cells along the slab direction: one more than the cells
+        return np.array_equal(local[along(axis, slice(g0, g0 + m + extra))],
+                              serial[along(axis, slice(slabs.lo, slabs.hi + extra))])
+
+    return (all(equal(a, b, c == slabs.d) for pair in ((solver.drag, whole.drag), (solver.target, whole.target))
+                for c, (a, b) in enumerate(zip(*pair)))
+            and equal(solver.source, whole.source, False) and equal(solver.fraction, whole.fraction, False))
 
 
 def main(case: str, poisson: str, slab_axis: str, out: str, progress: str = "") -> None:
@@ -85,12 +121,15 @@ def main(case: str, poisson: str, slab_axis: str, out: str, progress: str = "") 
         logging.getLogger("varcouple.fluid_chorin").setLevel(logging.INFO)
     solver, run = solve(case, poisson, slab_axis, comm)
     logged = comm.gather(sum("pseudo-time step" in line for line in lines), root=0)
+    planes = comm.gather(list(solver.slabs.input_planes), root=0)
+    same = comm.gather(same_solid(solver, case), root=0)
     pressure, velocity = solver.cell_pressure(), solver.cell_velocity()
     if comm.rank == 0:
         np.savez(out, pressure=pressure, velocity=velocity)
         print(json.dumps({"ranks": comm.size, "converged": run.converged, "iterations": run.report.iterations,
                           "poisson": run.poisson[-1].method, "poisson_converged": all(p.converged for p in run.poisson),
-                          "slabs": solver.slabs.bounds, "direction": solver.slabs.d, "progress_lines": logged}))
+                          "slabs": solver.slabs.bounds, "direction": solver.slabs.d, "progress_lines": logged,
+                          "input_planes": planes, "same_solid": same}))
 
 
 if __name__ == "__main__":

@@ -36,20 +36,34 @@ def assert_equal(a, b) -> None:
     assert np.abs(a - b).max() <= EQUAL * np.abs(b).max(), np.abs(a - b).max() / np.abs(b).max()
 
 
-@pytest.mark.parametrize("case,poisson,slab_axis,ranks,direction", [
-    ("cavity", "direct", "longest", 2, 0),  # closed: a singular Poisson matrix, one cell pinned
-    ("cavity", "gamg", "y", 3, 1),
-    ("plates", "direct", "longest", 2, 1),  # penalized (drag from the neighbours' fractions), open faces
-    ("plates", "direct", "x", 2, 0),        # the slabs cut the pressure inlet and outlet apart
-    ("box", "direct", "longest", 2, 2),     # 3D, transient, a moving and turning block, the inlet cut in slabs
-    ("box", "gamg", "x", 3, 0),
+def input_planes(bounds: list[int], layers: int | None) -> list[list[int]]:
+    """Each rank's input planes: its slab and ``layers`` more each side within the grid (None: all)."""
+    n = bounds[-1]
+    return [[0, n] if layers is None else [max(0, lo - layers), min(n, hi + layers)]
+            for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
+@pytest.mark.parametrize("case,poisson,slab_axis,ranks,direction,layers", [
+    ("cavity", "direct", "longest", 2, 0, 2),  # closed: a singular Poisson matrix, one cell pinned
+    ("cavity", "gamg", "y", 3, 1, 2),
+    ("plates", "direct", "longest", 2, 1, 2),  # wall penalization (drag from the neighbours' fractions), open faces
+    ("plates", "direct", "x", 2, 0, 2),        # the slabs cut the pressure inlet and outlet apart
+    ("plates", "direct", "y", 4, 1, 2),        # ranks 1, 2: a fluid ghost cell's wall drag from a solid cell beyond it
+    ("plates_power", "direct", "longest", 3, 1, 1),  # a cell's drag from its own fraction: the ghost layer alone
+    ("box", "direct", "longest", 2, 2, 2),     # 3D, transient, a moving and turning block, the inlet cut in slabs
+    ("box", "gamg", "x", 3, 0, 2),
+    ("bodies", "direct", "longest", 2, 2, None),  # a rigid body needs the whole grid
 ])
-def test_slabs_on_several_ranks_give_the_serial_fields(tmp_path, case, poisson, slab_axis, ranks, direction):
+def test_slabs_on_several_ranks_give_the_serial_fields(tmp_path, case, poisson, slab_axis, ranks, direction, layers):
+    """Each rank is given the rows of its input cells only (the ghost layer and the wall drag's
+    reach beyond its slab): still the serial fields."""
     serial, run = solve(case, poisson, slab_axis)
     out = tmp_path / "fields.npz"
     figures = run_mpi(SCRIPT, ranks, case, poisson, slab_axis, out)
     assert figures["ranks"] == ranks and figures["direction"] == direction
     assert len(figures["slabs"]) == ranks + 1 and min(np.diff(figures["slabs"])) >= 2
+    assert figures["input_planes"] == input_planes(figures["slabs"], layers)
+    assert figures["same_solid"] == [True] * ranks  # drag and solid velocity bit for bit
     assert figures["converged"] and figures["poisson_converged"] and run.converged
     assert figures["iterations"] == run.report.iterations
     assert figures["poisson"] == {"direct": "Cholesky (MUMPS)", "gamg": "CG + GAMG"}[poisson]
