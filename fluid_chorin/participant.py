@@ -36,6 +36,8 @@ from .solver import ChorinSolver, Run, State
 from .spec import ChorinSpec
 
 log = logging.getLogger("varcouple.fluid_chorin")
+#: the inputs of ``advance`` and their shapes (None: one row per input cell of the rank)
+INPUT_SHAPES = {"solid_fraction": (None,), "solid_velocity": (None, 3), "inlet_pressure": (1,)}
 
 
 class ChorinParticipant(Participant):
@@ -70,20 +72,10 @@ class ChorinParticipant(Participant):
         if self.solver is None:
             raise RuntimeError("advance before configure")
         solver = self.solver
-        slabs = solver.slabs
-        n = int(np.prod(slabs.input_shape))
-        arrays = {}
-        for name, want in (("solid_fraction", (n,)), ("solid_velocity", (n, 3)), ("inlet_pressure", (1,))):
-            if name in inputs:
-                data = np.asarray(inputs[name].data, dtype=float)
-                if data.shape != want:
-                    mine = "" if want == (1,) or self.size == 1 else (
-                        f" (rank {self.rank}'s input_ids: planes {slabs.input_planes[0]} to "
-                        f"{slabs.input_planes[1] - 1} along {'xyz'[slabs.d]})")
-                    raise ValueError(f"input {name!r} has shape {data.shape}, expected {want}{mine}")
-                if not np.all(np.isfinite(data)):
-                    raise ValueError(f"input {name!r} holds NaN/inf at index {int(np.argmin(np.isfinite(data)))}")
-                arrays[name] = data
+        problem = self.input_problem(inputs)
+        if problem:
+            raise ValueError(problem)
+        arrays = {name: np.asarray(inputs[name].data, dtype=float) for name in INPUT_SHAPES if name in inputs}
         if "inlet_pressure" in arrays:
             solver.set_inlet_pressure(float(arrays.pop("inlet_pressure")[0]))
         if arrays:
@@ -97,6 +89,27 @@ class ChorinParticipant(Participant):
         self.report(run)
         pressure, velocity = solver.part_fields()
         return {"pressure": Field("pressure", pressure, "Pa"), "velocity": Field("velocity", velocity, "m/s")}
+
+    def input_problem(self, inputs) -> str | None:
+        """An input whose shape is not one row per input cell of this rank (:data:`INPUT_SHAPES`)
+        or that holds NaN/inf."""
+        if self.solver is None:
+            return "advance before configure"
+        slabs = self.solver.slabs
+        n = int(np.prod(slabs.input_shape))
+        for name, shape in INPUT_SHAPES.items():
+            if name not in inputs:
+                continue
+            data = np.asarray(inputs[name].data, dtype=float)
+            want = tuple(n if k is None else k for k in shape)
+            if data.shape != want:
+                mine = "" if None not in shape or self.size == 1 else (
+                    f" (rank {self.rank}'s input_ids: planes {slabs.input_planes[0]} to "
+                    f"{slabs.input_planes[1] - 1} along {'xyz'[slabs.d]})")
+                return f"input {name!r} has shape {data.shape}, expected {want}{mine}"
+            if not np.all(np.isfinite(data)):
+                return f"input {name!r} holds NaN/inf at index {int(np.argmin(np.isfinite(data)))}"
+        return None
 
     def report(self, run: Run) -> None:
         """The stepping and, in one report, its pressure Poisson solves (the worst of them)."""

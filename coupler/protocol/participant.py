@@ -131,6 +131,13 @@ class Participant(abc.ABC):
         The state the participant advances from is its current state: the coupler calls
         :meth:`restore_state` before repeating a window."""
 
+    def input_problem(self, inputs: Mapping[str, Field]) -> str | None:
+        """Why this rank cannot take ``inputs`` for ``advance`` (None: it can), e.g. rows missing
+        from its part. On several ranks every rank asks before ``advance`` and the ranks agree,
+        so one rank's problem becomes every rank's error reply naming it (instead of that rank
+        failing alone inside the solver's collective code)."""
+        return None
+
     def save_state(self, window: int) -> None:
         """Verb ``save_state``: checkpoint the state at the start of ``window``
         (implicit coupling). Repeating a window after :meth:`restore_state` must give
@@ -189,7 +196,7 @@ class _MpiRoot:
         def call(*args):
             self._send((verb, args[:4] if verb == "advance" else args))  # rank 0's inputs stay here
             if verb in PART_VERBS:
-                _agree(self.comm, None)
+                _agree(self.comm, self.handler.input_problem(args[4]) if verb == "advance" else None)
             return method(*args)
 
         return call
@@ -227,6 +234,8 @@ def _mpi_worker(handler: Participant, comm, parts) -> None:
             problem = None
             try:
                 request = parts.take(verb, expect, PART_WAIT)
+                if verb == "advance" and (problem := handler.input_problem(request[3])):
+                    problem = f"{parts.key(verb)}: {problem}"
             except ProtocolError as exc:
                 problem = str(exc)
             try:
