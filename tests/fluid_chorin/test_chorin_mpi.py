@@ -79,13 +79,16 @@ def test_rank_0_alone_logs_the_progress_of_a_steady_solve(tmp_path):
     assert figures["progress_lines"][1:] == [0]
 
 
-def test_small_fracture_with_two_chorin_ranks_gives_the_one_rank_run(tmp_path):
-    """varcouple run with [solvers.fluid] ranks = 2 (mpirun -n 2, slabs along x): the same coupling
+@pytest.mark.parametrize("slab_axis", ["longest", "z"])
+def test_small_fracture_with_two_chorin_ranks_gives_the_one_rank_run(tmp_path, slab_axis):
+    """varcouple run with [solvers.fluid] ranks = 2 (mpirun -n 2, slabs along x, the longest, or
+    across the fracture along z, each rank given its input cells only): the same coupling
     iterations, displacements and fluid fields as one rank, to EQUAL."""
     runs = {}
     for ranks in (1, 2):
         case = copy_case(CASES / "small_fracture", tmp_path / f"case{ranks}",
-                         {**CHORIN, 'penalization = "wall"': f'penalization = "wall"\nranks = {ranks}'})
+                         {**CHORIN, 'penalization = "wall"': f'penalization = "wall"\nranks = {ranks}\n'
+                                                            f'slab_axis = "{slab_axis}"'})
         out = tmp_path / f"out{ranks}"
         assert main(["run", str(case), "--output", str(out)]) == 0
         runs[ranks] = out, json.loads((out / "summary.json").read_text())
