@@ -16,9 +16,12 @@ Two scenes (one time step each):
   shape 40 x 20 x 4: 38,400 tets) in a 42 x 22 x 22 grid (20,328 fluid cells), so that the
   per-cell costs stand out from the processes' fixed memory (Python, dolfinx, PETSc, MPI).
 
+With ``--fluid chorin`` the fluid is the Chorin fluid on M slab ranks instead (``python -m
+fluid_chorin``, each rank measured).
+
 Docs: docs/scaling.md "A coupled run on several ranks: what is gathered where".
 
-    .venv/bin/python bench/ranks.py [--scenes small large] [--pairs 1,1 2,1 1,2 2,2] [-o FILE]
+    .venv/bin/python bench/ranks.py [--scenes small large] [--pairs 1,1 2,1 1,2 2,2] [--fluid chorin] [-o FILE]
 """
 
 from __future__ import annotations
@@ -55,11 +58,17 @@ SCENES = {
 }
 
 
-def scene_text(scene: str, solid_ranks: int, fluid_ranks: int) -> str:
+#: the fluid participant's line in the scene per ``--fluid`` (the Chorin fluid has no max_iterations of simpleFoam)
+FLUIDS = {"openfoam": {}, "chorin": {'participant = "openfoam"': 'participant = "chorin"', "max_iterations = 3000\n": ""}}
+
+
+def scene_text(scene: str, solid_ranks: int, fluid_ranks: int, fluid: str = "openfoam") -> str:
     text = (SMALL / "scene.toml").read_text()
+    for old, new in FLUIDS[fluid].items():
+        text = text.replace(old, new)
     replace = {"steps = 2": "steps = 1",
                'participant = "solid_fenicsx"': f'participant = "solid_fenicsx"\nranks = {solid_ranks}',
-               'participant = "openfoam"': f'participant = "openfoam"\nranks = {fluid_ranks}', **SCENES[scene]}
+               f'participant = "{fluid}"': f'participant = "{fluid}"\nranks = {fluid_ranks}', **SCENES[scene]}
     for old, new in replace.items():
         if old not in text:
             raise SystemExit(f"bench/ranks.py: {old!r} not in cases/small_fracture/scene.toml")
@@ -85,6 +94,8 @@ def role(pid: int, root: int) -> str | None:
         return f"solid rank {rank}"
     if "fluid_openfoam" in argv:
         return "fluid participant"
+    if "fluid_chorin" in argv:
+        return f"chorin rank {rank}"
     if argv and Path(argv[0]).name in ("simpleFoam", "pimpleFoam"):
         return f"{Path(argv[0]).name} rank {rank}"
     return None
@@ -97,14 +108,14 @@ def peak_rss_kb(pid: int) -> int:
     return 0
 
 
-def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path) -> dict:
+def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, fluid: str = "openfoam") -> dict:
     """One ``varcouple run``: wall time, status and the peak resident memory [MB] per process."""
-    case = work / f"{scene}_n{solid_ranks}_m{fluid_ranks}"
+    case = work / f"{scene}_n{solid_ranks}_m{fluid_ranks}_{fluid}"
     case.mkdir(parents=True)
     for f in SMALL.iterdir():
         if f.is_file() and f.name != "scene.toml":
             (case / f.name).symlink_to(f)
-    (case / "scene.toml").write_text(scene_text(scene, solid_ranks, fluid_ranks))
+    (case / "scene.toml").write_text(scene_text(scene, solid_ranks, fluid_ranks, fluid))
     out = case / "results"
     peaks: dict[str, int] = {}
     t0 = time.perf_counter()
@@ -127,7 +138,8 @@ def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path) -> 
     thread.join()
     wall = time.perf_counter() - t0
     summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else {}
-    return {"scene": scene, "solid_ranks": solid_ranks, "fluid_ranks": fluid_ranks, "exit": proc.returncode,
+    return {"scene": scene, "fluid": fluid, "solid_ranks": solid_ranks, "fluid_ranks": fluid_ranks,
+            "exit": proc.returncode,
             "error": err.decode(errors="replace").strip().splitlines()[-1:] if proc.returncode else [],
             "status": summary.get("status"), "wall_seconds": round(wall, 2), "sizes": summary.get("sizes"),
             "iterations": summary.get("iterations"),
@@ -139,14 +151,18 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     ap.add_argument("--pairs", nargs="+", default=["1,1", "2,1", "1,2", "2,2"],
                     help="solid ranks,fluid ranks")
-    ap.add_argument("-o", "--output", type=Path, default=ROOT / "bench" / "results" / "ranks.json")
+    ap.add_argument("--fluid", choices=list(FLUIDS), default="openfoam")
+    ap.add_argument("-o", "--output", type=Path,
+                    help="default bench/results/ranks.json (ranks_chorin.json with --fluid chorin)")
     args = ap.parse_args(argv)
+    if args.output is None:
+        args.output = ROOT / "bench" / "results" / ("ranks.json" if args.fluid == "openfoam" else "ranks_chorin.json")
     runs = []
     with tempfile.TemporaryDirectory(prefix="varcouple-ranks-") as tmp:
         for scene in args.scenes:
             for pair in args.pairs:
                 n, m = (int(x) for x in pair.split(","))
-                run = measured_run(scene, n, m, Path(tmp))
+                run = measured_run(scene, n, m, Path(tmp), args.fluid)
                 runs.append(run)
                 print(f"{scene:6s} solid {n} fluid {m}: exit {run['exit']}, {run['wall_seconds']:6.1f} s, "
                       + ", ".join(f"{k} {v:.0f} MB" for k, v in run["peak_rss_mb"].items()), flush=True)
