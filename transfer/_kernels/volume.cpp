@@ -237,6 +237,50 @@ bool box_outside(const Vec3& lo, const Vec3& hi, const Convex& c, double eps) {
   return false;
 }
 
+// Signed distances n.x - d of the source points to the face planes of one target tet
+// (coordinates relative to its vertex 0, as ElementGeometry::build gives them), each
+// computed once per target: a point is shared by about 20 tets of a tet mesh, so the
+// separating-plane test of a pair mostly compares distances already at hand.
+class PointDistances {
+ public:
+  PointDistances() = default;
+  explicit PointDistances(int64_t npoints) : near_(npoints) {}
+  bool empty() const { return near_.empty(); }
+  // The distances of point `i` at `x` to the planes of `c`, the target tagged `tag`.
+  const double* of(int64_t i, const double* x, const Vec3& origin, const Convex& c, int64_t tag) {
+    Near& p = near_[i];
+    if (p.tag != tag) {
+      p.tag = tag;
+      const Vec3 r{x[0] - origin[0], x[1] - origin[1], x[2] - origin[2]};
+      for (int k = 0; k < 4; ++k) {
+        const Vec3& n = c.p[k].n;
+        p.s[k] = n[0] * r[0] + n[1] * r[1] + n[2] * r[2] - c.p[k].d;
+      }
+    }
+    return p.s;
+  }
+
+ private:
+  struct Near {
+    int64_t tag = -1;
+    double s[4];
+  };
+  std::vector<Near> near_;
+};
+
+// True when the four points with distances s[k][p] to the planes p of a tet all lie
+// outside one plane by more than eps; `cuts` as outside_a_plane gives it.
+bool outside_a_plane(const double* const s[4], double eps, unsigned& cuts) {
+  int separated = 0;
+  cuts = 0;
+  for (int p = 0; p < 4; ++p) {
+    const int out0 = s[0][p] > eps, out1 = s[1][p] > eps, out2 = s[2][p] > eps, out3 = s[3][p] > eps;
+    separated |= out0 & out1 & out2 & out3;
+    cuts |= static_cast<unsigned>(out0 | out1 | out2 | out3) << p;
+  }
+  return separated;
+}
+
 // True when every vertex of the `ntets` tets lies outside one plane of `c` by more than
 // eps (a separating plane: nothing of them meets `c`); bit p of `cuts` is set when some
 // vertex lies outside plane p by more than eps (no bit: all lie inside `c`, and a plane
@@ -324,12 +368,17 @@ class SourceTets {
 // skipped (both by more than eps): such pairs are those clipping finds empty; a plane
 // no subject vertex lies outside of is not clipped by. Without it every pair is clipped
 // by every plane (tests). With `clip` false nothing is clipped (benchmarks:
-// the rejection tests alone).
+// the rejection tests alone). `known_cuts`, when given, is the first test's `cuts`,
+// already found without a separating plane.
 template <class Faces, class F>
 void clip_convex(const Tet* subject, int nsubject, Faces&& faces_of, const Convex& c, const Tet* other,
-                 double eps, bool reject, bool clip, Polyhedron& poly, F&& piece) {
+                 double eps, bool reject, bool clip, Polyhedron& poly, F&& piece,
+                 const unsigned* known_cuts = nullptr) {
   unsigned cuts = ~0u, unused = 0;  // the planes of `c` that cut the subject (all without `reject`)
-  if (reject && outside_a_plane(c, subject, nsubject, eps, cuts)) return;
+  if (known_cuts)
+    cuts = *known_cuts;
+  else if (reject && outside_a_plane(c, subject, nsubject, eps, cuts))
+    return;
   for (int t = 0; t < nsubject; ++t) {
     if (reject && cuts && other && outside_a_plane(faces_of(t), other, 1, eps, unused)) continue;
     if (!clip) continue;
@@ -372,6 +421,8 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
     Bparts[tid].reserve(16 * nt * (tgt.ncells / nth + 1));
     Dparts[tid].reserve((lump ? 1 : nt) * nt * (tgt.ncells / nth + 1));
     std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
+    // tet-tet pairs: the first separating-plane test from distances of the source points
+    PointDistances near = reject && !src_tets.empty() ? PointDistances(src.npoints) : PointDistances();
     LocalAssembly la;
     Polyhedron poly;
     ElementGeometry tg, sg;
@@ -400,19 +451,27 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
       search.for_each(search_box, 1e-10 * h, stamp, t, [&](int64_t s) {
         ++tested;
         if (stages < kReject) return;
-        if (reject && tg.nconvex == 1) {
+        // the tolerance of the pair's tests and clipping, from the smaller of the two elements
+        auto tolerance = [&](double diagonal) { return 1e-12 * std::min(h, diagonal) + 4 * DBL_EPSILON * h; };
+        double eps = src_tets.empty() ? 0.0 : tolerance(src_tets.diagonal(s));
+        unsigned cuts = 0;
+        if (!near.empty()) {  // source points outside a target plane
+          const int64_t* v = src.cells + 4 * s;
+          const double* d[4];
+          for (int k = 0; k < 4; ++k) d[k] = near.of(v[k], src.points + 3 * v[k], origin, tg.convex[0], t);
+          if (outside_a_plane(d, eps, cuts)) return;
+        } else if (reject && tg.nconvex == 1) {
           const BBox& b = search.box(s);
           if (box_outside(sub(b.lo, origin), sub(b.hi, origin), tg.convex[0], eps_box)) return;
         }
         sg.build(src, s, origin, false);
+        if (src_tets.empty()) eps = tolerance(sg.box.diagonal());
         // Clip the tets of the element with fewer of them by the convex pieces
         // of the other (fewest tet-piece pairs).
         const bool clip_source = sg.ntets * tg.convex_count() <= tg.ntets * sg.convex_count();
         const ElementGeometry& subj = clip_source ? sg : tg;
         ElementGeometry& clipper = clip_source ? tg : sg;
         clipper.build_planes();
-        const double eps =
-            1e-12 * std::min(h, src_tets.empty() ? sg.box.diagonal() : src_tets.diagonal(s)) + 4 * DBL_EPSILON * h;
         const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
         // the faces of a source tet are computed once, those of other tets here
         auto faces_of = [&](int k) {
@@ -458,7 +517,7 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
         };
         for (int c = 0; c < clipper.nconvex; ++c)
           clip_convex(subj.tets, subj.ntets, faces_of, clipper.convex[c], other, eps, reject, stages >= kClip, poly,
-                      integrate);
+                      integrate, near.empty() ? nullptr : &cuts);
         if (!any) return;
         ++intersected;
         if (moments) {  // B block from the moments of the intersection
