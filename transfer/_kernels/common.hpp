@@ -60,19 +60,31 @@ struct SimplexRule {
 // which halves the memory traffic of assembly.
 using Index = int32_t;
 
-// COO triplets of one thread; merged into CSR by to_csr (sparse.cpp).
-struct Triplets {
-  std::vector<Index> rows, cols;
+// Rows of one thread, piece by piece: a piece is the entries one element gives one row
+// (its columns and values, in order); merged into CSR by to_csr (sparse.cpp), which
+// gathers the pieces of a row instead of sorting every entry by row.
+struct RowPieces {
+  std::vector<Index> rows;       // per piece
+  std::vector<int64_t> starts{0};  // per piece: where its entries start; one more at the end
+  std::vector<Index> cols;       // per entry
   std::vector<double> vals;
-  void reserve(size_t n) {
-    rows.reserve(n);
-    cols.reserve(n);
-    vals.reserve(n);
+  // Room for `pieces` pieces of `entries` entries in all.
+  void reserve(size_t pieces, size_t entries) {
+    rows.reserve(pieces);
+    starts.reserve(pieces + 1);
+    cols.reserve(entries);
+    vals.reserve(entries);
   }
-  void add(int64_t r, int64_t c, double v) {
+  size_t size() const { return rows.size(); }
+  // A piece of row r: its entries follow with add, up to the next row().
+  void row(int64_t r) {
     rows.push_back(static_cast<Index>(r));
+    starts.push_back(starts.back());
+  }
+  void add(int64_t c, double v) {
     cols.push_back(static_cast<Index>(c));
     vals.push_back(v);
+    ++starts.back();
   }
 };
 
@@ -82,9 +94,9 @@ struct CSR {
   std::vector<double> data;
 };
 
-// Sum the triplets of all threads into a CSR matrix with nrows rows and ncols columns
-// (duplicates added, columns sorted within each row).
-CSR to_csr(const std::vector<Triplets>& parts, int64_t nrows, int64_t ncols, int nthreads = 1);
+// Sum the row pieces of all threads into a CSR matrix with nrows rows and ncols columns
+// (duplicates added in the order of the threads and pieces, columns sorted within each row).
+CSR to_csr(const std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthreads = 1);
 
 // How a target element enters D (paper eqs. 3-4):
 // - covered entirely by the source (relative tolerance kFullCoverage on the
@@ -178,7 +190,7 @@ struct LocalAssembly {
     return true;
   }
   // Emit the element of measure `measure` by the policy above.
-  void finish(const int64_t* tdofs, double measure, bool dual, bool lump, Triplets& B, Triplets& D) const {
+  void finish(const int64_t* tdofs, double measure, bool dual, bool lump, RowPieces& B, RowPieces& D) const {
     const bool full = overlap >= (1.0 - kFullCoverage) * measure;
     emit(tdofs, dual && full, lump || (!full && !well_conditioned()), B, D);
   }
@@ -208,23 +220,21 @@ struct LocalAssembly {
   // own mass matrix M as integrated here, so int psi_a phi_c = delta_ac int phi_c
   // holds for exactly the integration that B uses. `lump` replaces the local
   // mass matrix by its row sums (diagonal D).
-  void emit(const int64_t* tdofs, bool use_dual, bool lump, Triplets& B, Triplets& D) const {
+  void emit(const int64_t* tdofs, bool use_dual, bool lump, RowPieces& B, RowPieces& D) const {
     std::array<double, 64> md{}, coeffs{};
-    std::array<double, 8> tmp{};
     const double* dual = (use_dual && dual_coefficients(coeffs.data())) ? coeffs.data() : nullptr;
     const size_t ns = src_dofs.size();
-    for (size_t k = 0; k < ns; ++k) {
-      const double* row = b.data() + k * nt;
-      for (int a = 0; a < nt; ++a) {
+    for (int a = 0; a < nt; ++a) {
+      B.row(tdofs[a]);
+      for (size_t k = 0; k < ns; ++k) {
+        const double* row = b.data() + k * nt;
         double v = row[a];
         if (dual) {
           v = 0.0;
           for (int c = 0; c < nt; ++c) v += dual[a * nt + c] * row[c];
         }
-        tmp[a] = v;
+        if (v != 0.0) B.add(src_dofs[k], v);
       }
-      for (int a = 0; a < nt; ++a)
-        if (tmp[a] != 0.0) B.add(tdofs[a], src_dofs[k], tmp[a]);
     }
     for (int a = 0; a < nt; ++a)
       for (int c = 0; c < nt; ++c) {
@@ -236,13 +246,14 @@ struct LocalAssembly {
         md[a * nt + c] = v;
       }
     for (int a = 0; a < nt; ++a) {
+      D.row(tdofs[a]);
       if (lump) {
         double s = 0.0;
         for (int c = 0; c < nt; ++c) s += md[a * nt + c];
-        D.add(tdofs[a], tdofs[a], s);
+        D.add(tdofs[a], s);
       } else {
         for (int c = 0; c < nt; ++c)
-          if (md[a * nt + c] != 0.0) D.add(tdofs[a], tdofs[c], md[a * nt + c]);
+          if (md[a * nt + c] != 0.0) D.add(tdofs[c], md[a * nt + c]);
       }
     }
   }
@@ -262,7 +273,7 @@ struct AssemblyResult {
   int64_t pairs_intersected = 0;
 
   // Merge the per-thread triplets into B and D.
-  void collect(const std::vector<Triplets>& b, const std::vector<Triplets>& d, int64_t n_src_dofs,
+  void collect(const std::vector<RowPieces>& b, const std::vector<RowPieces>& d, int64_t n_src_dofs,
                int64_t n_tgt_dofs, int nthreads) {
     B = to_csr(b, n_tgt_dofs, n_src_dofs, nthreads);
     D = to_csr(d, n_tgt_dofs, n_tgt_dofs, nthreads);

@@ -212,7 +212,7 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
 
   const int nt = tgt.nbasis(), nsb = src.nbasis();
   const int tnv = tgt.nverts, snv = src.nverts;
-  std::vector<Triplets> Bparts(nth), Dparts(nth);
+  std::vector<RowPieces> Bparts(nth), Dparts(nth);
   int64_t tested = 0, intersected = 0;
 
 #pragma omp parallel num_threads(nth) reduction(+ : tested, intersected)
@@ -221,8 +221,8 @@ AssemblyResult assemble_surface(const ElementSet& src, const ElementSet& tgt, co
 #ifdef _OPENMP
     tid = omp_get_thread_num();
 #endif
-    Triplets& Bt = Bparts[tid];
-    Triplets& Dt = Dparts[tid];
+    RowPieces& Bt = Bparts[tid];
+    RowPieces& Dt = Dparts[tid];
     std::vector<int32_t> slot(static_cast<size_t>(n_src_dofs), -1);
     std::vector<int64_t> stamp(static_cast<size_t>(ns_cells), -1);
     std::vector<int64_t> cand;

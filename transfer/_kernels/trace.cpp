@@ -90,7 +90,7 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
   const SourceSearch search(src, src_grid);
 
   const int nth = thread_count(nthreads);
-  std::vector<Triplets> Bparts(nth), Dparts(nth);
+  std::vector<RowPieces> Bparts(nth), Dparts(nth);
   int64_t tested = 0, intersected = 0;
   const int nt = tgt.nbasis(), ns = src.nbasis();
   static constexpr int kTris[2][3] = {{0, 1, 2}, {0, 2, 3}};

@@ -396,13 +396,19 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
                                const GridInfo* src_grid, int nthreads, int stages, bool reject) {
   AssemblyResult result(tgt.ncells);
   ElementSet src = src_in;
-  const std::vector<double> coords = src.packed_coords();
-  src.cell_coords = coords.data();
+  const bool tet_pairs = src.kind == TET && tgt.kind == TET;
+  // Source vertices cell by cell: one read per candidate where the search visits cells in no
+  // order; tet-tet pairs with rejection read the points through PointDistances instead.
+  std::vector<double> coords;
+  if (!(tet_pairs && reject)) {
+    coords = src.packed_coords();
+    src.cell_coords = coords.data();
+  }
   const SourceSearch search(src, src_grid);
-  const SourceTets src_tets = src.kind == TET && tgt.kind == TET ? SourceTets(src) : SourceTets();
+  const SourceTets src_tets = tet_pairs ? SourceTets(src) : SourceTets();
 
   const int nth = thread_count(nthreads);
-  std::vector<Triplets> Bparts(nth), Dparts(nth);
+  std::vector<RowPieces> Bparts(nth), Dparts(nth);
   int64_t tested = 0, intersected = 0;
   const int nt = tgt.nbasis(), ns = src.nbasis();
   // An empty rule asks for exact integration from moments (affine bases only).
@@ -418,8 +424,9 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
 #endif
     std::vector<int32_t> slot(n_src_dofs, -1);
     // about 14 source dofs per target cell of P1 tet pairs of similar size: room for 16
-    Bparts[tid].reserve(16 * nt * (tgt.ncells / nth + 1));
-    Dparts[tid].reserve((lump ? 1 : nt) * nt * (tgt.ncells / nth + 1));
+    const size_t cells = tgt.ncells / nth + 1;
+    Bparts[tid].reserve(nt * cells, 16 * nt * cells);
+    Dparts[tid].reserve(nt * cells, (lump ? 1 : nt) * nt * cells);
     std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
     // tet-tet pairs: the first separating-plane test from distances of the source points
     PointDistances near = reject && !src_tets.empty() ? PointDistances(src.npoints) : PointDistances();
