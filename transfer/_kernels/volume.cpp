@@ -329,15 +329,18 @@ class SourceTets {
   bool empty() const { return cells_.empty(); }
   double diagonal(int64_t k) const { return cells_[k].diagonal; }
   double shape_number(int64_t k) const { return cells_[k].shape; }
-  // The faces of cell k in a frame where its vertex 0 is at v0.
-  Convex faces(int64_t k, const Vec3& v0) const {
-    Convex out;
-    out.nplanes = 4;
-    for (int i = 0; i < 4; ++i) {
-      const Plane& f = cells_[k].faces[i];
-      out.p[i] = {f.n, f.d + dot(f.n, v0)};
+  // True when the tet `other` lies outside a face of cell k by more than eps, in a frame
+  // where the cell's vertex 0 is at v0 (outside_a_plane on the cell's faces, unpacked).
+  bool separates(int64_t k, const Vec3& v0, const Tet& other, double eps) const {
+    int separated = 0;
+    for (const Plane& f : cells_[k].faces) {
+      const Vec3& n = f.n;
+      const double d = f.d + dot(n, v0);
+      int out = 1;
+      for (const Vec3& x : other.v) out &= n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d > eps;
+      separated |= out;
     }
-    return out;
+    return separated;
   }
   // The basis of cell k in that frame, as Evaluator::affine gives it.
   void affine(int64_t k, const Vec3& v0, double* c, Vec3* g) const {
@@ -363,24 +366,23 @@ class SourceTets {
 
 // Clips each of the `nsubject` tets of `subject` by convex `c` and hands every
 // non-empty piece to piece(poly). With `reject`, a plane of `c` that all subject
-// vertices lie outside of rejects the pair, and when `c` holds the planes of the tet
-// `other`, a subject tet whose own faces, faces_of(t), leave all of `other` outside is
+// vertices lie outside of rejects the pair, and when `c` holds the planes of a tet, a
+// subject tet t whose own faces leave all of that tet outside, separated(t), is
 // skipped (both by more than eps): such pairs are those clipping finds empty; a plane
 // no subject vertex lies outside of is not clipped by. Without it every pair is clipped
 // by every plane (tests). With `clip` false nothing is clipped (benchmarks:
 // the rejection tests alone). `known_cuts`, when given, is the first test's `cuts`,
 // already found without a separating plane.
-template <class Faces, class F>
-void clip_convex(const Tet* subject, int nsubject, Faces&& faces_of, const Convex& c, const Tet* other,
-                 double eps, bool reject, bool clip, Polyhedron& poly, F&& piece,
-                 const unsigned* known_cuts = nullptr) {
-  unsigned cuts = ~0u, unused = 0;  // the planes of `c` that cut the subject (all without `reject`)
+template <class Separated, class F>
+void clip_convex(const Tet* subject, int nsubject, Separated&& separated, const Convex& c, double eps,
+                 bool reject, bool clip, Polyhedron& poly, F&& piece, const unsigned* known_cuts = nullptr) {
+  unsigned cuts = ~0u;  // the planes of `c` that cut the subject (all without `reject`)
   if (known_cuts)
     cuts = *known_cuts;
   else if (reject && outside_a_plane(c, subject, nsubject, eps, cuts))
     return;
   for (int t = 0; t < nsubject; ++t) {
-    if (reject && cuts && other && outside_a_plane(faces_of(t), other, 1, eps, unused)) continue;
+    if (reject && cuts && separated(t)) continue;
     if (!clip) continue;
     poly.assign(subject[t]);
     for (int p = 0; p < c.nplanes; ++p)
@@ -479,10 +481,13 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
         const ElementGeometry& subj = clip_source ? sg : tg;
         ElementGeometry& clipper = clip_source ? tg : sg;
         clipper.build_planes();
-        const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
-        // the faces of a source tet are computed once, those of other tets here
-        auto faces_of = [&](int k) {
-          return clip_source && !src_tets.empty() ? src_tets.faces(s, sg.verts[0]) : tet_planes(subj.tets[k]);
+        // a subject tet whose faces leave a tet clipper outside (the faces of a source tet
+        // are computed once, those of other tets here)
+        auto separated = [&](int k) {
+          unsigned unused = 0;
+          if (clipper.kind != TET) return false;
+          if (clip_source && !src_tets.empty()) return src_tets.separates(s, sg.verts[0], clipper.tets[0], eps);
+          return outside_a_plane(tet_planes(subj.tets[k]), &clipper.tets[0], 1, eps, unused);
         };
         bool prepared = false, any = false, moments = false;
         const SimplexRule* q_rule = &rule;
@@ -523,7 +528,7 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
           });
         };
         for (int c = 0; c < clipper.nconvex; ++c)
-          clip_convex(subj.tets, subj.ntets, faces_of, clipper.convex[c], other, eps, reject, stages >= kClip, poly,
+          clip_convex(subj.tets, subj.ntets, separated, clipper.convex[c], eps, reject, stages >= kClip, poly,
                       integrate, near.empty() ? nullptr : &cuts);
         if (!any) return;
         ++intersected;
