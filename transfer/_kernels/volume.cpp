@@ -107,11 +107,88 @@ class Polyhedron {
   // Keep the part with n.x - d <= eps; false when nothing is left.
   bool clip(const Plane& pl, double eps) {
     double s[kMax];
-    int out = 0;
-    for (int v = 0; v < n_; ++v) {
+    for (int v = 0; v < n_; ++v) s[v] = dot(pl.n, x_[v]) - pl.d;
+    return cut(s, eps);
+  }
+
+  // clip() on the tet just assigned, in one step: what clip does to a tet depends only on
+  // which of its vertices lie outside, so each case is a recipe (TetCut) found once by
+  // clip itself; the new vertices are the same, in the same order.
+  bool clip_tet(const Plane& pl, double eps) {
+    double s[4];
+    int outside = 0;
+    for (int v = 0; v < 4; ++v) {
       s[v] = dot(pl.n, x_[v]) - pl.d;
-      out += s[v] > eps;
+      outside |= (s[v] > eps) << v;
     }
+    if (outside == 0) return true;
+    if (outside == 15) {
+      n_ = 0;
+      return false;
+    }
+    const TetCut& r = tet_cuts()[outside];
+    Vec3 x[TetCut::kMax];
+    for (int v = 0; v < r.n; ++v) {
+      const int a = r.from[v], b = r.to[v];
+      if (b < 0) {
+        x[v] = x_[a];
+      } else {
+        const double sa = s[a] >= -eps ? 0.0 : s[a];  // as clip: a vertex within eps lies on the plane
+        x[v] = lerp(x_[a], x_[b], sa / (sa - s[b]));
+      }
+    }
+    n_ = r.n;
+    for (int v = 0; v < n_; ++v) {
+      x_[v] = x[v];
+      for (int k = 0; k < 3; ++k) nb_[v][k] = r.nb[v][k];
+    }
+    return true;
+  }
+
+ private:
+  // The tet of assign() cut by a plane with the vertices of bit mask `outside` outside:
+  // vertex v of the result is old vertex from[v] (to[v] < 0) or the point on the edge from
+  // from[v] (inside) to to[v] (outside); nb as nb_.
+  struct TetCut {
+    static constexpr int kMax = 6;
+    int n = 0;
+    int from[kMax], to[kMax], nb[kMax][3];
+  };
+  static const std::array<TetCut, 16>& tet_cuts() {
+    static const std::array<TetCut, 16> cuts = [] {
+      std::array<TetCut, 16> out{};
+      const Tet ref{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};  // positive: assign keeps its order
+      for (int outside = 1; outside < 15; ++outside) {
+        Polyhedron p;
+        p.assign(ref);
+        double s[kMax];
+        for (int v = 0; v < 4; ++v) s[v] = outside >> v & 1 ? 1.0 : -1.0;
+        p.cut(s, 0.5);  // new vertices at the midpoints of the cut edges
+        TetCut& r = out[outside];
+        r.n = p.n_;
+        for (int v = 0; v < p.n_; ++v) {
+          for (int k = 0; k < 3; ++k) r.nb[v][k] = p.nb_[v][k];
+          r.to[v] = -1;
+          for (int a = 0; a < 4; ++a)
+            for (int b = 0; b < 4; ++b) {
+              const Vec3 mid = scale(add(ref.v[a], ref.v[b]), 0.5);
+              if (a == b && p.x_[v] == ref.v[a]) r.from[v] = a;
+              if (a != b && !(outside >> a & 1) && (outside >> b & 1) && p.x_[v] == mid) {
+                r.from[v] = a;
+                r.to[v] = b;
+              }
+            }
+        }
+      }
+      return out;
+    }();
+    return cuts;
+  }
+
+  // clip() with the distances s[v] of the vertices to the plane.
+  bool cut(double* s, double eps) {
+    int out = 0;
+    for (int v = 0; v < n_; ++v) out += s[v] > eps;
     if (out == 0) return true;
     if (out == n_) {
       n_ = 0;
@@ -155,6 +232,8 @@ class Polyhedron {
     return true;
   }
 
+
+ public:
   // Calls f(a, b, c) for the fan triangles (vertex indices) of every face not holding
   // vertex 0: with vertex 0 they are the tets the polyhedron is cut into.
   template <class F>
@@ -329,16 +408,32 @@ class SourceTets {
   bool empty() const { return cells_.empty(); }
   double diagonal(int64_t k) const { return cells_[k].diagonal; }
   double shape_number(int64_t k) const { return cells_[k].shape; }
-  // True when the tet `other` lies outside a face of cell k by more than eps, in a frame
-  // where the cell's vertex 0 is at v0 (outside_a_plane on the cell's faces, unpacked).
-  bool separates(int64_t k, const Vec3& v0, const Tet& other, double eps) const {
+  // The faces of cell k in a frame where its vertex 0 is at v0.
+  Convex faces(int64_t k, const Vec3& v0) const {
+    Convex out;
+    out.nplanes = 4;
+    for (int i = 0; i < 4; ++i) {
+      const Plane& f = cells_[k].faces[i];
+      out.p[i] = {f.n, f.d + dot(f.n, v0)};
+    }
+    return out;
+  }
+  // outside_a_plane(faces(k, v0), &other, 1, eps, cuts), without the copy of the faces.
+  bool separates(int64_t k, const Vec3& v0, const Tet& other, double eps, unsigned& cuts) const {
     int separated = 0;
-    for (const Plane& f : cells_[k].faces) {
+    cuts = 0;
+    for (int i = 0; i < 4; ++i) {
+      const Plane& f = cells_[k].faces[i];
       const Vec3& n = f.n;
       const double d = f.d + dot(n, v0);
-      int out = 1;
-      for (const Vec3& x : other.v) out &= n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d > eps;
+      int out = 1, some = 0;
+      for (const Vec3& x : other.v) {
+        const int o = n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d > eps;
+        out &= o;
+        some |= o;
+      }
       separated |= out;
+      cuts |= static_cast<unsigned>(some) << i;
     }
     return separated;
   }
@@ -364,29 +459,46 @@ class SourceTets {
   int nbasis_ = 0;
 };
 
+// The tet t clipped by the planes of `c` with a bit in `cuts` (fed to poly).
+inline void clip_tet(const Tet& t, const Convex& c, unsigned cuts, double eps, Polyhedron& poly) {
+  poly.assign(t);
+  bool first = true;
+  for (int p = 0; p < c.nplanes; ++p) {
+    if (!(cuts >> p & 1u)) continue;
+    if (!(first ? poly.clip_tet(c.p[p], eps) : poly.clip(c.p[p], eps))) return;
+    first = false;
+  }
+}
+
 // Clips each of the `nsubject` tets of `subject` by convex `c` and hands every
 // non-empty piece to piece(poly). With `reject`, a plane of `c` that all subject
-// vertices lie outside of rejects the pair, and when `c` holds the planes of a tet, a
-// subject tet t whose own faces leave all of that tet outside, separated(t), is
-// skipped (both by more than eps): such pairs are those clipping finds empty; a plane
-// no subject vertex lies outside of is not clipped by. Without it every pair is clipped
-// by every plane (tests). With `clip` false nothing is clipped (benchmarks:
-// the rejection tests alone). `known_cuts`, when given, is the first test's `cuts`,
-// already found without a separating plane.
-template <class Separated, class F>
-void clip_convex(const Tet* subject, int nsubject, Separated&& separated, const Convex& c, double eps,
-                 bool reject, bool clip, Polyhedron& poly, F&& piece, const unsigned* known_cuts = nullptr) {
+// vertices lie outside of rejects the pair, and when `c` holds the planes of the tet
+// `other`, a subject tet t whose own faces leave all of `other` outside,
+// separated(t, faces_cut), is skipped (both by more than eps): such pairs are those
+// clipping finds empty; a plane no subject vertex lies outside of is not clipped by, and
+// with `either_way` (an integration exact on any cut of the intersection into tets), when
+// fewer of t's faces, faces(t), than planes of `c` cut `other`, `other` is clipped by them
+// instead (the same intersection, fewer cuts). Without `reject` every pair is clipped
+// by every plane (tests). With `clip` false nothing is clipped (benchmarks: the rejection
+// tests alone). `known_cuts`, when given, is the first test's `cuts`, already found
+// without a separating plane.
+template <class Separated, class Faces, class F>
+void clip_convex(const Tet* subject, int nsubject, Separated&& separated, Faces&& faces, const Convex& c,
+                 const Tet* other, double eps, bool reject, bool clip, bool either_way, Polyhedron& poly,
+                 F&& piece, const unsigned* known_cuts = nullptr) {
   unsigned cuts = ~0u;  // the planes of `c` that cut the subject (all without `reject`)
   if (known_cuts)
     cuts = *known_cuts;
   else if (reject && outside_a_plane(c, subject, nsubject, eps, cuts))
     return;
   for (int t = 0; t < nsubject; ++t) {
-    if (reject && cuts && separated(t)) continue;
+    unsigned faces_cut = ~0u;  // the faces of subject tet t that cut `other`
+    if (reject && cuts && other && separated(t, faces_cut)) continue;
     if (!clip) continue;
-    poly.assign(subject[t]);
-    for (int p = 0; p < c.nplanes; ++p)
-      if ((cuts >> p & 1u) && !poly.clip(c.p[p], eps)) break;
+    if (either_way && reject && other && __builtin_popcount(faces_cut) < __builtin_popcount(cuts))
+      clip_tet(*other, faces(t), faces_cut, eps, poly);
+    else
+      clip_tet(subject[t], c, cuts, eps, poly);
     if (!poly.empty()) piece(poly);
   }
 }
@@ -483,11 +595,12 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
         clipper.build_planes();
         // a subject tet whose faces leave a tet clipper outside (the faces of a source tet
         // are computed once, those of other tets here)
-        auto separated = [&](int k) {
-          unsigned unused = 0;
-          if (clipper.kind != TET) return false;
-          if (clip_source && !src_tets.empty()) return src_tets.separates(s, sg.verts[0], clipper.tets[0], eps);
-          return outside_a_plane(tet_planes(subj.tets[k]), &clipper.tets[0], 1, eps, unused);
+        const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
+        const bool source_faces = clip_source && !src_tets.empty();  // computed once per source tet
+        auto faces = [&](int k) { return source_faces ? src_tets.faces(s, sg.verts[0]) : tet_planes(subj.tets[k]); };
+        auto separated = [&](int k, unsigned& cuts) {
+          if (source_faces) return src_tets.separates(s, sg.verts[0], *other, eps, cuts);
+          return outside_a_plane(faces(k), other, 1, eps, cuts);
         };
         bool prepared = false, any = false, moments = false;
         const SimplexRule* q_rule = &rule;
@@ -528,8 +641,8 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
           });
         };
         for (int c = 0; c < clipper.nconvex; ++c)
-          clip_convex(subj.tets, subj.ntets, separated, clipper.convex[c], eps, reject, stages >= kClip, poly,
-                      integrate, near.empty() ? nullptr : &cuts);
+          clip_convex(subj.tets, subj.ntets, separated, faces, clipper.convex[c], other, eps, reject,
+                      stages >= kClip, exact && tet_pairs, poly, integrate, near.empty() ? nullptr : &cuts);
         if (!any) return;
         ++intersected;
         if (moments) {  // B block from the moments of the intersection
