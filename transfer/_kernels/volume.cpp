@@ -96,7 +96,8 @@ class Polyhedron {
     n_ = 4;
     const bool positive = dot(sub(t.v[1], t.v[0]), cross(sub(t.v[2], t.v[0]), sub(t.v[3], t.v[0]))) > 0;
     for (int k = 0; k < 4; ++k) x_[k] = t.v[k];
-    if (!positive) std::swap(x_[1], x_[2]);
+    swapped_ = !positive;
+    if (swapped_) std::swap(x_[1], x_[2]);
     static constexpr int nb[4][3] = {{1, 3, 2}, {2, 3, 0}, {0, 3, 1}, {1, 2, 0}};
     for (int k = 0; k < 4; ++k)
       for (int j = 0; j < 3; ++j) nb_[k][j] = nb[k][j];
@@ -114,13 +115,11 @@ class Polyhedron {
   // clip() on the tet just assigned, in one step: what clip does to a tet depends only on
   // which of its vertices lie outside, so each case is a recipe (TetCut) found once by
   // clip itself; the new vertices are the same, in the same order.
-  bool clip_tet(const Plane& pl, double eps) {
-    double s[4];
+  // s_tet[k]: the distance n.x - d of the tet's vertex k to the plane.
+  bool clip_tet(const double s_tet[4], double eps) {
+    double s[4] = {s_tet[0], s_tet[swapped_ ? 2 : 1], s_tet[swapped_ ? 1 : 2], s_tet[3]};
     int outside = 0;
-    for (int v = 0; v < 4; ++v) {
-      s[v] = dot(pl.n, x_[v]) - pl.d;
-      outside |= (s[v] > eps) << v;
-    }
+    for (int v = 0; v < 4; ++v) outside |= (s[v] > eps) << v;
     if (outside == 0) return true;
     if (outside == 15) {
       n_ = 0;
@@ -300,6 +299,7 @@ class Polyhedron {
   int slot(int v, int w) const { return nb_[v][0] == w ? 0 : (nb_[v][1] == w ? 1 : 2); }
 
   int n_ = 0;
+  bool swapped_ = false;  // assign() swapped the tet's vertices 1 and 2 (positive orientation)
   Vec3 x_[kMax];
   int nb_[kMax][3];
 };
@@ -460,14 +460,29 @@ class SourceTets {
 };
 
 // The tet t clipped by the planes of `c` with a bit in `cuts` (fed to poly).
+// The planes go in the order of how many vertices of t lie outside them, most first: the
+// piece shrinks soonest.
 inline void clip_tet(const Tet& t, const Convex& c, unsigned cuts, double eps, Polyhedron& poly) {
   poly.assign(t);
-  bool first = true;
+  double s[6][4];  // s[p][k]: the distance of vertex k to plane p
+  int planes[6], outside[6], m = 0;
   for (int p = 0; p < c.nplanes; ++p) {
     if (!(cuts >> p & 1u)) continue;
-    if (!(first ? poly.clip_tet(c.p[p], eps) : poly.clip(c.p[p], eps))) return;
-    first = false;
+    int out = 0;
+    for (int k = 0; k < 4; ++k) {
+      s[p][k] = dot(c.p[p].n, t.v[k]) - c.p[p].d;
+      out += s[p][k] > eps;
+    }
+    int i = m++;
+    for (; i > 0 && outside[i - 1] < out; --i) {
+      planes[i] = planes[i - 1];
+      outside[i] = outside[i - 1];
+    }
+    planes[i] = p;
+    outside[i] = out;
   }
+  for (int i = 0; i < m; ++i)
+    if (!(i == 0 ? poly.clip_tet(s[planes[i]], eps) : poly.clip(c.p[planes[i]], eps))) return;
 }
 
 // Clips each of the `nsubject` tets of `subject` by convex `c` and hands every
