@@ -62,8 +62,11 @@ using Index = int32_t;
 
 // Rows of one thread, piece by piece: a piece is the entries one element gives one row
 // (its columns and values, in order); merged into CSR by to_csr (sparse.cpp), which
-// gathers the pieces of a row instead of sorting every entry by row.
+// gathers the pieces of a row instead of sorting every entry by row. The pieces of the
+// last kWindow given are merged row by row as they come (merge_window): neighbouring
+// elements, which share rows, tend to come close together, so fewer entries are stored.
 struct RowPieces {
+  static constexpr size_t kWindow = 8192;
   std::vector<Index> rows;       // per piece
   std::vector<int64_t> starts{0};  // per piece: where its entries start; one more at the end
   std::vector<Index> cols;       // per entry
@@ -78,6 +81,7 @@ struct RowPieces {
   size_t size() const { return rows.size(); }
   // A piece of row r: its entries follow with add, up to the next row().
   void row(int64_t r) {
+    if (rows.size() - window_ >= kWindow) merge_window();
     rows.push_back(static_cast<Index>(r));
     starts.push_back(starts.back());
   }
@@ -86,6 +90,18 @@ struct RowPieces {
     vals.push_back(v);
     ++starts.back();
   }
+  // The pieces since the last merge as one piece per row (in the order the rows first
+  // came), each entry's values summed in the order given; an entry stays, as in to_csr,
+  // when they sum to zero.
+  void merge_window();
+
+ private:
+  size_t window_ = 0;                   // the first piece not merged
+  std::vector<int32_t> row_slot_;       // per row: its piece in the window, -1
+  std::vector<int64_t> col_slot_;       // per column: its entry in the row merged, -1
+  std::vector<Index> m_rows, m_cols;    // the merged window
+  std::vector<int64_t> m_starts, next_;
+  std::vector<double> m_vals;
 };
 
 struct CSR {
@@ -96,7 +112,7 @@ struct CSR {
 
 // Sum the row pieces of all threads into a CSR matrix with nrows rows and ncols columns
 // (duplicates added in the order of the threads and pieces, columns sorted within each row).
-CSR to_csr(const std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthreads = 1);
+CSR to_csr(std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthreads = 1);
 
 // How a target element enters D (paper eqs. 3-4):
 // - covered entirely by the source (relative tolerance kFullCoverage on the
@@ -272,8 +288,8 @@ struct AssemblyResult {
   int64_t pairs_tested = 0;
   int64_t pairs_intersected = 0;
 
-  // Merge the per-thread triplets into B and D.
-  void collect(const std::vector<RowPieces>& b, const std::vector<RowPieces>& d, int64_t n_src_dofs,
+  // Merge the per-thread row pieces into B and D.
+  void collect(std::vector<RowPieces>& b, std::vector<RowPieces>& d, int64_t n_src_dofs,
                int64_t n_tgt_dofs, int nthreads) {
     B = to_csr(b, n_tgt_dofs, n_src_dofs, nthreads);
     D = to_csr(d, n_tgt_dofs, n_tgt_dofs, nthreads);

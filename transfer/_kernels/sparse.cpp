@@ -20,6 +20,64 @@ int thread_count(int nthreads) {
 #endif
 }
 
+void RowPieces::merge_window() {
+  const size_t first = window_, end = rows.size();
+  if (end - first < 2) {
+    window_ = end;
+    return;
+  }
+  // the window's pieces listed per row, rows in the order they first came
+  m_rows.clear();
+  std::vector<int64_t> head, tail;
+  next_.assign(end - first, -1);
+  for (size_t q = first; q < end; ++q) {
+    const Index r = rows[q];
+    if (static_cast<size_t>(r) >= row_slot_.size()) row_slot_.resize(r + 1, -1);
+    int32_t& k = row_slot_[r];
+    if (k < 0) {
+      k = static_cast<int32_t>(m_rows.size());
+      m_rows.push_back(r);
+      head.push_back(q - first);
+      tail.push_back(q - first);
+    } else {
+      next_[tail[k]] = q - first;
+      tail[k] = q - first;
+    }
+  }
+  m_cols.clear();
+  m_vals.clear();
+  m_starts.assign(1, starts[first]);
+  for (size_t k = 0; k < m_rows.size(); ++k) {
+    const size_t row_first = m_cols.size();
+    for (int64_t q = head[k]; q >= 0; q = next_[q])
+      for (int64_t e = starts[first + q]; e < starts[first + q + 1]; ++e) {
+        const Index c = cols[e];
+        if (static_cast<size_t>(c) >= col_slot_.size()) col_slot_.resize(c + 1, -1);
+        int64_t& m = col_slot_[c];
+        if (m >= 0) {
+          m_vals[m] += vals[e];
+        } else {
+          m = static_cast<int64_t>(m_cols.size());
+          m_cols.push_back(c);
+          m_vals.push_back(vals[e]);
+        }
+      }
+    for (size_t e = row_first; e < m_cols.size(); ++e) col_slot_[m_cols[e]] = -1;
+    m_starts.push_back(m_starts[0] + static_cast<int64_t>(m_cols.size()));
+    row_slot_[m_rows[k]] = -1;
+  }
+  // the window replaced by its merge
+  rows.resize(first);
+  rows.insert(rows.end(), m_rows.begin(), m_rows.end());
+  starts.resize(first);
+  starts.insert(starts.end(), m_starts.begin(), m_starts.end());
+  cols.resize(m_starts[0]);
+  cols.insert(cols.end(), m_cols.begin(), m_cols.end());
+  vals.resize(m_starts[0]);
+  vals.insert(vals.end(), m_vals.begin(), m_vals.end());
+  window_ = rows.size();
+}
+
 namespace {
 struct Entry {
   double val;
@@ -27,8 +85,9 @@ struct Entry {
 };
 }  // namespace
 
-CSR to_csr(const std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthreads) {
+CSR to_csr(std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthreads) {
   nthreads = std::max(1, nthreads);
+  for (auto& p : parts) p.merge_window();
   // the pieces of each row, in the order of the parts: a counting sort of the pieces by row
   struct Piece {
     const RowPieces* part;
