@@ -68,9 +68,24 @@ HEX_CORNERS = np.array([[0, 1, 3, 4], [1, 2, 0, 5], [2, 3, 1, 6], [3, 0, 2, 7],
 
 
 def _signed_tet_volumes(p: np.ndarray) -> np.ndarray:
-    """Signed volumes of tetrahedra given as (n, 4, 3) vertex arrays."""
+    """Signed volumes of tetrahedra given as (n, 4, 3) vertex arrays: a . (b x c) / 6 by
+    components (np.cross copies its operands)."""
     a, b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
-    return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    a0, a1, a2, b0, b1, b2, c0, c1, c2 = a[:, 0], a[:, 1], a[:, 2], b[:, 0], b[:, 1], b[:, 2], c[:, 0], c[:, 1], c[:, 2]
+    return (a0 * (b1 * c2 - b2 * c1) + a1 * (b2 * c0 - b0 * c2) + a2 * (b0 * c1 - b1 * c0)) / 6.0
+
+
+def _longest_edges(p: np.ndarray) -> np.ndarray:
+    """The longest distance between two vertices of each cell given as (n, k, 3) vertex arrays."""
+    longest = np.zeros(len(p))
+    coords = np.ascontiguousarray(p.transpose(1, 2, 0))  # (k, 3, n): contiguous differences
+    for i, j in zip(*np.triu_indices(p.shape[1], 1)):  # vertex pairs, over all cells at once
+        d = coords[i] - coords[j]
+        d *= d
+        squared = d[0] + d[1]
+        squared += d[2]
+        np.maximum(longest, squared, out=longest)
+    return np.sqrt(longest)
 
 
 def _triangle_areas(p: np.ndarray) -> np.ndarray:
@@ -200,26 +215,24 @@ class Mesh:
             if not signed and self.cell_type in ("tetra", "hexahedron"):
                 self._cache[key] = np.abs(self.cell_measures(signed=True))
                 return self._cache[key]
-            p = self.cell_vertices()
-            if self.cell_type == "tetra":
-                m = _signed_tet_volumes(p)
-            elif self.cell_type == "hexahedron":
-                m = sum(_signed_tet_volumes(p[:, t]) for t in HEX_TETS)
-            elif self.cell_type == "triangle":
-                m = _triangle_areas(p)
-            else:
-                m = _triangle_areas(p[:, [0, 1, 2]]) + _triangle_areas(p[:, [0, 2, 3]])
-            self._cache[key] = m if signed else np.abs(m)
+            self._cache[key] = self._measures(self.cell_vertices(), signed)
         return self._cache[key]
+
+    def _measures(self, p: np.ndarray, signed: bool) -> np.ndarray:
+        """cell_measures from the cell vertices `p`."""
+        if self.cell_type == "tetra":
+            m = _signed_tet_volumes(p)
+        elif self.cell_type == "hexahedron":
+            m = sum(_signed_tet_volumes(p[:, t]) for t in HEX_TETS)
+        elif self.cell_type == "triangle":
+            m = _triangle_areas(p)
+        else:
+            m = _triangle_areas(p[:, [0, 1, 2]]) + _triangle_areas(p[:, [0, 2, 3]])
+        return m if signed else np.abs(m)
 
     def longest_edges(self) -> np.ndarray:
         """The longest distance between two vertices of each cell."""
-        p = self.cell_vertices()
-        longest = np.zeros(len(p))
-        for i, j in zip(*np.triu_indices(p.shape[1], 1)):  # vertex pairs, over all cells at once
-            d = p[:, i] - p[:, j]
-            longest = np.maximum(longest, d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
-        return np.sqrt(longest)
+        return _longest_edges(self.cell_vertices())
 
     # -- validation -------------------------------------------------------
     def _validate(self, reorient: bool):
@@ -239,7 +252,11 @@ class Mesh:
         if rep.size:
             raise MeshError(f"{self.name}: cell {rep[0]} repeats a vertex ({self.cells[rep[0]].tolist()}); "
                             f"{rep.size} such cell(s)")
-        h = self.longest_edges()
+        p = self.cell_vertices()  # gathered once for both
+        h = _longest_edges(p)
+        signed = tdim == 3 and self.cell_type in ("tetra", "hexahedron")
+        self._cache.setdefault(("measures", signed), self._measures(p, signed))
+        del p
         measure = self.cell_measures()
         degenerate = np.flatnonzero(measure <= DEGENERATE_RTOL * h**tdim)
         if degenerate.size:
