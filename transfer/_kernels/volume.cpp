@@ -231,7 +231,6 @@ class Polyhedron {
     return true;
   }
 
-
  public:
   // Calls f(a, b, c) for the fan triangles (vertex indices) of every face not holding
   // vertex 0: with vertex 0 they are the tets the polyhedron is cut into.
@@ -613,9 +612,9 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
         const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
         const bool source_faces = clip_source && !src_tets.empty();  // computed once per source tet
         auto faces = [&](int k) { return source_faces ? src_tets.faces(s, sg.verts[0]) : tet_planes(subj.tets[k]); };
-        auto separated = [&](int k, unsigned& cuts) {
-          if (source_faces) return src_tets.separates(s, sg.verts[0], *other, eps, cuts);
-          return outside_a_plane(faces(k), other, 1, eps, cuts);
+        auto separated = [&](int k, unsigned& faces_cut) {
+          if (source_faces) return src_tets.separates(s, sg.verts[0], *other, eps, faces_cut);
+          return outside_a_plane(faces(k), other, 1, eps, faces_cut);
         };
         bool prepared = false, any = false, moments = false;
         const SimplexRule* q_rule = &rule;
