@@ -178,7 +178,11 @@ struct Evaluator {
   }
 };
 
-// Candidate source elements of a target bounding box.
+// Candidate source elements of a target bounding box. Each source cell is filed once, in
+// the bin of its box's lower corner, with a copy of its box (bins in order, each a
+// contiguous run): a query visits the bins of the lower corners that can overlap, the
+// target box widened below by the largest source box, row by row in one sweep each,
+// without duplicates to skip.
 class SourceSearch {
  public:
   SourceSearch(const ElementSet& src, const GridInfo* grid) : boxes_(src.ncells), grid_(grid) {
@@ -191,13 +195,14 @@ class SourceSearch {
       all.grow(b.lo);
       all.grow(b.hi);
       mean += (b.hi[0] - b.lo[0]) + (b.hi[1] - b.lo[1]) + (b.hi[2] - b.lo[2]);
+      for (int d = 0; d < 3; ++d) extent_[d] = std::max(extent_[d], b.hi[d] - b.lo[d]);
     }
     mean /= std::max<double>(1.0, 3.0 * boxes_.size());
     lo_ = all.lo;
     int64_t total = 1;
     for (int d = 0; d < 3; ++d) {
       const double ext = all.hi[d] - all.lo[d];
-      n_[d] = std::max<int64_t>(1, static_cast<int64_t>(ext / std::max(mean, 1e-300)));
+      n_[d] = std::max<int64_t>(1, static_cast<int64_t>(ext / std::max(kBinSize * mean, 1e-300)));
       total *= n_[d];
     }
     while (total > 4 * static_cast<int64_t>(boxes_.size()) + 64) {  // cap the bin count
@@ -208,35 +213,25 @@ class SourceSearch {
       }
     }
     for (int d = 0; d < 3; ++d) h_[d] = std::max((all.hi[d] - all.lo[d]) / n_[d], 1e-300);
+    std::vector<int64_t> bin(boxes_.size());
     start_.assign(total + 1, 0);
-    for (int pass = 0; pass < 2; ++pass) {
-      std::vector<int64_t> fill;
-      if (pass == 1) {
-        for (int64_t k = 0; k < total; ++k) start_[k + 1] += start_[k];
-        items_.resize(start_[total]);
-        fill.assign(start_.begin(), start_.end() - 1);
-      }
-      for (int64_t e = 0; e < static_cast<int64_t>(boxes_.size()); ++e) {
-        int64_t r[3][2] = {{0, 0}, {0, 0}, {0, 0}};
-        range(boxes_[e], 0.0, r);
-        for (int64_t k = r[2][0]; k <= r[2][1]; ++k)
-          for (int64_t j = r[1][0]; j <= r[1][1]; ++j)
-            for (int64_t i = r[0][0]; i <= r[0][1]; ++i) {
-              const int64_t bin = i + n_[0] * (j + n_[1] * k);
-              if (pass == 0)
-                ++start_[bin + 1];
-              else
-                items_[fill[bin]++] = e;
-            }
-      }
+    for (size_t e = 0; e < boxes_.size(); ++e) {
+      int64_t r[3];
+      for (int d = 0; d < 3; ++d) r[d] = cell(boxes_[e].lo[d], d);
+      bin[e] = r[0] + n_[0] * (r[1] + n_[1] * r[2]);
+      ++start_[bin[e] + 1];
     }
+    for (int64_t k = 0; k < total; ++k) start_[k + 1] += start_[k];
+    filed_.resize(boxes_.size());
+    std::vector<int64_t> fill(start_.begin(), start_.end() - 1);
+    for (size_t e = 0; e < boxes_.size(); ++e) filed_[fill[bin[e]]++] = {boxes_[e], static_cast<int64_t>(e)};
   }
 
   const BBox& box(int64_t e) const { return boxes_[e]; }
 
-  // Calls f(e) once for every source element whose box may overlap `b`.
+  // Calls f(e) once for every source element whose box overlaps `b` within tol.
   template <class F>
-  void for_each(const BBox& b, double tol, std::vector<int64_t>& stamp, int64_t tag, F&& f) const {
+  void for_each(const BBox& b, double tol, F&& f) const {
     int64_t r[3][2] = {{0, 0}, {0, 0}, {0, 0}};
     if (grid_) {
       for (int d = 0; d < 3; ++d) {
@@ -251,37 +246,42 @@ class SourceSearch {
           for (int64_t i = r[0][0]; i <= r[0][1]; ++i) f(i + grid_->shape[0] * (j + grid_->shape[1] * k));
       return;
     }
-    if (!range(b, tol, r)) return;
+    for (int d = 0; d < 3; ++d) {
+      // the lowest lower corner of an overlapping box, less a margin for its rounding
+      const double first = b.lo[d] - tol - extent_[d];
+      const double last = b.hi[d] + tol;
+      if (last < lo_[d]) return;
+      r[d][0] = cell(first - 1e-9 * (std::fabs(first) + h_[d]), d);
+      r[d][1] = cell(last, d);
+    }
     for (int64_t k = r[2][0]; k <= r[2][1]; ++k)
-      for (int64_t j = r[1][0]; j <= r[1][1]; ++j)
-        for (int64_t i = r[0][0]; i <= r[0][1]; ++i) {
-          const int64_t bin = i + n_[0] * (j + n_[1] * k);
-          for (int64_t q = start_[bin]; q < start_[bin + 1]; ++q) {
-            const int64_t e = items_[q];
-            if (stamp[e] == tag) continue;
-            stamp[e] = tag;
-            if (boxes_[e].overlaps(b, tol)) f(e);
-          }
-        }
+      for (int64_t j = r[1][0]; j <= r[1][1]; ++j) {
+        const int64_t row = n_[0] * (j + n_[1] * k);
+        for (int64_t q = start_[row + r[0][0]]; q < start_[row + r[0][1] + 1]; ++q)
+          if (filed_[q].box.overlaps(b, tol)) f(filed_[q].e);
+      }
   }
 
  private:
-  bool range(const BBox& b, double tol, int64_t r[3][2]) const {
-    for (int d = 0; d < 3; ++d) {
-      const double a = (b.lo[d] - tol - lo_[d]) / h_[d];
-      const double z = (b.hi[d] + tol - lo_[d]) / h_[d];
-      if (z < 0 || a >= n_[d]) return false;
-      r[d][0] = std::clamp<int64_t>(static_cast<int64_t>(std::floor(a)), 0, n_[d] - 1);
-      r[d][1] = std::clamp<int64_t>(static_cast<int64_t>(std::floor(z)), 0, n_[d] - 1);
-    }
-    return true;
+  // Bins of about this many mean source box sizes.
+  static constexpr double kBinSize = 0.7;
+
+  // The bin of coordinate x along axis d, clamped to the grid.
+  int64_t cell(double x, int d) const {
+    const double a = std::floor((x - lo_[d]) / h_[d]);
+    return a < 0 ? 0 : (a >= n_[d] ? n_[d] - 1 : static_cast<int64_t>(a));
   }
 
+  struct Filed {
+    BBox box;
+    int64_t e;
+  };
   std::vector<BBox> boxes_;
   const GridInfo* grid_;
-  Vec3 lo_{}, h_{};
+  Vec3 lo_{}, h_{}, extent_{0, 0, 0};
   int64_t n_[3] = {1, 1, 1};
-  std::vector<int64_t> start_, items_;
+  std::vector<int64_t> start_;
+  std::vector<Filed> filed_;
 };
 
 }  // namespace

@@ -102,8 +102,6 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
     tid = omp_get_thread_num();
 #endif
     std::vector<int32_t> slot(n_src_dofs, -1);
-    std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1), stamp2(stamp.size(), -1);
-    int64_t probes = 0;
     LocalAssembly la;
     ElementGeometry sg, other;
     Evaluator sev;
@@ -143,7 +141,7 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
       if (nt > 1 && !te.init()) continue;
       const double eps = 1e-12 * h + 4 * DBL_EPSILON * h;
       const BBox search_box{add(box.lo, origin), add(box.hi, origin)};
-      search.for_each(search_box, 1e-10 * h, stamp, t, [&](int64_t s) {
+      search.for_each(search_box, 1e-10 * h, [&](int64_t s) {
         ++tested;
         sg.build(src, s, origin, false);
         sg.build_planes();
@@ -165,7 +163,7 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
               const Vec3 probe = add(scale(c0, 1.0 / P.n), scale(kTieBreak, 1e-6 * std::min(h, sg.box.diagonal())));
               const Vec3 abs_probe = add(probe, origin);
               bool owned = inside(sg, probe, eps);  // another tet of the same hexahedron
-              if (!owned) search.for_each(BBox{abs_probe, abs_probe}, 0.0, stamp2, probes++, [&](int64_t s2) {
+              if (!owned) search.for_each(BBox{abs_probe, abs_probe}, 0.0, [&](int64_t s2) {
                 if (owned || s2 == s) return;
                 other.build(src, s2, origin, false);
                 other.build_planes();

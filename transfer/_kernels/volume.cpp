@@ -555,7 +555,6 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
     const size_t cells = tgt.ncells / nth + 1;
     Bparts[tid].reserve(nt * cells, 16 * nt * cells);
     Dparts[tid].reserve(nt * cells, (lump ? 1 : nt) * nt * cells);
-    std::vector<int64_t> stamp(src_grid ? 0 : src.ncells, -1);
     // tet-tet pairs: the first separating-plane test from distances of the source points
     PointDistances near = reject && !src_tets.empty() ? PointDistances(src.npoints) : PointDistances();
     LocalAssembly la;
@@ -583,7 +582,7 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
       tg.build_planes();
       // A source box outside a plane of a convex target (a tet, a box) needs no clipping.
       const double eps_box = 1e-12 * h + 4 * DBL_EPSILON * h;
-      search.for_each(search_box, 1e-10 * h, stamp, t, [&](int64_t s) {
+      search.for_each(search_box, 1e-10 * h, [&](int64_t s) {
         ++tested;
         if (stages < kReject) return;
         // the tolerance of the pair's tests and clipping, from the smaller of the two elements
