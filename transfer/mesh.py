@@ -252,11 +252,17 @@ class Mesh:
         if rep.size:
             raise MeshError(f"{self.name}: cell {rep[0]} repeats a vertex ({self.cells[rep[0]].tolist()}); "
                             f"{rep.size} such cell(s)")
-        p = self.cell_vertices()  # gathered once for both
-        h = _longest_edges(p)
-        signed = tdim == 3 and self.cell_type in ("tetra", "hexahedron")
-        self._cache.setdefault(("measures", signed), self._measures(p, signed))
-        del p
+        if self.cell_type == "tetra":  # both in one pass, the same values
+            from . import _kernels
+
+            h, volumes = _kernels.tet_shapes(self.points, self.cells)
+            self._cache.setdefault(("measures", True), volumes)
+        else:
+            p = self.cell_vertices()  # gathered once for both
+            h = _longest_edges(p)
+            signed = tdim == 3 and self.cell_type == "hexahedron"
+            self._cache.setdefault(("measures", signed), self._measures(p, signed))
+            del p
         measure = self.cell_measures()
         degenerate = np.flatnonzero(measure <= DEGENERATE_RTOL * h**tdim)
         if degenerate.size:

@@ -233,3 +233,19 @@ def test_bounding_box_of_the_used_points_computed_once():
     np.testing.assert_array_equal(far.bounding_box()[0], [0, 0, 0])
     assert "box" in far._cache
     np.testing.assert_array_equal(far.cell_measures(), np.abs(far.cell_measures(signed=True)))
+
+
+def test_tet_shapes_equal_the_numpy_versions_bit_for_bit():
+    """Mesh validation takes a tet mesh's longest edges and signed volumes from the kernel
+    (one pass) and a hex mesh's from numpy: the two give the same values."""
+    from transfer import _kernels
+    from transfer.mesh import _longest_edges, _signed_tet_volumes
+
+    mesh = box_tetrahedra((7, 6, 5), (1e4, -3.0, 0.0), (1e4 + 3.0, 0.5, 2.0), jitter=0.2, seed=4)
+    cells = mesh.cells[:, [0, 2, 1, 3]]  # negative volumes too
+    longest, volumes = _kernels.tet_shapes(mesh.points, cells)
+    p = mesh.points[cells]
+    assert np.array_equal(longest, _longest_edges(p))
+    assert np.array_equal(volumes, _signed_tet_volumes(p))
+    assert (volumes < 0).all()
+    assert np.array_equal(mesh.cell_measures(signed=True), _signed_tet_volumes(mesh.points[mesh.cells]))

@@ -142,6 +142,17 @@ NB_MODULE(_kernels, m) {
       "src_points"_a, "src_cells"_a, "src_kind"_a, "src_degree"_a, "tgt_points"_a, "tgt_cells"_a,
       "tgt_kind"_a, "tgt_degree"_a, "rule_points"_a, "rule_weights"_a, "dual"_a, "lump"_a,
       "n_src_dofs"_a, "n_tgt_dofs"_a, "search_distance"_a, "min_normal_cos"_a, "nthreads"_a = 1);
+  m.def(
+      "tet_shapes",
+      [](const Points& pts, const Cells& cells) {
+        if (pts.shape(1) != 3 || cells.shape(1) != 4) throw std::invalid_argument("tet_shapes: points (n, 3), cells (m, 4)");
+        const size_t n = cells.shape(0);
+        std::vector<double> longest(n), volume(n);
+        vc::tet_shapes(pts.data(), cells.data(), static_cast<int64_t>(n), longest.data(), volume.data());
+        return nb::make_tuple(to_numpy(std::move(longest)), to_numpy(std::move(volume)));
+      },
+      "points"_a, "cells"_a,
+      "(longest vertex distance, signed volume) of each tet; cell vertex indices must be in range");
   m.attr("TET") = static_cast<int>(vc::TET);
   m.attr("HEX") = static_cast<int>(vc::HEX);
   m.attr("BOX") = static_cast<int>(vc::BOX);

@@ -348,6 +348,9 @@ struct GridInfo {
 // everything (the rows of B and D in CSR).
 enum Stage : int { kSearch = 1, kReject = 2, kClip = 3, kIntegrate = 4, kAll = 5 };
 
+// The longest vertex distance and the signed volume of each of `ncells` tets (shapes.cpp).
+void tet_shapes(const double* points, const int64_t* cells, int64_t ncells, double* longest, double* volume);
+
 // Volume-volume (TET, HEX, BOX) by exact polyhedron clipping.
 // `rule` is a rule on the reference tetrahedron (4 barycentric coordinates).
 // `dual`: use the dual basis of eq. 4 on the target (fully covered elements).

@@ -458,6 +458,12 @@ class SourceTets {
   int nbasis_ = 0;
 };
 
+// The number of planes in a mask of the (at most 6) planes of a Convex; without -mpopcnt
+// __builtin_popcount is a library call.
+inline int plane_count(unsigned mask) {
+  return (mask & 1) + (mask >> 1 & 1) + (mask >> 2 & 1) + (mask >> 3 & 1) + (mask >> 4 & 1) + (mask >> 5 & 1);
+}
+
 // The tet t clipped by the planes of `c` with a bit in `cuts` (fed to poly).
 // The planes go in the order of how many vertices of t lie outside them, most first: the
 // piece shrinks soonest.
@@ -509,7 +515,7 @@ void clip_convex(const Tet* subject, int nsubject, Separated&& separated, Faces&
     unsigned faces_cut = ~0u;  // the faces of subject tet t that cut `other`
     if (reject && cuts && other && separated(t, faces_cut)) continue;
     if (!clip) continue;
-    if (either_way && reject && other && __builtin_popcount(faces_cut) < __builtin_popcount(cuts))
+    if (either_way && reject && other && plane_count(faces_cut) < plane_count(cuts))
       clip_tet(*other, faces(t), faces_cut, eps, poly);
     else
       clip_tet(subject[t], c, cuts, eps, poly);
