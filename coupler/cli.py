@@ -174,7 +174,7 @@ def _project_distributed(field, smesh, tmesh, source_family: str, target_family:
     start = time.perf_counter()
     v = operator(u)
     apply = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
-    conservation = operator.conservation_error(u)
+    conservation = operator.conservation_error(u, v)
     values, covered = gather(pt, v, comm), gather(pt, operator.covered, comm)
     if comm.rank:
         return None

@@ -53,6 +53,6 @@ def project(field: MeshFileField, source: FunctionSpace, target: FunctionSpace, 
     start = time.perf_counter()
     v = operator(u)
     apply = time.perf_counter() - start
-    conservation = operator.conservation_error(u)
+    conservation = operator.conservation_error(u, v)
     values = v.reshape((target.num_dofs,) + field.values.shape[1:])
     return Projection(method, operator, values, assembly, apply, conservation)

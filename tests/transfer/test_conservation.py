@@ -109,3 +109,13 @@ def test_target_inside_source_conserves_over_the_target(src_tets, method):
     assert T.covered_fraction == 1.0
     u = Linear(35)
     assert rel(T.integral_target(T(src.interpolate(u))), u.box_integral(lo, hi)) < TOL
+
+
+def test_conservation_error_of_a_given_transfer(src_tets, shifted_p1, method):
+    """conservation_error(u, v) takes v as T u instead of applying T again (the CLI has it)."""
+    src = FunctionSpace(src_tets, "P1")
+    T = Transfer.assemble(src, shifted_p1, method)
+    u = src.interpolate(Linear(31))
+    v = T(u)
+    assert T.conservation_error(u, v) == T.conservation_error(u)
+    assert T.conservation_error(u, 2 * v) == pytest.approx(1.0, rel=1e-12)
