@@ -23,6 +23,13 @@ inner products and norms are then the discrete L2 ones, ``(u, v)_M = sum m_i u_i
 v_i``, so that the result does not depend on how unevenly the interface is
 meshed.
 
+Every accelerator takes an optional ``comm`` (an mpi4py communicator): x, H(x), the
+weights and IQN-ILS's secant columns then hold this rank's rows only (any number, none
+too), every inner product is a local sum and one allreduce (:mod:`coupler.coupling.rows`),
+and the factors derived from them (Aitken's omega, the QR's triangle, the least-squares
+coefficients, the columns filtered out) are the same on every rank. ``comm=None`` is the
+serial computation, unchanged.
+
 References
 ----------
 - B. M. Irons, R. C. Tuck, "A version of the Aitken accelerator for computer
@@ -49,6 +56,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from coupler.coupling.convergence import as_weights, inner
+from coupler.coupling.rows import Rows
 
 __all__ = ["Accelerator", "ConstantRelaxation", "Aitken", "IQNILS", "FilteredQR",
            "filtered_qr", "make_accelerator", "ACCELERATIONS"]
@@ -66,18 +74,27 @@ class Accelerator:
     weights:
         the diagonal of the (lumped) mass matrix ``M``, one non-negative value per
         dof of ``x``; ``None`` uses the Euclidean inner product.
+    comm:
+        an mpi4py communicator when x, H(x) and the weights hold this rank's rows only;
+        ``None``: serial. Every method is then collective.
     """
 
     name = "accelerator"
 
-    def __init__(self, weights=None):
-        self.weights = as_weights(weights)
+    def __init__(self, weights=None, comm=None):
+        self.comm = comm
+        self.weights = as_weights(weights, comm=comm)
         self.iteration = 0  # iterations of the current window seen by update()
         self.windows = 0  # windows completed (end_window calls)
 
     def set_weights(self, weights) -> None:
         """Set the diagonal mass of the inner product (before the first window)."""
-        self.weights = as_weights(weights)
+        self.weights = as_weights(weights, comm=self.comm)
+
+    @property
+    def rows(self) -> Rows:
+        """The sums over the ranks' rows (serial when `comm` is None)."""
+        return Rows(self.comm)
 
     def _check(self, x, Hx) -> tuple[np.ndarray, np.ndarray]:
         x = _vector(x)
@@ -123,8 +140,8 @@ class ConstantRelaxation(Accelerator):
 
     name = "constant"
 
-    def __init__(self, omega: float = 0.5, weights=None):
-        super().__init__(weights)
+    def __init__(self, omega: float = 0.5, weights=None, comm=None):
+        super().__init__(weights, comm)
         if not (math.isfinite(omega) and omega > 0):
             raise ValueError(f"constant relaxation: omega must be positive, not {omega}")
         self.omega = float(omega)
@@ -158,8 +175,8 @@ class Aitken(Accelerator):
 
     name = "aitken"
 
-    def __init__(self, omega0: float = 0.5, omega_max: float | None = None, weights=None):
-        super().__init__(weights)
+    def __init__(self, omega0: float = 0.5, omega_max: float | None = None, weights=None, comm=None):
+        super().__init__(weights, comm)
         if not (math.isfinite(omega0) and omega0 > 0):
             raise ValueError(f"Aitken: omega0 must be positive, not {omega0}")
         if omega_max is not None and not omega_max > 0:
@@ -186,9 +203,10 @@ class Aitken(Accelerator):
         r = Hx - x
         if self._r_prev is not None:
             dr = r - self._r_prev
-            denom = inner(dr, dr, self.weights)
+            local = np.array([inner(dr, dr, self.weights), inner(self._r_prev, dr, self.weights)])
+            denom, numerator = map(float, self.rows.sum(local))  # one allreduce of 2 numbers
             if denom > 0 and math.isfinite(denom):
-                self.omega = self._cap(-self.omega * inner(self._r_prev, dr, self.weights) / denom)
+                self.omega = self._cap(-self.omega * numerator / denom)
             # dr = 0: the residual did not change, keep the factor
         else:
             self.omega = self._cap(self.omega)
@@ -222,7 +240,7 @@ class FilteredQR:
     removed: list[int]  # indices of the columns of V filtered out
 
 
-def filtered_qr(V: np.ndarray, filter: str = "QR2", eps: float = 1e-8, weights=None) -> FilteredQR:
+def filtered_qr(V: np.ndarray, filter: str = "QR2", eps: float = 1e-8, weights=None, comm=None) -> FilteredQR:
     """QR decomposition of the columns of `V` with filtering of (nearly) linearly dependent ones.
 
     Columns are taken in order (for IQN-ILS the newest first, so that old
@@ -237,21 +255,28 @@ def filtered_qr(V: np.ndarray, filter: str = "QR2", eps: float = 1e-8, weights=N
       ``||v_orth|| < eps * ||v||``.
     - ``"none"``: only exactly zero columns are removed.
 
-    Zero columns are always removed.
+    Zero columns are always removed. With `comm`, `V` and `weights` are this rank's rows:
+    ``Q`` has them too, ``R`` is the same on every rank, and QR1's decomposition is the
+    Gram-Schmidt one of QR2 without its filter (Householder's needs the whole columns).
     """
     V = np.asarray(V, dtype=float)
     if V.ndim != 2:
         raise ValueError("filtered_qr: V must be a 2-D array of columns")
-    n, m = V.shape
-    w = as_weights(weights, n)
+    rows = Rows(comm)
+    n_local, m = V.shape
+    w = as_weights(weights, n_local, comm)
     S = V if w is None else np.sqrt(w)[:, None] * V
-    norms = np.linalg.norm(S, axis=0)
+    norms = rows.column_norms(S)
+    n = rows.size(n_local)
     kept = [j for j in range(m) if norms[j] > 0 and math.isfinite(norms[j])]
     kind = filter.upper() if isinstance(filter, str) else filter
     if kind in ("QR1", "QR1-ABSOLUTE", "NONE", None):
         kept = kept[:n]  # more columns than dofs: the oldest are dependent
         while kept:
-            Q, R = np.linalg.qr(S[:, kept], mode="reduced")
+            if rows.distributed:
+                Q, R, kept = _gram_schmidt(S, kept, norms, 0.0, len(kept), rows)
+            else:
+                Q, R = np.linalg.qr(S[:, kept], mode="reduced")
             if kind in ("NONE", None):
                 break
             limit = eps if kind == "QR1-ABSOLUTE" else eps * np.linalg.norm(R)
@@ -260,37 +285,44 @@ def filtered_qr(V: np.ndarray, filter: str = "QR2", eps: float = 1e-8, weights=N
                 break
             kept = [j for j, b in zip(kept, bad) if not b]
         if not kept:
-            Q, R = np.zeros((n, 0)), np.zeros((0, 0))
+            Q, R = np.zeros((n_local, 0)), np.zeros((0, 0))
     elif kind == "QR2":
-        Q = np.zeros((n, min(len(kept), n)))
-        R = np.zeros((Q.shape[1], Q.shape[1]))
-        accepted = []
-        for j in kept:
-            p = len(accepted)
-            if p == Q.shape[1]:
-                break  # V already spans the whole space: the rest is dependent
-            v = S[:, j].copy()
-            rho0 = norms[j]
-            h = np.zeros(p)
-            for _ in range(2):  # CGS2: Gram-Schmidt twice is enough (Giraud et al. 2005)
-                if p:
-                    c = Q[:, :p].T @ v
-                    v -= Q[:, :p] @ c
-                    h += c
-            rho = float(np.linalg.norm(v))
-            if rho < eps * rho0 or rho == 0.0:
-                continue
-            Q[:, p] = v / rho
-            R[:p, p] = h
-            R[p, p] = rho
-            accepted.append(j)
-        kept = accepted
-        p = len(kept)
-        Q, R = Q[:, :p], R[:p, :p]
+        Q, R, kept = _gram_schmidt(S, kept, norms, eps, min(len(kept), n), rows)
     else:
         raise ValueError(f"filtered_qr: filter must be 'QR1', 'QR1-absolute', 'QR2' or 'none', not {filter!r}")
     removed = sorted(set(range(m)) - set(kept))
     return FilteredQR(Q, R, list(kept), removed)
+
+
+def _gram_schmidt(S: np.ndarray, columns: list[int], norms: np.ndarray, eps: float, most: int,
+                  rows: Rows) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Thin QR of ``S[:, columns]`` by classical Gram-Schmidt with one re-orthogonalisation
+    (CGS2: twice is enough, Giraud et al. 2005), at most `most` columns; a column whose part
+    orthogonal to the columns accepted so far is zero or below ``eps`` times its norm is
+    skipped (QR2's filter). Each projection is one reduction of p numbers over `rows`."""
+    Q = np.zeros((S.shape[0], most))
+    R = np.zeros((most, most))
+    accepted = []
+    for j in columns:
+        p = len(accepted)
+        if p == most:
+            break  # V already spans the whole space: the rest is dependent
+        v = S[:, j].copy()
+        h = np.zeros(p)
+        for _ in range(2):
+            if p:
+                c = rows.column_dots(Q[:, :p], v)
+                v -= Q[:, :p] @ c
+                h += c
+        rho = rows.norm(v)
+        if rho < eps * norms[j] or rho == 0.0:
+            continue
+        Q[:, p] = v / rho
+        R[:p, p] = h
+        R[p, p] = rho
+        accepted.append(j)
+    p = len(accepted)
+    return Q[:, :p], R[:p, :p], accepted
 
 
 class IQNILS(Accelerator):
@@ -338,13 +370,15 @@ class IQNILS(Accelerator):
         vectors.
     weights:
         lumped mass per dof for the M-weighted least-squares problem.
+    comm:
+        with this rank's rows of x, H(x), the weights and the columns (see :class:`Accelerator`).
     """
 
     name = "iqn-ils"
 
     def __init__(self, omega0: float = 0.5, reuse: int = 0, filter: str = "QR2", filter_eps: float = 1e-2,
-                 max_columns: int | None = 100, weights=None):
-        super().__init__(weights)
+                 max_columns: int | None = 100, weights=None, comm=None):
+        super().__init__(weights, comm)
         if not (math.isfinite(omega0) and omega0 > 0):
             raise ValueError(f"IQN-ILS: omega0 must be positive, not {omega0}")
         if int(reuse) != reuse or reuse < 0:
@@ -412,14 +446,14 @@ class IQNILS(Accelerator):
         self._add_secant(r, Hx)
         self.iteration += 1
         if self._V:
-            qr = filtered_qr(self.V, self.filter, self.filter_eps, self.weights)
+            qr = filtered_qr(self.V, self.filter, self.filter_eps, self.weights, self.comm)
             if qr.removed:
                 self.filtered_columns += len(qr.removed)
                 self._drop(qr.removed)
             self.used_columns = len(qr.kept)
             if qr.kept:
                 s = r if self.weights is None else np.sqrt(self.weights) * r
-                alpha = solve_triangular(qr.R, -(qr.Q.T @ s), lower=False)
+                alpha = solve_triangular(qr.R, -self.rows.column_dots(qr.Q, s), lower=False)
                 self.last_alpha = alpha
                 return Hx + self.W @ alpha
         self.used_columns = 0
@@ -457,18 +491,19 @@ ACCELERATIONS = ("constant", "aitken", "iqn-ils")
 
 def make_accelerator(name: str, relaxation: float = 0.5, reuse: int = 0, filter: str = "QR2",
                      filter_eps: float = 1e-2, omega_max: float | None = None,
-                     max_columns: int | None = 100, weights=None) -> Accelerator:
+                     max_columns: int | None = 100, weights=None, comm=None) -> Accelerator:
     """The accelerator a scene's ``[coupling]`` table asks for.
 
     `relaxation` is the constant factor (``constant``) or the initial one
     (``aitken``, ``iqn-ils``); `reuse`, `filter`, `filter_eps` and `max_columns`
-    apply to IQN-ILS, `omega_max` to Aitken.
+    apply to IQN-ILS, `omega_max` to Aitken; `comm`: x holds this rank's rows (see
+    :class:`Accelerator`).
     """
     key = name.lower().replace("_", "-")
     if key in ("constant", "relaxation", "constant-relaxation"):
-        return ConstantRelaxation(relaxation, weights=weights)
+        return ConstantRelaxation(relaxation, weights=weights, comm=comm)
     if key == "aitken":
-        return Aitken(relaxation, omega_max, weights=weights)
+        return Aitken(relaxation, omega_max, weights=weights, comm=comm)
     if key in ("iqn-ils", "iqnils", "iqn"):
-        return IQNILS(relaxation, reuse, filter, filter_eps, max_columns, weights=weights)
+        return IQNILS(relaxation, reuse, filter, filter_eps, max_columns, weights=weights, comm=comm)
     raise ValueError(f"unknown acceleration {name!r}: one of {', '.join(ACCELERATIONS)}")

@@ -23,6 +23,10 @@ interaction on massively parallel systems", PhD thesis, TU Munich 2016, sec. 2.3
 and the reference norm in the denominator of the reported relative residual is
 floored so that an interface field that vanishes (no load in a window) gives a
 finite number instead of 0/0.
+
+With ``comm`` (an mpi4py communicator) the vectors and weights hold this rank's rows only
+(:mod:`coupler.coupling.rows`): the norms are local sums and one allreduce, the same on
+every rank; ``comm=None`` is the serial computation, unchanged.
 """
 
 from __future__ import annotations
@@ -31,20 +35,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from coupler.coupling.rows import Rows, inner, norm  # noqa: F401  (inner, norm: the M-inner product's API)
+
 #: Denominator floor of the relative residual: below this the reference norm counts as zero.
 REFERENCE_FLOOR = 1e-300
 
 
-def as_weights(weights, size: int | None = None) -> np.ndarray | None:
-    """Check a diagonal mass (one non-negative weight per dof); ``None`` means the Euclidean norm."""
+def as_weights(weights, size: int | None = None, comm=None) -> np.ndarray | None:
+    """Check a diagonal mass (one non-negative weight per dof); ``None`` means the Euclidean norm.
+
+    With `comm` the weights are this rank's rows and the checks are collective: every rank
+    raises when one rank's weights are wrong, or when all ranks' weights are zero."""
     if weights is None:
         return None
+    rows = Rows(comm)
     w = np.asarray(weights, dtype=float).ravel()
-    if size is not None and w.size != size:
-        raise ValueError(f"interface weights: {w.size} values for an interface vector of {size} dofs")
-    if not np.all(np.isfinite(w)) or np.any(w < 0):
-        raise ValueError("interface weights: a lumped mass must be finite and non-negative")
-    if w.size and not np.any(w > 0):
+    local = [size is not None and w.size != size, not np.all(np.isfinite(w)) or np.any(w < 0), w.size > 0,
+             np.any(w > 0)]
+    wrong_size, invalid, some_rows, positive = map(bool, rows.extremum(np.array(local, dtype=float), "max"))
+    where = " (on some rank)" if rows.distributed else ""
+    if wrong_size:
+        raise ValueError(f"interface weights: {w.size} values for an interface vector of {size} dofs{where}")
+    if invalid:
+        raise ValueError(f"interface weights: a lumped mass must be finite and non-negative{where}")
+    if some_rows and not positive:
         raise ValueError("interface weights: all weights are zero")
     return w
 
@@ -72,20 +86,6 @@ def concatenate_weights(*weights) -> np.ndarray:
     return np.concatenate([np.asarray(w, dtype=float).ravel() for w in weights])
 
 
-def inner(u: np.ndarray, v: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """The inner product ``(u, v)_M = sum_i m_i u_i v_i`` (Euclidean when `weights` is None)."""
-    if weights is None:
-        return float(np.dot(u, v))
-    return float(np.dot(weights * u, v))
-
-
-def norm(v: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """The norm ``||v||_M = sqrt((v, v)_M)``."""
-    if weights is None:
-        return float(np.linalg.norm(v))
-    return float(np.sqrt(np.dot(weights * v, v)))
-
-
 @dataclass(frozen=True)
 class Residual:
     """The interface residual of one iteration: ``||H(x) - x||_M`` and its reference ``||H(x)||_M``."""
@@ -100,19 +100,24 @@ class Residual:
         return self.absolute / max(self.reference, REFERENCE_FLOOR)
 
 
-def interface_residual(x, Hx, weights=None) -> Residual:
-    """The residual ``H(x) - x`` of the fixed-point iteration measured in the M-norm."""
+def interface_residual(x, Hx, weights=None, comm=None) -> Residual:
+    """The residual ``H(x) - x`` of the fixed-point iteration measured in the M-norm (with
+    `comm`: this rank's rows of x, H(x) and the weights; both norms in one allreduce)."""
     x = np.asarray(x, dtype=float).ravel()
     Hx = np.asarray(Hx, dtype=float).ravel()
     if x.shape != Hx.shape:
         raise ValueError(f"interface residual: x has {x.size} values, H(x) has {Hx.size}")
-    w = as_weights(weights, x.size)
-    return Residual(norm(Hx - x, w), norm(Hx, w))
+    w = as_weights(weights, x.size, comm)
+    rows = Rows(comm)
+    if not rows.distributed:
+        return Residual(norm(Hx - x, w), norm(Hx, w))
+    absolute, reference = rows.norms([Hx - x, Hx], w)
+    return Residual(float(absolute), float(reference))
 
 
-def relative_residual(x, Hx, weights=None) -> float:
+def relative_residual(x, Hx, weights=None, comm=None) -> float:
     """``||H(x) - x||_M / ||H(x)||_M`` with the denominator floored at :data:`REFERENCE_FLOOR`."""
-    return interface_residual(x, Hx, weights).relative
+    return interface_residual(x, Hx, weights, comm).relative
 
 
 @dataclass
@@ -148,14 +153,18 @@ class ConvergenceMonitor:
     weights:
         the lumped mass per dof (``M = diag(weights)``); ``None`` is the Euclidean
         norm of the dof vector.
+    comm:
+        an mpi4py communicator when x, H(x) and the weights hold this rank's rows only
+        (the residuals are then the same on every rank); ``None``: serial.
     """
 
-    def __init__(self, tolerance: float, abs_tolerance: float = 0.0, weights=None):
+    def __init__(self, tolerance: float, abs_tolerance: float = 0.0, weights=None, comm=None):
         if not tolerance >= 0 or not abs_tolerance >= 0:
             raise ValueError("convergence: tolerances must be non-negative")
         self.tolerance = float(tolerance)
         self.abs_tolerance = float(abs_tolerance)
-        self.weights = as_weights(weights)
+        self.comm = comm
+        self.weights = as_weights(weights, comm=comm)
         self.windows: list[WindowHistory] = []
 
     def start_window(self, window: int, time: float = 0.0) -> WindowHistory:
@@ -170,7 +179,7 @@ class ConvergenceMonitor:
 
     def measure(self, x, Hx) -> Residual:
         """Measure and record the residual of one iteration."""
-        res = interface_residual(x, Hx, self.weights)
+        res = interface_residual(x, Hx, self.weights, self.comm)
         self.current.relative.append(res.relative)
         self.current.absolute.append(res.absolute)
         return res

@@ -16,6 +16,12 @@ supplies
   interface value and the window's :class:`StepRecord`, where the caller writes
   output and advances its participants' clocks.
 
+With ``comm`` (an mpi4py communicator) every coupler rank runs the loop on its own rows of
+``x`` (and of the weights): ``iterate`` returns this rank's rows of ``H(x)``, the residual
+norms and the accelerator's factors are reduced over the ranks (:mod:`coupler.coupling.rows`),
+so every rank takes the same decisions (converged, diverged, the next iterate's factors) and
+raises the same errors.
+
 The loop does Step 5: it measures the interface residual ``||H(x) - x||_M`` in the
 mass-weighted L2 norm (:mod:`coupler.convergence`), stops the window when it is
 small relative to ``||H(x)||_M``, and otherwise computes the next iterate with an
@@ -49,6 +55,7 @@ import numpy as np
 
 from coupler.coupling.acceleration import Accelerator, ConstantRelaxation
 from coupler.coupling.convergence import ConvergenceMonitor, as_weights
+from coupler.coupling.rows import Rows
 from coupler.errors import CouplerError, NotConverged
 
 __all__ = ["TimeWindow", "Checkpoint", "StepRecord", "CouplingResult", "CouplingError", "CouplingDiverged",
@@ -187,18 +194,22 @@ class NonFiniteInterface(CouplingError):
         self.where = where
 
 
-def _check_finite(v: np.ndarray, window: TimeWindow, iteration: int, where: str) -> None:
+def _check_finite(v: np.ndarray, window: TimeWindow, iteration: int, where: str, rows: Rows = Rows()) -> None:
+    """Raise NonFiniteInterface on every rank when some rank's rows of `v` hold NaN or inf
+    (counts over all ranks, the first bad dof in global numbering: lower ranks' rows first)."""
     finite = np.isfinite(v)
-    if finite.all():
+    if not rows.any(not finite.all()):
         return
     bad = np.flatnonzero(~finite)
-    nans = int(np.count_nonzero(np.isnan(v)))
-    kinds = ", ".join(k for k, c in (("NaN", nans), ("inf", bad.size - nans)) if c)
+    local = np.array([bad.size, np.count_nonzero(np.isnan(v)), v.size], dtype=float)
+    count, nans, size = (int(c) for c in rows.sum(local))
+    offset = rows.offset(v.size)
+    first = int(rows.extremum(offset + bad[0] if bad.size else math.inf, "min"))
+    kinds = ", ".join(k for k, c in (("NaN", nans), ("inf", count - nans)) if c)
     raise NonFiniteInterface(
-        f"{window}, iteration {iteration}: {where} has {bad.size} non-finite values ({kinds}) of {v.size}, "
-        f"first at dof {bad[0]}; a participant produced NaN/inf or the coupling blew up",
-        step=window.index, time=window.t_start, iteration=iteration, count=int(bad.size), first=int(bad[0]),
-        where=where)
+        f"{window}, iteration {iteration}: {where} has {count} non-finite values ({kinds}) of {size}, "
+        f"first at dof {first}; a participant produced NaN/inf or the coupling blew up",
+        step=window.index, time=window.t_start, iteration=iteration, count=count, first=first, where=where)
 
 
 def _as_interface(v, size: int, window: TimeWindow, iteration: int) -> np.ndarray:
@@ -220,7 +231,7 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                 progress=None, *, weights=None, abs_tolerance: float = 0.0, allow_unconverged: bool = False,
                 coupling: str = "implicit", t0: float = 0.0, extrapolation: int = 0,
                 divergence_factor: float | None = 1e8,
-                unmet: Callable[[], str | None] | None = None) -> CouplingResult:
+                unmet: Callable[[], str | None] | None = None, comm=None) -> CouplingResult:
     """Run `steps` time windows of length `dt`, each to convergence of the interface fixed point.
 
     Parameters
@@ -274,6 +285,11 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
         raise :class:`CouplingDiverged` at once when ``||H(x) - x||_M`` grows
         beyond this factor times its value in the first iteration of the window
         (also with `allow_unconverged`); ``None`` disables it.
+    comm:
+        an mpi4py communicator when `x0`, `weights` and what `iterate` returns are this
+        rank's rows of the interface vector (any number, none too); the accelerator is
+        given it when it has none (it must not have another). All ranks call
+        ``run_coupled`` together; ``None``: serial.
 
     Returns
     -------
@@ -305,15 +321,20 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
     x = np.asarray(x0, dtype=float).ravel().copy()
     size = x.size
     first = TimeWindow(0, float(t0), float(t0) + dt)
-    _check_finite(x, first, 0, "the initial interface value x0")
-    w = as_weights(weights, size)
+    rows = Rows(comm)
+    _check_finite(x, first, 0, "the initial interface value x0", rows)
+    w = as_weights(weights, size, comm)
     implicit = coupling == "implicit"
     if implicit:
         if accelerator is None:
             accelerator = ConstantRelaxation(1.0)
+        if accelerator.comm is None:
+            accelerator.comm = comm
+        elif Rows(accelerator.comm).comm is not rows.comm:
+            raise ValueError("run_coupled: the accelerator's comm is not the loop's")
         if w is not None and accelerator.weights is None:
             accelerator.set_weights(w)
-    monitor = ConvergenceMonitor(tolerance, abs_tolerance, w)
+    monitor = ConvergenceMonitor(tolerance, abs_tolerance, w, comm)
     result = CouplingResult(coupling=coupling, tolerance=float(tolerance), norm=monitor.summary()["norm"],
                             accelerator=accelerator.info() if implicit else {"name": "none (explicit)"})
     bar = progress
@@ -330,7 +351,7 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                 tic = time.perf_counter()
                 Hx = _as_interface(iterate(window, 0, x.copy()), size, window, 0)
                 t_iterate += time.perf_counter() - tic
-                _check_finite(Hx, window, 0, "H(x)")
+                _check_finite(Hx, window, 0, "H(x)", rows)
                 monitor.measure(x, Hx)
                 converged = True
             else:
@@ -348,7 +369,7 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                     tic = time.perf_counter()
                     Hx = _as_interface(iterate(window, k, x.copy()), size, window, k)
                     t_iterate += time.perf_counter() - tic
-                    _check_finite(Hx, window, k, "H(x)")
+                    _check_finite(Hx, window, k, "H(x)", rows)
                     res = monitor.measure(x, Hx)
                     if hasattr(bar, "iteration"):
                         bar.iteration(n, k, res.relative)
@@ -372,7 +393,7 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
                     tic = time.perf_counter()
                     x_next = accelerator.update(x, Hx)
                     t_accel += time.perf_counter() - tic
-                    _check_finite(x_next, window, k, f"the {accelerator.name} update")
+                    _check_finite(x_next, window, k, f"the {accelerator.name} update", rows)
                     x = x_next
                 if not converged:
                     last = history.relative[-1]
