@@ -50,10 +50,6 @@ class Rows:
     def distributed(self) -> bool:
         return self.comm is not None
 
-    @property
-    def rank(self) -> int:
-        return 0 if self.comm is None else self.comm.Get_rank()
-
     def sum(self, local):
         """The sum over the ranks of a number or an array of numbers (one allreduce)."""
         if self.comm is None:
@@ -75,10 +71,6 @@ class Rows:
         total = np.empty_like(send)
         self.comm.Allreduce(send, total, op={"max": MPI.MAX, "min": MPI.MIN}[op])
         return float(total) if np.ndim(local) == 0 else total
-
-    def dot(self, u, v, weights=None) -> float:
-        """``(u, v)_M`` over all rows."""
-        return float(self.sum(inner(u, v, weights)))
 
     def norms(self, vectors, weights=None) -> np.ndarray:
         """``||v||_M`` of each vector of `vectors` (one allreduce for all)."""
