@@ -19,8 +19,13 @@ Boundary facets get their tags from two sources, in this order:
 
 Vertex numbering: the vertices of the input, compacted to those used by a cell,
 in input order, are the "input numbering" that :mod:`solid_fenicsx.vertex_io`
-gathers fields in. ``SolidMesh.point_map`` (root rank) gives, for each of them,
-its index in the original point array.
+gathers fields in.
+
+No rank hands the whole mesh to dolfinx: every rank gives ``create_mesh`` one block
+of cells and one block of points (:func:`from_blocks`). A generator that describes its
+mesh by index ranges (:class:`transfer.generators.lattice.Lattices`) makes only each
+rank's blocks on that rank; a file, or any other generator, is read or made on the root
+rank, which keeps the arrays only until it has scattered them (:func:`from_arrays`).
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ import dolfinx
 import dolfinx.cpp
 from transfer.generators.lattice import box_arrays
 from transfer.grid import BOX_FACES
+from transfer.mesh import Mesh
 
 Predicate = Callable[[np.ndarray], np.ndarray]
 
@@ -55,8 +61,6 @@ class SolidMesh:
     facet_tags : facet MeshTags (local facets, one integer tag each)
     boundaries : name -> integer tag (the same on every rank)
     num_points, num_cells : global counts of input vertices and tetrahedra
-    point_map : on the root rank, input-numbering index -> index in the
-        original point array (points not used by any cell were dropped); None elsewhere
     """
 
     mesh: dolfinx.mesh.Mesh
@@ -64,7 +68,6 @@ class SolidMesh:
     boundaries: dict[str, int]
     num_points: int
     num_cells: int
-    point_map: np.ndarray | None = None
 
     @property
     def comm(self) -> MPI.Comm:
@@ -109,7 +112,7 @@ def _compact(points: np.ndarray, tets: np.ndarray, triangles: np.ndarray | None)
             raise SolidMeshError("boundary triangles use points that belong to no tetrahedron")
     elif triangles is not None:
         tris = np.empty((0, 3), np.int64)
-    return points[point_map], new_index[tets], tris, point_map
+    return points[point_map], new_index[tets], tris
 
 
 def _check_arrays(points, tets):
@@ -143,15 +146,73 @@ def _prepare(points, cells, triangles, triangle_tags):
         vals = np.asarray(triangle_tags, dtype=np.int32).ravel()
         if len(vals) != len(tris):
             raise SolidMeshError(f"{len(tris)} triangles but {len(vals)} triangle tags")
-    points, tets, tris, point_map = _compact(points, tets, tris)
-    return points, tets, tris, vals, point_map
+    points, tets, tris = _compact(points, tets, tris)
+    return points, tets, tris, vals
+
+
+def block_rows(n: int, size: int, rank: int) -> tuple[int, int]:
+    """The rows ``[start, stop)`` of ``rank`` when ``n`` rows are split in ``size`` consecutive
+    near-equal blocks (the first ``n % size`` ranks one row more)."""
+    q, r = divmod(int(n), size)
+    start = rank * q + min(rank, r)
+    return start, start + q + (rank < r)
+
+
+def agree(comm: MPI.Comm, error: str | None) -> None:
+    """Raise :class:`SolidMeshError` on every rank with the first rank's `error` if any rank
+    has one (collective: a rank's bad block stops every rank, none waits for it)."""
+    errors = [e for e in comm.allgather(error) if e]
+    if errors:
+        raise SolidMeshError(errors[0])
+
+
+def from_blocks(points, cells, triangles=None, triangle_tags=None, tag_names: Mapping[str, int] | None = None,
+                boundaries: Mapping[str, Predicate] | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
+    """Distribute a tet mesh of which every rank gives one block (dolfinx's ``create_mesh``).
+
+    Parameters (each rank's own, collective)
+    ----------
+    points : (n_r, 3) this rank's block of the input points: row ``i`` is input vertex
+        ``offset_r + i``, ``offset_r`` the points of the ranks before it (every point used by a cell)
+    cells : (m_r, 4) this rank's block of tetrahedra in input vertex ids; input cell ``c_r + i``
+    triangles, triangle_tags : tagged boundary triangles (input vertex ids) held by this rank, or
+        None on every rank; only exterior facets keep their tag
+    tag_names : name -> tag of the triangle tags (the same on every rank)
+    boundaries : name -> predicate on facet midpoints, as in :func:`from_arrays`
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    cells = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
+    num_points, num_cells = (int(n) for n in comm.allreduce(np.array([len(points), len(cells)], np.int64)))
+    mesh = dolfinx.mesh.create_mesh(comm, cells, points, _tet_domain())
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    mesh.topology.create_connectivity(tdim - 1, 0)
+
+    indices = np.empty(0, np.int32)
+    values = np.empty(0, np.int32)
+    names: dict[str, int] = {}
+    if triangles is not None:
+        tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+        vals = np.ascontiguousarray(triangle_tags, dtype=np.int32).ravel()
+        local_entities, local_values = dolfinx.cpp.io.distribute_entity_data(mesh._mesh, tdim - 1, tris, vals)
+        adj = dolfinx.cpp.graph.AdjacencyList_int32(np.asarray(local_entities, dtype=np.int32))
+        ft = dolfinx.cpp.mesh.create_meshtags(mesh._mesh, tdim - 1, adj, np.asarray(local_values, np.int32))
+        exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+        keep = np.isin(ft.indices, exterior)
+        indices, values = np.asarray(ft.indices[keep], np.int32), np.asarray(ft.values[keep], np.int32)
+        by_tag = {int(v): k for k, v in (tag_names or {}).items()}
+        for t in sorted(set().union(*comm.allgather(set(np.unique(vals).tolist())))):
+            names[by_tag.get(int(t), str(int(t)))] = int(t)
+    return _finish(mesh, indices, values, names, boundaries, num_points, num_cells)
 
 
 def from_arrays(points=None, cells=None, triangles=None, triangle_tags=None,
                 tag_names: Mapping[str, int] | None = None,
                 boundaries: Mapping[str, Predicate] | None = None,
                 comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
-    """Distribute a tet mesh given as arrays on the ``root`` rank.
+    """Distribute a tet mesh given as arrays on the ``root`` rank: ``root`` validates and
+    compacts them, then scatters consecutive blocks of points, cells and triangles
+    (:func:`block_rows`) to :func:`from_blocks`, so dolfinx never takes the whole mesh on one rank.
 
     Parameters
     ----------
@@ -162,42 +223,38 @@ def from_arrays(points=None, cells=None, triangles=None, triangle_tags=None,
     tag_names : name -> tag for the triangle tags (others are named ``str(tag)``); read on ``root``
     boundaries : name -> predicate on facet midpoints, ``x`` of shape (3, n)
     """
-    rank = comm.rank
-    payload, error = None, None
-    points_, tets, tris, vals, point_map = np.empty((0, 3)), np.empty((0, 4), np.int64), None, None, None
-    if rank == root:
+    arrays, payload, error = (None,) * 4, None, None
+    if comm.rank == root:
         try:
-            points_, tets, tris, vals, point_map = _prepare(points, cells, triangles, triangle_tags)
-            file_tags = sorted(set(vals.tolist())) if vals is not None else []
-            payload = (len(points_), len(tets), tris is not None, file_tags, dict(tag_names or {}))
+            points, tets, tris, vals = _prepare(points, cells, triangles, triangle_tags)
+            arrays = (points, tets, tris, vals)
+            payload = (len(points), len(tets), 0 if tris is None else len(tris), tris is not None,
+                       dict(tag_names or {}))
         except SolidMeshError as exc:
             error = str(exc)
     error = comm.bcast(error, root=root)
     if error:
         raise SolidMeshError(error)
-    num_points, num_cells, has_tris, file_tags, tag_names = comm.bcast(payload, root=root)
-    points = points_
-    mesh = dolfinx.mesh.create_mesh(comm, tets, points, _tet_domain())
-    tdim = mesh.topology.dim
-    mesh.topology.create_connectivity(tdim - 1, tdim)
-    mesh.topology.create_connectivity(tdim - 1, 0)
+    num_points, num_cells, num_tris, has_tris, tag_names = comm.bcast(payload, root=root)
+    points, tets, tris, vals = (_scatter(a, n, width, dtype, comm, root) for a, n, width, dtype in
+                                zip(arrays, (num_points, num_cells, num_tris, num_tris), (3, 4, 3, 1),
+                                    (np.float64, np.int64, np.int64, np.int32)))
+    del arrays
+    return from_blocks(points, tets, tris if has_tris else None, vals, tag_names, boundaries, comm)
 
-    indices = np.empty(0, np.int32)
-    values = np.empty(0, np.int32)
-    names: dict[str, int] = {}
-    if has_tris:
-        if rank != root:
-            tris, vals = np.empty((0, 3), np.int64), np.empty(0, np.int32)
-        local_entities, local_values = dolfinx.cpp.io.distribute_entity_data(mesh._mesh, tdim - 1, tris, vals)
-        adj = dolfinx.cpp.graph.AdjacencyList_int32(np.asarray(local_entities, dtype=np.int32))
-        ft = dolfinx.cpp.mesh.create_meshtags(mesh._mesh, tdim - 1, adj, np.asarray(local_values, np.int32))
-        exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
-        keep = np.isin(ft.indices, exterior)
-        indices, values = np.asarray(ft.indices[keep], np.int32), np.asarray(ft.values[keep], np.int32)
-        by_tag = {int(v): k for k, v in (tag_names or {}).items()}
-        for t in file_tags:
-            names[by_tag.get(int(t), str(int(t)))] = int(t)
-    return _finish(mesh, indices, values, names, boundaries, num_points, num_cells, point_map)
+
+def _scatter(array, n: int, width: int, dtype, comm: MPI.Comm, root: int) -> np.ndarray:
+    """This rank's block (:func:`block_rows`) of the (n, width) `array` held by ``root``."""
+    starts = np.array([block_rows(n, comm.size, r)[0] for r in range(comm.size)], np.int64)
+    counts = np.diff(np.append(starts, n)) * width
+    out = np.empty((counts[comm.rank] // width, width), dtype)
+    send = None
+    if comm.rank == root:
+        rows = np.empty((0, width), dtype) if array is None else np.asarray(array, dtype).reshape(-1, width)
+        send = [np.ascontiguousarray(rows), counts, starts * width,
+                MPI._typedict[np.dtype(dtype).char]]
+    comm.Scatterv(send, out, root=root)
+    return out if width > 1 else out.ravel()
 
 
 def exterior_midpoints(mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -206,7 +263,7 @@ def exterior_midpoints(mesh) -> tuple[np.ndarray, np.ndarray]:
     return exterior, dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim - 1, exterior).T
 
 
-def _finish(mesh, indices, values, names, boundaries, num_points, num_cells, point_map) -> SolidMesh:
+def _finish(mesh, indices, values, names, boundaries, num_points, num_cells) -> SolidMesh:
     """Add predicate boundaries to the file tags and build the MeshTags."""
     tdim = mesh.topology.dim
     tags = dict(zip(indices.tolist(), values.tolist()))
@@ -231,7 +288,7 @@ def _finish(mesh, indices, values, names, boundaries, num_points, num_cells, poi
     for (name, _), n in zip(names.items(), counts):
         if n == 0:
             warnings.warn(f"boundary {name!r} has no facets", stacklevel=3)
-    return SolidMesh(mesh, facet_tags, names, num_points, num_cells, point_map)
+    return SolidMesh(mesh, facet_tags, names, num_points, num_cells)
 
 
 # -- files --------------------------------------------------------------------
@@ -253,9 +310,21 @@ def read_mesh(path, boundaries: Mapping[str, Predicate] | None = None, tag_key: 
 def generated_mesh(generator: str, parameters: Mapping | None = None,
                    boundaries: Mapping[str, Predicate] | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
                    root: int = 0) -> SolidMesh:
-    """The mesh of a generator of :mod:`transfer.generators` (run on ``root``) with its named
-    faces as boundaries, distributed; ``boundaries`` add predicates as in :func:`from_arrays`."""
-    from transfer.generators import generate
+    """The mesh of a generator of :mod:`transfer.generators` with its named faces as boundaries,
+    distributed; ``boundaries`` add predicates as in :func:`from_arrays`. A generator that
+    describes its mesh by index (``lattices``) makes on each rank only that rank's blocks
+    (:func:`lattice_mesh`); any other runs on ``root``."""
+    from transfer.generators import generate, lattices
+
+    where = f"generator {generator!r}"
+    described, error = None, None
+    try:
+        described = lattices(generator, dict(parameters or {}))
+    except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
+        error = f"{where}: {exc}"
+    agree(comm, error)
+    if described is not None:
+        return lattice_mesh(described, where, boundaries, comm)
 
     def build():
         block = generate(generator, dict(parameters or {}))
@@ -263,7 +332,26 @@ def generated_mesh(generator: str, parameters: Mapping | None = None,
         return {"points": block.points, "cells": block.cells, "triangles": triangles, "triangle_tags": tags,
                 "tag_names": block.face_tags}
 
-    return _from_root(build, f"generator {generator!r}", boundaries, comm, root)
+    return _from_root(build, where, boundaries, comm, root)
+
+
+def lattice_mesh(lattices, where: str, boundaries: Mapping[str, Predicate] | None = None,
+                 comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
+    """The mesh of `lattices` (a :class:`transfer.generators.lattices.Lattices`, the same on every
+    rank), each rank making only its block of cells (:func:`block_rows`), their boundary
+    triangles, the points of its own block and, to validate its cells (:class:`transfer.Mesh`),
+    their vertices; an error of any rank, prefixed by `where`, raised on every rank."""
+    error = None
+    cells, _, triangles, tags = lattices.cells(*block_rows(lattices.num_cells, comm.size, comm.rank))
+    points = lattices.points(np.arange(*block_rows(lattices.num_points, comm.size, comm.rank)))
+    try:
+        used, local = np.unique(cells, return_inverse=True)
+        Mesh(lattices.points(used), local.reshape(-1, 4), "tetra", name=where)
+    except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
+        error = f"{where}: {exc}"
+    agree(comm, error)
+    named = bool(lattices.face_tags)
+    return from_blocks(points, cells, triangles if named else None, tags, lattices.face_tags, boundaries, comm)
 
 
 def _from_root(build, where: str, boundaries, comm, root) -> SolidMesh:

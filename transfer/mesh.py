@@ -38,20 +38,27 @@ HEX_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0,
 
 
 
-def lattice_hexahedra(shape) -> np.ndarray:
+def lattice_hexahedra(shape, hexes=None) -> np.ndarray:
     """Hexahedra (VTK order) of an (nx, ny, nz) lattice of (nx+1)(ny+1)(nz+1) points
-    numbered x fastest; cells numbered x fastest too."""
+    numbered x fastest; cells numbered x fastest too (only those of index ``hexes`` if given)."""
     nx, ny, nz = (int(n) for n in shape)
     px, py = nx + 1, ny + 1
-    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-    base = (i + px * (j + py * k)).ravel()
+    h = np.arange(nx * ny * nz) if hexes is None else np.asarray(hexes, np.int64)
+    i, j, k = h % nx, (h // nx) % ny, h // (nx * ny)
+    base = i + px * (j + py * k)
     offsets = np.array([0, 1, 1 + px, px, px * py, 1 + px * py, 1 + px + px * py, px + px * py])
     return np.ascontiguousarray(base[:, None] + offsets[None, :], dtype=np.int64)
 
 
-def lattice_tetrahedra(shape) -> np.ndarray:
-    """The hexahedra of :func:`lattice_hexahedra` split by :data:`HEX_TETS` (conforming)."""
-    return np.ascontiguousarray(lattice_hexahedra(shape)[:, HEX_TETS].reshape(-1, 4))
+def lattice_tetrahedra(shape, start: int = 0, stop: int | None = None) -> np.ndarray:
+    """The hexahedra of :func:`lattice_hexahedra` split by :data:`HEX_TETS` (conforming): tets
+    ``start`` to ``stop`` (6 per hexahedron, in hexahedron order; default all)."""
+    nx, ny, nz = (int(n) for n in shape)
+    stop = 6 * nx * ny * nz if stop is None else int(stop)
+    first = int(start) // 6
+    hexes = np.arange(first, -(-stop // 6)) if stop > start else np.empty(0, np.int64)
+    tets = lattice_hexahedra(shape, hexes)[:, HEX_TETS].reshape(-1, 4)
+    return np.ascontiguousarray(tets[int(start) - 6 * first: stop - 6 * first])
 
 
 #: a cell whose measure is below this times (longest edge)^dim is degenerate

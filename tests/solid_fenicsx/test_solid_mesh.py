@@ -70,9 +70,9 @@ def test_from_arrays_with_tags_and_predicates():
                         boundaries={"xmin": lambda x: np.isclose(x[0], 0.0)})
     assert solid.boundaries == {"3": 3, "top": 7, "xmin": 8}
     assert [_count(solid, n) for n in ("3", "top", "xmin")] == [18, 18, 18]
-    assert solid.num_points == 64  # the unused point is dropped
-    if MPI.COMM_WORLD.rank == 0:
-        assert np.array_equal(solid.point_map, np.arange(1, 65))
+    assert solid.num_points == 64  # the unused point 0 is dropped: input id i is point i + 1
+    ids = np.asarray(solid.mesh.geometry.input_global_indices)
+    assert np.array_equal(solid.mesh.geometry.x, points[ids + 1])
 
 
 @pytest.mark.parametrize("fmt", ["gmsh22", "vtu", "xdmf"])

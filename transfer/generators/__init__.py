@@ -1,16 +1,19 @@
 """Case geometry made from parameters: one module per generator, found by :data:`GENERATORS`.
 
 A scene names one in ``[geometry.solid] generator = "NAME"`` with its ``[geometry.solid.parameters]``;
-the solid participant runs it on rank 0, and cases that ship a mesh file make it with the same
-generator (their ``make_mesh.py``). A generator module defines ``NAME``, ``DESCRIPTION``,
+the solid participant makes on each rank only that rank's cells and points when the generator
+describes its mesh by index (``lattices``), else runs it on rank 0; cases that ship a mesh file
+make it with the same generator (their ``make_mesh.py``). A generator module defines ``NAME``, ``DESCRIPTION``,
 ``PARAMETERS`` (``{name: description}``, every key it takes), ``DEFAULTS`` (the optional ones'
 values), ``check(parameters) -> dict`` (types and ranges; ``ValueError("<key>: <reason>")``),
 ``mesh(parameters)`` (the solid: a :class:`~transfer.generators.blocks.Block`, tetrahedra with
 named boundary faces), ``FACES`` (``{name: tag}`` of the faces every mesh it makes carries)
 and, optionally, ``FILES`` (the parameters that name files: the scene gives them relative to the
 case directory and resolves them), ``cells(parameters)`` (the number of tetrahedra without
-building the mesh) and, for geometry made for a fluid grid (an immersed-boundary study),
-``grid(parameters) -> {"origin", "spacing", "shape"}``.
+building the mesh), ``lattices(parameters)`` (the mesh by index,
+:class:`~transfer.generators.lattices.Lattices`: any block of cells or points made alone) and,
+for geometry made for a fluid grid (an immersed-boundary study), ``grid(parameters) ->
+{"origin", "spacing", "shape"}``.
 
 - ``rough_fracture``: two rock blocks around a matched rough fracture (small_fracture, fracture_flow)
 - ``fracture_specimen``: the closure specimen, box or cylinder, non-matching fracture faces (paper 4.1)
@@ -54,6 +57,13 @@ def parameters(name: str, values: dict) -> dict:
 def generate(name: str, values: dict | None = None):
     """The mesh of generator `name` with `values` (checked, defaults filled in)."""
     return GENERATORS[name].mesh(parameters(name, dict(values or {})))
+
+
+def lattices(name: str, values: dict | None = None):
+    """The :class:`~transfer.generators.lattices.Lattices` of generator `name` with `values` (its mesh by
+    index, nothing built), or None for a generator that only builds whole meshes."""
+    module = GENERATORS[name]
+    return module.lattices(parameters(name, dict(values or {}))) if hasattr(module, "lattices") else None
 
 
 def cells(name: str, values: dict) -> int:

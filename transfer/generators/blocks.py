@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..mesh import Mesh, lattice_tetrahedra
+from ..mesh import Mesh
+from .lattices import Lattice, Lattices
 from .surfaces import surface_mean
 
 #: integer tag of each named boundary (gmsh physical tags of dimension 2)
@@ -76,6 +77,13 @@ class Block:
     @property
     def num_cells(self) -> int:
         return len(self.cells)
+
+    @classmethod
+    def of(cls, lattices: Lattices, name: str = "block", info: dict | None = None) -> "Block":
+        """The whole mesh of `lattices` (:meth:`Lattices.arrays`) with its tags and names."""
+        points, cells, faces, tags = lattices.arrays()
+        return cls(points, cells, faces, tags, name, dict(lattices.face_tags), dict(lattices.cell_names),
+                   info=dict(info or {}))
 
     def volume(self) -> float:
         return float(self.mesh.cell_measures().sum())
@@ -171,65 +179,41 @@ def _layers(nz, grading, fine_at_top):
     return 1.0 - t[::-1] if fine_at_top else t
 
 
-def _stretched_lattice(xs, ys, z_of_layer):
-    """Points of an (nx+1)(ny+1)(nz+1) lattice, x fastest, z per column; z_of_layer: (nz+1, nx+1, ny+1)."""
-    nz = z_of_layer.shape[0] - 1
-    k, j, i = np.meshgrid(np.arange(nz + 1), np.arange(len(ys)), np.arange(len(xs)), indexing="ij")
-    idx = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1)
-    points = np.column_stack([xs[idx[:, 0]], ys[idx[:, 1]], z_of_layer[idx[:, 2], idx[:, 0], idx[:, 1]]])
-    return points, idx
-
-
-def _boundary_faces(cells, idx, shape, names):
-    """Outward boundary triangles of a positively oriented lattice tet mesh, by lattice face.
-
-    names: the six face names in the order (i=0, i=nx, j=0, j=ny, k=0, k=nz)."""
-    # faces opposite vertex 0, 1, 2, 3, ordered so their normal points out of a positive tet
-    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    # a tet face whose three vertices lie on one face of the lattice (in index space) is on the
-    # boundary, in one tet only: no search for unmatched faces is needed
-    on_face = np.zeros(len(idx), bool)
-    for axis in range(3):
-        on_face |= (idx[:, axis] == 0) | (idx[:, axis] == shape[axis])
-    tris = cells[:, local].reshape(-1, 3)
-    tris = tris[on_face[tris].all(axis=1)]
-    lat = idx[tris]  # (f, 3 vertices, 3 axes)
-    faces = {}
-    for axis in range(3):
-        for side, value in enumerate((0, shape[axis])):
-            sel = np.all(lat[:, :, axis] == value, axis=1)
-            faces[names[2 * axis + side]] = tris[sel]
-    return faces
-
-
-def _block(xs, ys, z_bottom, z_top, nz, grading, fine_at_top, names, tag, name):
-    nx, ny = len(xs) - 1, len(ys) - 1
+def _layered(xs, ys, z_bottom, z_top, nz, grading, fine_at_top, names, tag) -> Lattice:
+    """The lattice of a block between two node-grid surfaces z_bottom, z_top (nx+1, ny+1) in nz
+    layers, its faces named ``names`` (i=0, i=nx, j=0, j=ny, k=0, k=nz), its cells tagged ``tag``."""
     t = _layers(nz, grading, fine_at_top)
-    z = z_bottom[None] + t[:, None, None] * (z_top - z_bottom)[None]
-    z[0], z[-1] = z_bottom, z_top  # the faces carry the surface heights exactly
-    points, idx = _stretched_lattice(xs, ys, z)
-    cells = lattice_tetrahedra((nx, ny, nz))
-    faces = _boundary_faces(cells, idx, (nx, ny, nz), names)
-    block = Block(points, cells, faces, np.full(len(cells), tag, np.int32), name=name)
-    block.mesh  # validate now: raises MeshError on an inverted or degenerate tet
+
+    def node(i, j, k):
+        z = z_bottom[i, j] + t[k] * (z_top[i, j] - z_bottom[i, j])
+        z = np.where(k == 0, z_bottom[i, j], np.where(k == nz, z_top[i, j], z))  # the faces carry the surfaces
+        return np.column_stack([xs[i], ys[j], z])
+
+    return Lattice((len(xs) - 1, len(ys) - 1, nz), node, tuple(names), tag)
+
+
+def lattice_block(lattices: Lattices, name: str, info: dict | None = None) -> Block:
+    """The :class:`Block` of `lattices`, validated: raises MeshError on an inverted or degenerate tet."""
+    block = Block.of(lattices, name, info)
+    block.mesh
     return block
-
-
-def _combine(a: Block, b: Block, name="solid") -> Block:
-    off = len(a.points)
-    faces = {}
-    for n in FACE_TAGS:
-        parts = [f for f in (a.faces.get(n), None if b.faces.get(n) is None else b.faces[n] + off)
-                 if f is not None and len(f)]
-        if parts:
-            faces[n] = np.concatenate(parts)
-    return Block(np.concatenate([a.points, b.points]), np.concatenate([a.cells, b.cells + off]), faces,
-                 np.concatenate([a.cell_tags, b.cell_tags]), name=name)
 
 
 def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, grading=1.0,
                     bottom=None) -> FractureBlocks:
-    """Two tetrahedral rock blocks with a rough fracture between them.
+    """Two tetrahedral rock blocks with a rough fracture between them (the arguments of
+    :func:`fracture_lattices`)."""
+    low, up = fracture_lattices(shape, size, height, heights, origin, top, grading, bottom)
+    return FractureBlocks(lattice_block(Lattices((low,), FACE_TAGS, BLOCK_TAGS), "lower_block"),
+                          lattice_block(Lattices((up,), FACE_TAGS, BLOCK_TAGS), "upper_block"),
+                          lattice_block(Lattices((low, up), FACE_TAGS, BLOCK_TAGS), "solid"),
+                          tuple(np.asarray(h, float) for h in heights), (float(size[0]), float(size[1])),
+                          (float(origin[0]), float(origin[1])))
+
+
+def fracture_lattices(shape, size, height, heights, origin=(0.0, 0.0), top=None, grading=1.0,
+                      bottom=None) -> tuple[Lattice, Lattice]:
+    """The lattices of two tetrahedral rock blocks with a rough fracture between them.
 
     Parameters
     ----------
@@ -246,7 +230,8 @@ def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, g
     The lower block spans ``z = bottom`` .. lower(x, y) (faces ``bottom``, ``fracture_lower``),
     the upper block upper(x, y) .. ``top`` (faces ``fracture_upper``, ``top``); both have
     the sides ``xmin, xmax, ymin, ymax``. Raises ValueError if a surface does not lie strictly
-    between the bottom and the top, and :class:`transfer.MeshError` on a bad cell.
+    between the bottom and the top (:func:`fracture_blocks` also :class:`transfer.MeshError` on
+    a bad cell).
     """
     nx, ny, nz = (int(n) for n in shape)
     size = (float(size[0]), float(size[1]))
@@ -269,24 +254,24 @@ def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, g
     xs = origin[0] + np.linspace(0.0, size[0], nx + 1)
     ys = origin[1] + np.linspace(0.0, size[1], ny + 1)
     sides = ("xmin", "xmax", "ymin", "ymax")
-    low = _block(xs, ys, np.full_like(lower, bottom), lower, nz, grading, True,
-                 sides + ("bottom", "fracture_lower"), BLOCK_TAGS["lower_block"], "lower_block")
-    up = _block(xs, ys, upper, np.full_like(upper, top), nz, grading, False,
-                sides + ("fracture_upper", "top"), BLOCK_TAGS["upper_block"], "upper_block")
-    return FractureBlocks(low, up, _combine(low, up), (lower, upper), size, (float(origin[0]), float(origin[1])))
+    low = _layered(xs, ys, np.full_like(lower, bottom), lower, nz, grading, True, sides + ("bottom", "fracture_lower"),
+                   BLOCK_TAGS["lower_block"])
+    up = _layered(xs, ys, upper, np.full_like(upper, top), nz, grading, False, sides + ("fracture_upper", "top"),
+                  BLOCK_TAGS["upper_block"])
+    return low, up
 
 
-def mortar_blocks(shape, size, height, heights, ratio, origin=(0.0, 0.0), top=None, bottom=None) -> Block:
+def mortar_lattices(shape, size, height, heights, ratio, origin=(0.0, 0.0), top=None, bottom=None) -> Lattices:
     """Two blocks around a fracture with non-matching faces, for mortar contact: the lower
     block on the (nx, ny, nz) lattice, the upper on one ``ratio`` times coarser in x and y
     (its face the upper heights at every ratio-th node; ratio divides nx and ny), both in one
     mesh (the upper block's points follow the lower's). ``top`` defaults to the mean of the
-    full upper surface plus ``height``; the other arguments as in :func:`fracture_blocks`."""
+    full upper surface plus ``height``; the other arguments as in :func:`fracture_lattices`."""
     nx, ny, nz = (int(n) for n in shape)
     lower, upper = (np.asarray(h, float) for h in heights)
     if top is None:
         top = surface_mean(upper, size) + float(height)
-    fine = fracture_blocks((nx, ny, nz), size, height, (lower, upper), origin, top=top, bottom=bottom).lower
-    coarse = fracture_blocks((nx // ratio, ny // ratio, nz), size, height, (lower[::ratio, ::ratio],
-                             upper[::ratio, ::ratio]), origin, top=top, bottom=bottom).upper
-    return _combine(fine, coarse)
+    fine = fracture_lattices((nx, ny, nz), size, height, (lower, upper), origin, top=top, bottom=bottom)[0]
+    coarse = fracture_lattices((nx // ratio, ny // ratio, nz), size, height, (lower[::ratio, ::ratio],
+                               upper[::ratio, ::ratio]), origin, top=top, bottom=bottom)[1]
+    return Lattices((fine, coarse), FACE_TAGS, BLOCK_TAGS)

@@ -8,11 +8,13 @@ built, so the face heights stay the generator's functions of the lattice's (x, y
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..mesh import Mesh
 from . import choice, number, numbers
-from .blocks import FACE_TAGS, Block, mortar_blocks
+from .blocks import FACE_TAGS, Block, lattice_block, mortar_lattices
+from .lattices import Lattices
 from .surfaces import fracture_pair
 
 NAME = "fracture_specimen"
@@ -65,24 +67,37 @@ def cells(p: dict) -> int:
     return 6 * nx * ny * nz + 6 * (nx // r) * (ny // r) * nz
 
 
-def mesh(p: dict) -> Block:
-    """The two blocks of a closure specimen in one mesh, faces ``bottom``, ``top``,
-    ``fracture_lower`` (the fine face), ``fracture_upper`` and the sides. ``info``: the
-    nominal cross-section (size^2, or pi (size / 2)^2) and the largest initial aperture on
-    the lattice (what a contact search must reach across)."""
+def _parts(p: dict) -> tuple[Lattices, dict]:
+    """The specimen by index (the cylinder's points mapped onto the disc) and its ``info``."""
     shape, size, height = p["shape"], p["size"], p["height"]
     (nx, ny, nz), r = p["lattice"], p["ratio"]
     square = (float(size), float(size))
     lower, upper = fracture_pair((nx, ny), square, aperture=p["aperture"], hurst=p["hurst"], rms=p["rms"],
                                  mismatch_length=p["mismatch_length"], seed=p["seed"],
                                  min_aperture=p["min_aperture"], periodic=False)
-    block = mortar_blocks((nx, ny, nz), square, height, (lower, upper), r)
-    points = block.points.copy()
+    lattices = mortar_lattices((nx, ny, nz), square, height, (lower, upper), r)
     if shape == "cylinder":
         half = size / 2
-        x, y = square_to_disc(points[:, 0] / half - 1, points[:, 1] / half - 1)
-        points[:, 0], points[:, 1] = half * (1 + x), half * (1 + y)
-        Mesh(points, block.cells, "tetra", name=f"cylindrical specimen {[nx, ny, nz]}")  # raises on a bad cell
+
+        def disc(points):
+            x, y = square_to_disc(points[:, 0] / half - 1, points[:, 1] / half - 1)
+            points[:, 0], points[:, 1] = half * (1 + x), half * (1 + y)
+            return points
+
+        lattices = replace(lattices, transform=disc)
     area = size ** 2 if shape == "box" else np.pi * (size / 2) ** 2
-    return Block(points, block.cells, block.faces, block.cell_tags, f"{shape} specimen",
-                 info={"cross_section": float(area), "max_initial_aperture": float((upper - lower).max())})
+    return lattices, {"cross_section": float(area), "max_initial_aperture": float((upper - lower).max())}
+
+
+def lattices(p: dict) -> Lattices:
+    """The two blocks by index (:mod:`.lattices`)."""
+    return _parts(p)[0]
+
+
+def mesh(p: dict) -> Block:
+    """The two blocks of a closure specimen in one mesh, faces ``bottom``, ``top``,
+    ``fracture_lower`` (the fine face), ``fracture_upper`` and the sides. ``info``: the
+    nominal cross-section (size^2, or pi (size / 2)^2) and the largest initial aperture on
+    the lattice (what a contact search must reach across). Raises MeshError on a bad cell."""
+    lattices, info = _parts(p)
+    return lattice_block(lattices, f"{p['shape']} specimen", info)

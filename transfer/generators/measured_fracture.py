@@ -1,6 +1,6 @@
 """Two rock blocks around a measured fracture: the faces from height maps (profilometer
 scans, :mod:`.height_maps`) instead of synthetic ones, meshed as the synthetic fractures are
-(:func:`~transfer.generators.blocks.mortar_blocks`, :func:`~transfer.generators.blocks.fracture_blocks`).
+(:func:`~transfer.generators.blocks.mortar_lattices`, :func:`~transfer.generators.blocks.fracture_blocks`).
 
 The lattice's nodes are map nodes: every ``coarsen``-th one in x and y (sampled, not
 averaged), so the faces' heights at the lattice nodes are the map's; the upper face's lattice
@@ -16,7 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import number
-from .blocks import FACE_TAGS, Block, mortar_blocks
+from .blocks import FACE_TAGS, Block, lattice_block, mortar_lattices
+from .lattices import Lattices
 from .height_maps import read_npz, read_xyz
 from .surfaces import surface_mean
 
@@ -105,10 +106,8 @@ def cells(p: dict) -> int:
     return 6 * nx * ny * nz + 6 * (nx // r) * (ny // r) * nz
 
 
-def mesh(p: dict) -> Block:
-    """The two blocks in one mesh; ``info``: the map's nodes and spacing, the lattice, the
-    aperture's mean, minimum and maximum on the lower lattice, the nodes of the map raised to
-    ``min_aperture``, the cross-section."""
+def _parts(p: dict) -> tuple[Lattices, dict]:
+    """The two blocks by index and the ``info`` of :func:`mesh`."""
     lower, upper, spacing, origin = read_faces(p)
     raised = upper - lower < p["min_aperture"]
     upper = np.where(raised, lower + p["min_aperture"], upper)
@@ -116,11 +115,24 @@ def mesh(p: dict) -> Block:
     c = p["coarsen"]
     size = ((lower.shape[0] - 1) * spacing[0], (lower.shape[1] - 1) * spacing[1])
     low, up = lower[::c, ::c], upper[::c, ::c]
-    block = mortar_blocks((nx, ny, p["layers"]), size, p["height"], (low, up), p["ratio"], origin,
-                          bottom=surface_mean(low, size) - p["height"])
+    lattices = mortar_lattices((nx, ny, p["layers"]), size, p["height"], (low, up), p["ratio"], origin,
+                               bottom=surface_mean(low, size) - p["height"])
     gap = up - low
     info = {"map_nodes": f"{lower.shape[0]} x {lower.shape[1]}", "map_spacing": f"{spacing[0]:g} x {spacing[1]:g} m",
             "lattice": f"{nx} x {ny}", "mean_aperture": surface_mean(gap, size), "min_aperture": float(gap.min()),
             "max_initial_aperture": float(gap.max()), "raised_nodes": int(raised.sum()),
             "cross_section": size[0] * size[1]}
-    return Block(block.points, block.cells, block.faces, block.cell_tags, NAME, info=info)
+    return lattices, info
+
+
+def lattices(p: dict) -> Lattices:
+    """The two blocks by index (:mod:`.lattices`)."""
+    return _parts(p)[0]
+
+
+def mesh(p: dict) -> Block:
+    """The two blocks in one mesh; ``info``: the map's nodes and spacing, the lattice, the
+    aperture's mean, minimum and maximum on the lower lattice, the nodes of the map raised to
+    ``min_aperture``, the cross-section."""
+    lattices, info = _parts(p)
+    return lattice_block(lattices, NAME, info)

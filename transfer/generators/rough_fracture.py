@@ -6,7 +6,8 @@ the faces of :func:`~transfer.generators.surfaces.fracture_pair` (non-periodic, 
 from __future__ import annotations
 
 from . import number, numbers
-from .blocks import FACE_TAGS, Block, fracture_blocks
+from .blocks import BLOCK_TAGS, FACE_TAGS, Block, fracture_lattices, lattice_block
+from .lattices import Lattices
 from .surfaces import fracture_pair, surface_mean
 
 NAME = "rough_fracture"
@@ -35,14 +36,22 @@ def cells(p: dict) -> int:
     return 2 * 6 * nx * ny * nz
 
 
+def _faces(p: dict):
+    return fracture_pair(p["shape"][:2], p["size"], aperture=p["aperture"], hurst=p["hurst"], rms=p["rms"],
+                         seed=p["seed"], min_aperture=p["min_aperture"], periodic=False,
+                         mismatch_length=p["mismatch_length"])
+
+
+def lattices(p: dict, faces=None) -> Lattices:
+    """The two blocks by index (:mod:`.lattices`), on the fracture `faces` (default: made from `p`)."""
+    return Lattices(fracture_lattices(p["shape"], p["size"], p["height"], faces or _faces(p), grading=p["grading"]),
+                    FACE_TAGS, BLOCK_TAGS)
+
+
 def mesh(p: dict) -> Block:
     """The two blocks in one mesh; ``info``: the aperture's mean, minimum and maximum."""
-    lower, upper = fracture_pair(p["shape"][:2], p["size"], aperture=p["aperture"], hurst=p["hurst"], rms=p["rms"],
-                                 seed=p["seed"], min_aperture=p["min_aperture"], periodic=False,
-                                 mismatch_length=p["mismatch_length"])
-    blocks = fracture_blocks(p["shape"], p["size"], p["height"], (lower, upper), grading=p["grading"])
-    w = blocks.aperture
-    info = {"mean_aperture": surface_mean(w, blocks.size), "min_aperture": float(w.min()),
+    lower, upper = _faces(p)
+    w = upper - lower
+    info = {"mean_aperture": surface_mean(w, p["size"]), "min_aperture": float(w.min()),
             "max_aperture": float(w.max())}
-    s = blocks.solid
-    return Block(s.points, s.cells, s.faces, s.cell_tags, NAME, info=info)
+    return lattice_block(lattices(p, (lower, upper)), NAME, info)

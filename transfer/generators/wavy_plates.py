@@ -23,7 +23,8 @@ import math
 import numpy as np
 
 from . import choice, number
-from .blocks import FACE_TAGS, Block, fracture_blocks
+from .blocks import BLOCK_TAGS, FACE_TAGS, Block, fracture_lattices, lattice_block
+from .lattices import Lattices
 
 NAME = "wavy_plates"
 DESCRIPTION = "two blocks with a sinusoidal aperture along or across the flow, and the fluid grid made for them"
@@ -92,8 +93,8 @@ def cells(p: dict) -> int:
     return 2 * 6 * nx * ny * 2
 
 
-def mesh(p: dict) -> Block:
-    """Both blocks in one mesh, two layers each, with the named faces of a fracture."""
+def lattices(p: dict) -> Lattices:
+    """Both blocks by index (:mod:`.lattices`), two layers each, with the named faces of a fracture."""
     g = grid(p)
     nx, ny = _lattice(p)
     size = (g["spacing"][0] * g["shape"][0], g["spacing"][1] * g["shape"][1])
@@ -102,8 +103,11 @@ def mesh(p: dict) -> Block:
     s = x if p["direction"] == "along" else y
     lower = np.full(s.shape, _lower_face(p))
     top = g["spacing"][2] * g["shape"][2]
-    blocks = fracture_blocks((nx, ny, 2), size, top, (lower, lower + aperture(p, s)), bottom=0.0, top=top)
-    solid = blocks.solid
-    return Block(solid.points, solid.cells, solid.faces, solid.cell_tags, NAME,
-                 info={"smallest_aperture": float(p["aperture"] * (1 - p["amplitude"])),
-                       "largest_aperture": float(p["aperture"] * (1 + p["amplitude"]))})
+    return Lattices(fracture_lattices((nx, ny, 2), size, top, (lower, lower + aperture(p, s)), bottom=0.0, top=top),
+                    FACE_TAGS, BLOCK_TAGS)
+
+
+def mesh(p: dict) -> Block:
+    """Both blocks in one mesh, two layers each, with the named faces of a fracture."""
+    return lattice_block(lattices(p), NAME, {"smallest_aperture": float(p["aperture"] * (1 - p["amplitude"])),
+                                             "largest_aperture": float(p["aperture"] * (1 + p["amplitude"]))})
