@@ -314,12 +314,12 @@ def generated_mesh(generator: str, parameters: Mapping | None = None,
     distributed; ``boundaries`` add predicates as in :func:`from_arrays`. A generator that
     describes its mesh by index (``lattices``) makes on each rank only that rank's blocks
     (:func:`lattice_mesh`); any other runs on ``root``."""
-    from transfer.generators import generate, lattices
+    from transfer.generators import generate, lattices_of
 
     where = f"generator {generator!r}"
     described, error = None, None
     try:
-        described = lattices(generator, dict(parameters or {}))
+        described = lattices_of(generator, dict(parameters or {}))
     except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
         error = f"{where}: {exc}"
     agree(comm, error)
@@ -342,11 +342,12 @@ def lattice_mesh(lattices, where: str, boundaries: Mapping[str, Predicate] | Non
     triangles, the points of its own block and, to validate its cells (:class:`transfer.Mesh`),
     their vertices; an error of any rank, prefixed by `where`, raised on every rank."""
     error = None
-    cells, _, triangles, tags = lattices.cells(*block_rows(lattices.num_cells, comm.size, comm.rank))
+    start, stop = block_rows(lattices.num_cells, comm.size, comm.rank)
+    cells, _, triangles, tags = lattices.cells(start, stop)
     points = lattices.points(np.arange(*block_rows(lattices.num_points, comm.size, comm.rank)))
     try:
         used, local = np.unique(cells, return_inverse=True)
-        Mesh(lattices.points(used), local.reshape(-1, 4), "tetra", name=where)
+        Mesh(lattices.points(used), local.reshape(-1, 4), "tetra", name=f"cells {start} to {stop - 1}")
     except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
         error = f"{where}: {exc}"
     agree(comm, error)
@@ -372,7 +373,10 @@ def _from_root(build, where: str, boundaries, comm, root) -> SolidMesh:
 def _read_on_root(path: str, tag_key: str | None) -> dict:
     import meshio
 
-    m = meshio.read(path)
+    try:
+        m = meshio.read(path)
+    except SystemExit:  # meshio 5.0 exits when none of the suffix's readers takes the file
+        raise SolidMeshError("meshio cannot read it (not a mesh in the format its suffix names)") from None
     tets = [b.data[:, :4] for b in m.cells if b.type in ("tetra", "tetra10")]
     if not tets:
         raise SolidMeshError(f"no tetrahedra (cell blocks: {[b.type for b in m.cells]})")

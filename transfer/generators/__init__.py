@@ -59,7 +59,7 @@ def generate(name: str, values: dict | None = None):
     return GENERATORS[name].mesh(parameters(name, dict(values or {})))
 
 
-def lattices(name: str, values: dict | None = None):
+def lattices_of(name: str, values: dict | None = None):
     """The :class:`~transfer.generators.lattices.Lattices` of generator `name` with `values` (its mesh by
     index, nothing built), or None for a generator that only builds whole meshes."""
     module = GENERATORS[name]
