@@ -39,8 +39,7 @@ from transfer.generators.lattices import box_lattices
 
 from .elasticity import Elasticity
 from .load_steps import StaticStep, add_loads
-from .mesh import (BOX_FACES, SolidMeshError, exterior_midpoints, from_arrays, generated_mesh, lattice_mesh,
-                   read_mesh)
+from .mesh import BOX_FACES, SolidMeshError, exterior_midpoints, generated_mesh, lattice_mesh, read_mesh
 from .settings import PARTICIPANT
 
 _AXES = {"x": 0, "y": 1, "z": 2}
@@ -119,16 +118,9 @@ class SolidParticipant(Participant):
                 boundaries[name] = _face_predicate(spec, box["lower"], box["upper"])
             else:
                 boundaries[name] = _expression_predicate(spec)
-        if box is not None and not box.get("jitter"):  # each rank makes its own cells and points
-            solid = lattice_mesh(box_lattices(box["shape"], box["lower"], box["upper"]), "[geometry.solid] box",
-                                 boundaries, comm)
-        elif box is not None:  # jittered: made on rank 0
-            from transfer.generate import box_tetrahedra
-
-            mesh = box_tetrahedra(box["shape"], box["lower"], box["upper"], jitter=box["jitter"],
-                                  seed=box.get("seed", 0)) if comm.rank == 0 else None
-            solid = from_arrays(mesh.points if mesh else None, mesh.cells if mesh else None,
-                                boundaries=boundaries, comm=comm)
+        if box is not None:  # each rank makes its own cells and points
+            lattices = box_lattices(box["shape"], box["lower"], box["upper"], box.get("jitter", 0.0), box.get("seed", 0))
+            solid = lattice_mesh(lattices, "[geometry.solid] box", boundaries, comm)
         elif "generator" in config:
             g = config["generator"]
             solid = generated_mesh(g["name"], g.get("parameters"), boundaries, comm)

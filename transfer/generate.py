@@ -23,10 +23,31 @@ def _lattice(shape, lower, upper, jitter, seed):
     idx = np.stack([g.ravel() for g in index], axis=1)  # lattice index of each point
     points = np.stack([axes[d][idx[:, d]] for d in range(len(shape))], axis=1)
     if jitter:
-        move = np.random.default_rng(seed).uniform(-jitter, jitter, points.shape) * (upper - lower) / shape
-        on_face = (idx == 0) | (idx == shape)  # vertices on a boundary face stay on it
-        points = points + np.where(on_face, 0.0, move)
+        points = points + jitter_moves(idx, shape, lower, upper, jitter, seed)
     return points
+
+
+def jitter_moves(idx, shape, lower, upper, jitter: float, seed: int, rows=None) -> np.ndarray:
+    """The random moves of lattice points of index `idx` (n, d) of :func:`_lattice`: uniform in
+    +-`jitter` times the spacing, zero on the boundary faces. ``rows``: the points' numbers (x
+    fastest), to draw only their rows of the whole lattice's random array (by advancing the
+    generator: the same values as drawing every row); default all points in order."""
+    shape, lower, upper = np.asarray(shape), np.asarray(lower, float), np.asarray(upper, float)
+    d = len(shape)
+    if rows is None:
+        draws = np.random.default_rng(seed).uniform(-jitter, jitter, (len(idx), d))
+    else:
+        rows = np.asarray(rows, np.int64)
+        order = np.argsort(rows, kind="stable")
+        ordered = rows[order]
+        starts = np.flatnonzero(np.diff(ordered, prepend=-2) != 1)  # runs of consecutive rows
+        draws = np.empty((len(rows), d))
+        for first, last in zip(starts, np.append(starts[1:], len(rows))):
+            generator = np.random.PCG64(seed)  # np.random.default_rng's bit generator
+            generator.advance(d * int(ordered[first]))  # one 64-bit draw per uniform double
+            draws[order[first:last]] = np.random.Generator(generator).uniform(-jitter, jitter, (last - first, d))
+    on_face = (idx == 0) | (idx == shape)  # vertices on a boundary face stay on it
+    return np.where(on_face, 0.0, draws * (upper - lower) / shape)
 
 
 def box_hexahedra(shape, lower=(0, 0, 0), upper=(1, 1, 1), jitter=0.0, seed=0, name="box") -> Mesh:

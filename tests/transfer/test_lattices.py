@@ -4,6 +4,7 @@ blocks, each made alone, joins to the whole mesh exactly (what the solid's ranks
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from transfer.generate import box_tetrahedra
 from transfer.generators import generate, lattices_of
@@ -36,7 +37,13 @@ def test_blocks_of_a_generator_join_to_its_mesh():
     assert lattices_of("hertz", {}) is None  # gmsh: built whole only
 
 
-def test_box_lattices_are_the_unjittered_box():
-    box = box_tetrahedra((3, 4, 2), (0, -1, 2), (1, 1, 3))
-    points, cells, faces, _ = box_lattices((3, 4, 2), (0, -1, 2), (1, 1, 3)).arrays()
+@pytest.mark.parametrize("jitter", [0.0, 0.2])
+def test_box_lattices_are_the_box(jitter):
+    """Jittered too: each block of points draws its rows of the whole box's random moves."""
+    box = box_tetrahedra((3, 4, 2), (0, -1, 2), (1, 1, 3), jitter=jitter, seed=3)
+    lattices = box_lattices((3, 4, 2), (0, -1, 2), (1, 1, 3), jitter, 3)
+    points, cells, faces, _ = lattices.arrays()
     assert np.array_equal(points, box.points) and np.array_equal(cells, box.cells) and faces == {}
+    ids = np.array([50, 7, 8, 9, 21, 0, 59])  # runs of consecutive rows, unordered
+    assert np.array_equal(lattices.points(ids), box.points[ids])
+    assert jitter == 0 or not np.array_equal(points, box_tetrahedra((3, 4, 2), (0, -1, 2), (1, 1, 3)).points)

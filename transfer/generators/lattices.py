@@ -12,11 +12,12 @@ holds). A generator that describes its mesh so defines ``lattices(parameters)``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 
+from ..generate import jitter_moves
 from ..mesh import lattice_tetrahedra
 
 #: the faces of a tet opposite vertex 0, 1, 2, 3, ordered so their normal points out of a positive tet
@@ -133,10 +134,25 @@ class Lattices:
         return self.points(np.arange(self.num_points)), cells, faces, tags
 
 
-def box_lattices(shape, lower, upper) -> Lattices:
+def axes_lattice(xs, ys, zs, tag: int = 0) -> Lattice:
+    """The lattice with nodes (xs[i], ys[j], zs[k]) (the points of
+    :func:`transfer.generators.lattice.box_arrays`), no named face."""
+    xs, ys, zs = (np.asarray(a, float) for a in (xs, ys, zs))
+    return Lattice((len(xs) - 1, len(ys) - 1, len(zs) - 1), lambda i, j, k: np.column_stack([xs[i], ys[j], zs[k]]),
+                   tag=tag)
+
+
+def box_lattices(shape, lower, upper, jitter: float = 0.0, seed: int = 0) -> Lattices:
     """The tet lattice of a box, ``shape`` = (nx, ny, nz) hexahedra between the corners ``lower``
-    and ``upper`` (the points and cells of :func:`transfer.generate.box_tetrahedra` without jitter),
-    no named face."""
-    xs, ys, zs = (np.linspace(lower[d], upper[d], int(shape[d]) + 1) for d in range(3))
-    return Lattices((Lattice(tuple(int(n) for n in shape), lambda i, j, k: np.column_stack([xs[i], ys[j], zs[k]])),),
-                    {})
+    and ``upper``, interior points moved by ``jitter`` (the points and cells of
+    :func:`transfer.generate.box_tetrahedra`), no named face."""
+    lattice = axes_lattice(*(np.linspace(lower[d], upper[d], int(shape[d]) + 1) for d in range(3)))
+    if not jitter:
+        return Lattices((lattice,), {})
+
+    def node(i, j, k):
+        rows = i + (lattice.shape[0] + 1) * (j + (lattice.shape[1] + 1) * k)
+        return lattice.node(i, j, k) + jitter_moves(np.column_stack([i, j, k]), lattice.shape, lower, upper, jitter,
+                                                    seed, rows)
+
+    return Lattices((replace(lattice, node=node),), {})

@@ -7,7 +7,8 @@ import numpy as np
 
 from . import number
 from .blocks import Block
-from .lattice import box_arrays, graded_nodes
+from .lattice import graded_nodes
+from .lattices import Lattices, axes_lattice
 
 NAME = "penny_crack"
 DESCRIPTION = "the quarter model of a penny-shaped crack, graded toward its front"
@@ -35,19 +36,27 @@ def mesh(p: dict) -> Block:
     for rho <= a + 2 h_tip (blended back to the lattice at rho = 2a): the crack
     front r = a is a row of mesh edges, refined, with no staircase.
     """
+    return Block.of(lattices(p), NAME)
+
+
+def lattices(p: dict) -> Lattices:
+    """The quarter model of :func:`mesh` by index (:mod:`.lattices`)."""
     a, growth = p["a"], p["growth"]
     h = a / 32 if p["h_tip"] is None else p["h_tip"]
     L = p["extent"] * a
     axis = np.unique(np.concatenate([graded_nodes(a, 0.0, h, 0.0, growth), graded_nodes(a, L, h, 0.0, growth)]))
     zs = graded_nodes(0.0, L, h, 0.0, growth)
     r1, r2 = a + 2.0 * h, 2.0 * a
-    points, cells = box_arrays([axis, axis, zs])
-    x, y = points[:, 0], points[:, 1]
-    rho, r = np.maximum(x, y), np.hypot(x, y)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        to_circle = np.where(r > 0, rho / r, 1.0)
-    w = np.clip((r2 - rho) / (r2 - r1), 0.0, 1.0)
-    scale = w * to_circle + (1.0 - w)
-    points[:, 0] *= scale
-    points[:, 1] *= scale
-    return Block(points, cells, {}, np.zeros(len(cells), np.int32), NAME, face_tags={}, cell_names={})
+
+    def morph(points):
+        x, y = points[:, 0], points[:, 1]
+        rho, r = np.maximum(x, y), np.hypot(x, y)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            to_circle = np.where(r > 0, rho / r, 1.0)
+        w = np.clip((r2 - rho) / (r2 - r1), 0.0, 1.0)
+        scale = w * to_circle + (1.0 - w)
+        points[:, 0] *= scale
+        points[:, 1] *= scale
+        return points
+
+    return Lattices((axes_lattice(axis, axis, zs),), {}, {}, transform=morph)

@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from transfer.generate import box_tetrahedra
-
 from . import number
-from .blocks import BLOCK_TAGS, Block
+from .blocks import BLOCK_TAGS, Block, lattice_block
+from .lattices import Lattices, axes_lattice
 
 NAME = "plates"
 DESCRIPTION = "two flat blocks with a gap of aperture w, and the 2D fluid grid made for them"
@@ -54,9 +53,13 @@ def cells(p: dict) -> int:
     return 2 * 6 * 3 * 2 * 1
 
 
+def lattices(p: dict) -> Lattices:
+    """Both blocks by index (:mod:`.lattices`), 3 x 2 x 1 hexahedra each."""
+    return Lattices(tuple(axes_lattice(*(np.linspace(lo[d], hi[d], n + 1) for d, n in enumerate((3, 2, 1))), tag=tag)
+                          for (lo, hi), tag in zip(blocks(p), (BLOCK_TAGS["lower_block"], BLOCK_TAGS["upper_block"]))),
+                    {}, BLOCK_TAGS)
+
+
 def mesh(p: dict) -> Block:
     """Cells tagged ``lower_block`` and ``upper_block``; no named faces."""
-    lower, upper = (box_tetrahedra((3, 2, 1), lo, hi) for lo, hi in blocks(p))
-    tags = np.repeat([BLOCK_TAGS["lower_block"], BLOCK_TAGS["upper_block"]], [lower.num_cells, upper.num_cells])
-    return Block(np.vstack([lower.points, upper.points]), np.vstack([lower.cells, upper.cells + lower.num_points]),
-                 {}, tags, NAME, face_tags={})
+    return lattice_block(lattices(p), NAME)

@@ -1,11 +1,14 @@
 """A rock block with a flat top and a self-affine rough bottom face (cases/rock_obstacle,
-paper figure 15): the upper block of :func:`~transfer.generators.blocks.fracture_blocks` on a
+paper figure 15): the upper block of :func:`~transfer.generators.blocks.fracture_lattices` on a
 non-periodic :func:`~transfer.generators.surfaces.rough_surface` of zero mean."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from . import number, numbers
-from .blocks import FACE_TAGS, Block, fracture_blocks
+from .blocks import BLOCK_TAGS, FACE_TAGS, Block, fracture_lattices, lattice_block
+from .lattices import Lattices
 from .surfaces import rough_surface
 
 NAME = "rough_block"
@@ -28,11 +31,16 @@ def cells(p: dict) -> int:
     return 6 * nx * ny * nz
 
 
-def mesh(p: dict) -> Block:
-    """Faces ``bottom`` (the rough face), ``top`` and the sides; ``info``: its lowest point."""
+def lattices(p: dict) -> Lattices:
+    """The block by index (:mod:`.lattices`): the upper block of a fracture, its face ``bottom``."""
     (nx, ny, nz), (lx, ly, height) = p["cells"], p["size"]
     rough = rough_surface((nx, ny), (lx, ly), p["hurst"], p["rms"], p["seed"], periodic=False)
-    upper = fracture_blocks((nx, ny, nz), (lx, ly), height, (rough - p["rms"], rough)).upper
-    faces = {"bottom" if n == "fracture_upper" else n: f for n, f in upper.faces.items()}
-    return Block(upper.points, upper.cells, faces, upper.cell_tags, NAME,
-                 info={"lowest_point": float(upper.points[:, 2].min())})
+    upper = fracture_lattices((nx, ny, nz), (lx, ly), height, (rough - p["rms"], rough))[1]
+    faces = tuple("bottom" if n == "fracture_upper" else n for n in upper.faces)
+    return Lattices((replace(upper, faces=faces),), FACE_TAGS, BLOCK_TAGS)
+
+
+def mesh(p: dict) -> Block:
+    """Faces ``bottom`` (the rough face), ``top`` and the sides; ``info``: its lowest point."""
+    block = lattice_block(lattices(p), NAME)
+    return replace(block, info={"lowest_point": float(block.points[:, 2].min())})
