@@ -46,6 +46,9 @@ from transfer.mesh import Mesh
 
 Predicate = Callable[[np.ndarray], np.ndarray]
 
+#: cells of a generator's block validated at once (:func:`lattice_mesh`)
+VALIDATE_CELLS = 1 << 15
+
 
 class SolidMeshError(ValueError):
     """A mesh that cannot be used by the solid (no tetrahedra, bad tags, ...)."""
@@ -346,8 +349,10 @@ def lattice_mesh(lattices, where: str, boundaries: Mapping[str, Predicate] | Non
     cells, _, triangles, tags = lattices.cells(start, stop)
     points = lattices.points(np.arange(*block_rows(lattices.num_points, comm.size, comm.rank)))
     try:
-        used, local = np.unique(cells, return_inverse=True)
-        Mesh(lattices.points(used), local.reshape(-1, 4), "tetra", name=f"cells {start} to {stop - 1}")
+        for first in range(start, stop, VALIDATE_CELLS):  # a bounded batch: the checks' temporaries stay small
+            last = min(first + VALIDATE_CELLS, stop)
+            used, local = np.unique(cells[first - start:last - start], return_inverse=True)
+            Mesh(lattices.points(used), local.reshape(-1, 4), "tetra", name=f"cells {first} to {last - 1}")
     except Exception as exc:  # noqa: BLE001 - re-raised on every rank below
         error = f"{where}: {exc}"
     agree(comm, error)

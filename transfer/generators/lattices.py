@@ -56,17 +56,28 @@ class Lattice:
         return np.asarray(self.node(i, j, k), np.float64).reshape(-1, 3)
 
     def boundary(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The outward triangles of `cells` (lattice tets) on a face of the lattice, and the face
-        (0 to 5) each lies on. A tet face whose three vertices lie on one face of the lattice (in
-        index space) is on the boundary, in one tet only: no search for unmatched faces is needed."""
-        tris = cells[:, TET_FACES].reshape(-1, 3)
-        lat = self.index(tris.ravel()).reshape(-1, 3, 3)  # (f, 3 vertices, 3 axes)
+        """The outward triangles of `cells` (lattice tets) on a face of the lattice, in cell order,
+        and the face (0 to 5) each lies on. A tet face whose three vertices lie on one face of the
+        lattice (in index space) is on the boundary, in one tet only: no search for unmatched faces
+        is needed. Temporaries of a few bytes per cell: the faces are tested one vertex set at a time."""
+        used, local = np.unique(cells, return_inverse=True)
+        lat = self.index(used)  # lattice index of each vertex the cells use
+        on_face = ((lat == 0) | (lat == np.asarray(self.shape))).any(axis=1)
+        local = local.reshape(-1, 4)
+        keys, tris = [], []
+        for f, vertices in enumerate(TET_FACES):
+            hit = np.flatnonzero(on_face[local[:, vertices]].all(axis=1))  # candidates: every vertex on a face
+            keys.append(4 * hit + f)
+            tris.append(local[hit][:, vertices])
+        order = np.argsort(np.concatenate(keys), kind="stable")  # cell by cell, face by face
+        tris = np.concatenate(tris)[order]
+        corners = lat[tris]  # (f, 3 vertices, 3 axes)
         face = np.full(len(tris), -1, np.int64)
         for axis in range(3):
             for side, value in enumerate((0, self.shape[axis])):
-                face[np.all(lat[:, :, axis] == value, axis=1)] = 2 * axis + side
+                face[np.all(corners[:, :, axis] == value, axis=1)] = 2 * axis + side
         on = face >= 0
-        return tris[on], face[on]
+        return used[tris[on]], face[on]
 
 
 @dataclass(frozen=True)
