@@ -3,9 +3,11 @@ building the ``rough_fracture`` mesh of bench/ranks.py's large scene (40 x 20 x 
 and finer ones, three ways:
 
 * ``blocks``: each rank makes its own block of cells and points (solid_fenicsx.mesh.generated_mesh);
-* ``scattered``: rank 0 makes the whole mesh and scatters blocks (solid_fenicsx.mesh.from_arrays, what
-  a mesh file gets);
-* ``root``: rank 0 makes the whole mesh and hands it to dolfinx (the path before blocks).
+* ``file``: rank 0 reads it from a gmsh file (meshio, written beforehand by this script) and
+  scatters blocks (solid_fenicsx.mesh.read_mesh, what small_fracture's solid.msh gets);
+* ``scattered``: rank 0 makes the whole mesh and scatters blocks (solid_fenicsx.mesh.from_arrays);
+* ``root``: rank 0 makes the whole mesh, validates it and hands it to dolfinx (the path before
+  blocks).
 
 Each (way, shape, N) is its own ``mpirun -n N`` (a fresh process per rank). Docs: docs/scaling.md
 "A coupled run on several ranks: what is gathered where".
@@ -20,29 +22,38 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from transfer.generators import generate  # noqa: E402
 PARAMETERS = {"size": [0.05, 0.025], "height": 0.005, "aperture": 0.001, "min_aperture": 0.0005, "rms": 0.00015,
               "hurst": 0.8, "mismatch_length": 0.0125, "seed": 4}
-WAYS = ("blocks", "scattered", "root")
+WAYS = ("blocks", "file", "scattered", "root")
 
 
-def rank_main(way: str, shape: list) -> None:
-    """One rank: build the mesh `way`, print this rank's peak memory [MB] from rank 0 as JSON."""
+def rank_main(way: str, shape: list, path: str) -> None:
+    """One rank: build the mesh `way` (``file``: read `path`), print every rank's peak memory [MB]
+    from rank 0 as JSON."""
     import numpy as np
     from mpi4py import MPI
 
-    from solid_fenicsx.mesh import from_arrays, from_blocks, generated_mesh
+    from solid_fenicsx.mesh import _prepare, from_arrays, from_blocks, generated_mesh, read_mesh
     from transfer.generators import generate
 
     comm, p = MPI.COMM_WORLD, {**PARAMETERS, "shape": shape}
     if way == "blocks":
         solid = generated_mesh("rough_fracture", p, comm=comm)
+    elif way == "file":
+        solid = read_mesh(path, comm=comm)
     else:
         block = generate("rough_fracture", p) if comm.rank == 0 else None
         triangles, tags = block.tagged_triangles() if block else (None, None)
         args = (block.points, block.cells, triangles, tags) if block else (None,) * 4
+        if way == "root" and block:  # validated and compacted on rank 0 as before
+            args = _prepare(*args)
         if way == "scattered":
             solid = from_arrays(*args, tag_names=block.face_tags if block else None, comm=comm)
         else:
@@ -66,13 +77,17 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))
     runs = []
-    for shape in args.shapes:
-        for ranks in args.ranks:
-            for way in args.ways:
-                cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, __file__, "--rank", way, shape]
-                out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True).stdout
-                runs.append(json.loads(out.strip().splitlines()[-1]))
-                print(runs[-1], flush=True)
+    with tempfile.TemporaryDirectory(prefix="varcouple-solid-mesh-") as tmp:
+        for shape in args.shapes:
+            path = Path(tmp) / f"rough_{shape.replace(',', 'x')}.msh"
+            generate("rough_fracture", {**PARAMETERS, "shape": [int(n) for n in shape.split(",")]}).write(path)
+            for ranks in args.ranks:
+                for way in args.ways:
+                    cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", sys.executable, __file__, "--rank", way, shape,
+                           str(path)]
+                    out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True).stdout
+                    runs.append(json.loads(out.strip().splitlines()[-1]))
+                    print(runs[-1], flush=True)
     args.output.write_text(json.dumps({"runs": runs}, indent=1) + "\n")
     print(f"wrote {args.output}")
     return 0
@@ -80,6 +95,6 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--rank"]:
-        rank_main(sys.argv[2], [int(n) for n in sys.argv[3].split(",")])
+        rank_main(sys.argv[2], [int(n) for n in sys.argv[3].split(",")], sys.argv[4])
     else:
         sys.exit(main())

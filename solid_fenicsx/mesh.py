@@ -46,7 +46,7 @@ from transfer.mesh import Mesh
 
 Predicate = Callable[[np.ndarray], np.ndarray]
 
-#: cells of a generator's block validated at once (:func:`lattice_mesh`)
+#: cells validated at once (:func:`lattice_mesh`, :func:`from_arrays`)
 VALIDATE_CELLS = 1 << 15
 
 
@@ -129,11 +129,14 @@ def _check_arrays(points, tets):
         raise SolidMeshError("cell vertex index out of range")
     if not np.isfinite(points).all():
         raise SolidMeshError("points contain NaN or infinite coordinates")
-    p = points[tets]
-    vol = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
-    scale = np.max(np.linalg.norm(p - p[:, :1], axis=2), axis=1) ** 3
-    if (np.abs(vol) <= 1e-14 * scale).any():
-        raise SolidMeshError(f"{int((np.abs(vol) <= 1e-14 * scale).sum())} degenerate tetrahedra")
+    degenerate = 0
+    for first in range(0, len(tets), VALIDATE_CELLS):  # a bounded batch: the checks' temporaries stay small
+        p = points[tets[first:first + VALIDATE_CELLS]]
+        vol = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+        scale = np.max(np.linalg.norm(p - p[:, :1], axis=2), axis=1) ** 3
+        degenerate += int((np.abs(vol) <= 1e-14 * scale).sum())
+    if degenerate:
+        raise SolidMeshError(f"{degenerate} degenerate tetrahedra")
 
 
 def _prepare(points, cells, triangles, triangle_tags):
