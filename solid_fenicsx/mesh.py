@@ -22,10 +22,10 @@ in input order, are the "input numbering" that :mod:`solid_fenicsx.vertex_io`
 gathers fields in.
 
 No rank hands the whole mesh to dolfinx: every rank gives ``create_mesh`` one block
-of cells and one block of points (:func:`from_blocks`). A generator that describes its
-mesh by index ranges (:class:`transfer.generators.lattice.Lattices`) makes only each
-rank's blocks on that rank; a file, or any other generator, is read or made on the root
-rank, which keeps the arrays only until it has scattered them (:func:`from_arrays`).
+of cells and one block of points (:func:`from_blocks`). A box, or a generator that
+describes its mesh by index (:class:`transfer.generators.lattices.Lattices`), is made
+block by block, each rank only its own (:func:`lattice_mesh`); a file, or any other
+generator, is read or made on the root rank, which scatters the blocks (:func:`from_arrays`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from mpi4py import MPI
 
 import dolfinx
 import dolfinx.cpp
-from transfer.generators.lattice import box_arrays
+from transfer.generators.lattices import Lattices, axes_lattice
 from transfer.grid import BOX_FACES
 from transfer.mesh import Mesh
 
@@ -416,19 +416,22 @@ def _read_on_root(path: str, tag_key: str | None) -> dict:
 def box_mesh(lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), shape=(4, 4, 4), axes=None,
              boundaries: Mapping[str, Predicate] | None = None,
              transform: Callable[[np.ndarray], np.ndarray] | None = None,
-             comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
+             comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
     """A structured tet mesh of a box, faces named ``xmin, xmax, ymin, ymax, zmin, zmax``.
 
     Either ``lower``/``upper``/``shape`` (uniform), or ``axes`` = three increasing
     arrays of node coordinates (e.g. from :func:`transfer.generators.lattice.graded_nodes`, to refine toward
     a crack). ``boundaries`` add named predicates that override the face names
     on the facets they select (e.g. a crack disk on ``zmin``). ``transform``
-    maps the (n, 3) lattice points before the mesh is built (e.g. to fit a
-    curved crack front); it must keep each box face in its plane.
+    maps (n, 3) lattice points, each alone (every rank maps only the points it makes:
+    :func:`lattice_mesh`), before the mesh is built (e.g. to fit a curved crack front);
+    it must keep each box face in its plane.
     """
     if axes is None:
         axes = [np.linspace(lower[d], upper[d], int(shape[d]) + 1) for d in range(3)]
     axes = [np.unique(np.asarray(a, float)) for a in axes]
+    if any(len(a) < 2 for a in axes):
+        raise SolidMeshError("box node coordinates must be increasing, at least two per axis")
     lo = [a[0] for a in axes]
     hi = [a[-1] for a in axes]
     tol = [1e-10 * (h - l) for l, h in zip(lo, hi)]
@@ -437,7 +440,4 @@ def box_mesh(lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), shape=(4, 4, 4), axes
         faces[BOX_FACES[2 * d]] = (lambda x, d=d: np.abs(x[d] - lo[d]) <= tol[d])
         faces[BOX_FACES[2 * d + 1]] = (lambda x, d=d: np.abs(x[d] - hi[d]) <= tol[d])
     faces.update(boundaries or {})
-    points, cells = box_arrays(axes) if comm.rank == root else (None, None)
-    if transform is not None and comm.rank == root:
-        points = np.asarray(transform(points), dtype=np.float64)
-    return from_arrays(points, cells, boundaries=faces, comm=comm, root=root)
+    return lattice_mesh(Lattices((axes_lattice(*axes),), {}, transform=transform), "box", faces, comm)
