@@ -45,12 +45,12 @@ needs_mpi_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil
                                     reason="OpenFOAM (simpleFoam, decomposePar) or mpirun not installed")
 
 def run(tmp_path, solid_ranks: int, fluid_ranks: int, steps: int = 2, fluid: str = "openfoam",
-        fluid_tolerance: str = "1e-12"):
+        fluid_tolerance: str = "1e-12", scene: dict | None = None, label: str = ""):
     """small_fracture on these ranks, its solid solved by LU and simpleFoam stopped at
-    `fluid_tolerance` (module docstring); its output directory."""
-    name = f"n{solid_ranks}m{fluid_ranks}{fluid}{fluid_tolerance}"
+    `fluid_tolerance` (module docstring), with `scene`'s text replacements; its output directory."""
+    name = f"n{solid_ranks}m{fluid_ranks}{fluid}{fluid_tolerance}{label}"
     fluid_line = f'participant = "{fluid}"' + (f"\nranks = {fluid_ranks}" if fluid_ranks > 1 else "")
-    case = copy_case(CASE, tmp_path / name, {
+    case = copy_case(CASE, tmp_path / name, {**(scene or {}),
         'participant = "solid_fenicsx"': f'participant = "solid_fenicsx"\nranks = {solid_ranks}\nlinear_solver = "lu"',
         'participant = "openfoam"': fluid_line, "tolerance = 1e-7 ": f"tolerance = {fluid_tolerance} ",
         "steps = 2": f"steps = {steps}"})
@@ -100,6 +100,22 @@ def test_solid_ranks_with_the_chorin_fluid(tmp_path):
     found = assert_same(run(tmp_path, 1, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7"),
                         run(tmp_path, 2, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7"), "chorin, solid 2 ranks")
     assert "fluid_0000.vtu cell:velocity" in found and "solid_0000.vtu point:displacement" in found
+
+
+#: small_fracture's solid made by its generator instead of read from solid.msh (make_mesh.py's parameters)
+GENERATED = {'mesh = "solid.msh"              # two blocks, 4800 tetrahedra (make_mesh.py)\n'
+             "boundaries = { bottom = 1, top = 2, fracture_lower = 3, fracture_upper = 4 }":
+             'generator = "rough_fracture"\nparameters = { shape = [20, 10, 2], size = [0.05, 0.025], height = 0.005, '
+             "aperture = 0.001, min_aperture = 0.0005, rms = 0.00015, hurst = 0.8, mismatch_length = 0.0125, seed = 4 }"}
+
+
+def test_generated_solid_on_two_ranks_is_the_mesh_file_on_one(tmp_path):
+    """The solid's mesh made block by block on 2 ranks (rough_fracture's lattices: no rank makes
+    the whole mesh) gives the run of its file solid.msh read on one rank (Chorin fluid, one step)."""
+    found = assert_same(run(tmp_path, 1, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7"),
+                        run(tmp_path, 2, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7", scene=GENERATED,
+                            label="generated"), "generated solid on 2 ranks")
+    assert "solid_0000.vtu point:displacement" in found
 
 
 @pytest.mark.slow
