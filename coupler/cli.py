@@ -243,8 +243,13 @@ def run(args: argparse.Namespace) -> int:
     from coupler.errors import EXIT_CODES
     from coupler.run.execute import execute
 
+    from coupler.run.execute import coupler_ranks, job_size, relaunch
+
     start = time.perf_counter()
     scene = scenes.load(args.case, output=args.output)
+    ranks = coupler_ranks(scene)
+    if ranks > 1 and job_size() == 1:  # [coupling] ranks = P: this command again on P ranks
+        return relaunch(["run", args.case] + (["--output", args.output] if args.output is not None else []), ranks)
     origin = "--output" if args.output is not None else f"{scene.path}: [output] directory"
     summary = execute(scene, origin, log=_log)
     if not summary.get("check", {}).get("passed", True):
@@ -255,7 +260,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _log(line: str) -> None:
-    print(line, flush=True)
+    if not _mpi_job()[0]:  # rank 0 of a coupler on several ranks speaks for all
+        print(line, flush=True)
 
 
 # -- varcouple study -------------------------------------------------------------
@@ -317,6 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def error(message: str) -> None:
+    if _mpi_job()[0]:  # every rank of an MPI job finds the same error: rank 0 says it
+        return
     print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 

@@ -172,6 +172,15 @@ class DistributedTransfer:
     def covered_fraction(self) -> float:
         return self.num_covered / max(self.num_target_dofs, 1)
 
+    def diagonal(self) -> np.ndarray:
+        """The diagonal of D at this rank's target dofs (the overlap volumes of a P0/Q0 target)."""
+        return self._target.get(self.D.getDiagonal())
+
+    def row_sums(self) -> np.ndarray:
+        """The row sums of D (the lumped mass over the overlap) of the dofs this rank owns in
+        PETSc's block split."""
+        return self._mass.array.copy()
+
     def matrix(self) -> PETSc.Mat:
         """T = D^{-1} B (pseudo-L2 only, as in the serial :meth:`transfer.Transfer.matrix`)."""
         if self.T is None:

@@ -48,24 +48,8 @@ class WettedInterface:
                                f"(a folded surface)")
         self.normals = normals / length[:, None]
         self.points = points  # the wall: the interface vertices where the solid is now
-        # half the cell's extent along the normal, scaled so that it is half the cell diagonal on
-        # a cubic grid: 0.5 sqrt(3) |(n_i h_i)|; on anisotropic grids (thin cells across a fracture)
-        # a vertical normal moves by 0.87 h_z, not by half the long diagonal
-        h = np.asarray(G.spacing, float)
-        # (times `depth`: deeper surfaces sample the near-wall velocity profile, coupler/viscous.py)
-        self.offsets = depth * 0.5 * np.sqrt(3.0) * np.linalg.norm(self.normals * h[None, :], axis=1)
+        moved, self.offsets = sampling_points(points, self.normals, np.asarray(S.points)[self.vertices], G, depth)
         self.offset = float(self.offsets.max())
-        moved = points + self.offsets[:, None] * self.normals
-        # a vertex on a face of the grid's box (e.g. a fracture face meeting the inlet) stays on it
-        # (a rough face's normal would tilt it out by a few micrometres): clamp the coordinates
-        # that lie on the box's faces; any other vertex moved outside is an error below
-        lo, hi = np.asarray(G.origin, float), np.asarray(G.origin, float) + h * np.asarray(G.shape)
-        tol = 1e-9 * h
-        ref = np.asarray(S.points)[self.vertices]  # undeformed: a face vertex stays on the face when it moves
-        on_face = (np.abs(ref - lo) <= tol) | (np.abs(ref - hi) <= tol)
-        # ... and so does an inside vertex moved out along an axis its normal is nearly tangent to
-        on_face |= (points >= lo - tol) & (points <= hi + tol) & (np.abs(self.normals) < 0.5)
-        moved = np.where(on_face, np.clip(moved, lo, hi), moved)
         self.surface = Mesh(moved, self.triangles, "triangle", name="interface")
         uncovered, first = len(self.vertices), ""
         try:
@@ -109,6 +93,28 @@ class WettedInterface:
         return {"method": self.method, "vertices": int(self.size), "triangles": int(self.num_triangles),
                 "offset": self.offset, "sampled_area": self.area,
                 "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+
+
+def sampling_points(points, normals, reference, G: StructuredGrid, depth: float = 1.0):
+    """(moved points, offsets): the interface vertices at `points` moved along their unit `normals`
+    into the fluid by `depth` times half a cell diagonal (:class:`WettedInterface`); `reference`:
+    the undeformed vertices (a vertex on a face of the grid's box stays on it)."""
+    # half the cell's extent along the normal, scaled so that it is half the cell diagonal on
+    # a cubic grid: 0.5 sqrt(3) |(n_i h_i)|; on anisotropic grids (thin cells across a fracture)
+    # a vertical normal moves by 0.87 h_z, not by half the long diagonal
+    h = np.asarray(G.spacing, float)
+    # (times `depth`: deeper surfaces sample the near-wall velocity profile, coupler/viscous.py)
+    offsets = depth * 0.5 * np.sqrt(3.0) * np.linalg.norm(normals * h[None, :], axis=1)
+    moved = points + offsets[:, None] * normals
+    # a vertex on a face of the grid's box (e.g. a fracture face meeting the inlet) stays on it
+    # (a rough face's normal would tilt it out by a few micrometres): clamp the coordinates
+    # that lie on the box's faces; any other vertex moved outside is an error of the caller
+    lo, hi = np.asarray(G.origin, float), np.asarray(G.origin, float) + h * np.asarray(G.shape)
+    tol = 1e-9 * h
+    on_face = (np.abs(reference - lo) <= tol) | (np.abs(reference - hi) <= tol)
+    # ... and so does an inside vertex moved out along an axis its normal is nearly tangent to
+    on_face |= (points >= lo - tol) & (points <= hi + tol) & (np.abs(normals) < 0.5)
+    return np.where(on_face, np.clip(moved, lo, hi), moved), offsets
 
 
 class VolumeInterface:

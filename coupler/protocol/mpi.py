@@ -36,7 +36,7 @@ def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] 
     comma-separated ``VARCOUPLE_MPI_INTERFACES`` of ``env``. Named interfaces replace the
     transport settings ``env`` has; without them (this host only) every setting ``env``
     already has wins."""
-    out = dict(os.environ if env is None else env)
+    out = outside_job(os.environ if env is None else env)
     if interfaces is None:
         interfaces = out.get(INTERFACES_VAR, "").split(",")
     interfaces = [i.strip() for i in interfaces if i.strip()]
@@ -60,6 +60,19 @@ def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] 
     out.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
     out.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     return out
+
+
+#: what mpirun tells the processes of its job (Open MPI, PMIx): a process started by one of them
+#: (a participant of a coupler on several ranks) must not inherit it, or it would join that job
+JOB_VARIABLES = ("OMPI_", "PMIX_", "OPAL_", "ORTE_", "HWLOC_")
+
+
+def outside_job(env: Mapping[str, str]) -> dict[str, str]:
+    """A copy of `env` without the variables of the MPI job it runs in, if any (then every
+    ``OMPI_*`` goes: mpirun sets its own ``OMPI_MCA_*`` among them)."""
+    if "OMPI_COMM_WORLD_SIZE" not in env and "PMIX_RANK" not in env:
+        return dict(env)
+    return {k: v for k, v in env.items() if not k.startswith(JOB_VARIABLES)}
 
 
 def loopback_library() -> str | None:

@@ -74,6 +74,8 @@ class ParticipantClient:
         #: ranks of the participant (its parts; from announce) and the layout of its fields (from geometry)
         self.parts: int | None = None
         self.layout: Layout | None = None
+        #: on a coupler of several ranks: the participant's ranks this coupler rank talks to (None: all)
+        self.mine: list[int] | None = None
         self._ranks_alive: set[int] = set()
         self._ranks_lost: set[int] = set()
         self._sub = session.liveliness().declare_subscriber(
@@ -155,10 +157,13 @@ class ParticipantClient:
         part = self.exchange(verb, header, [fields], timeout)[0]
         return part.header, part.fields
 
-    def exchange(self, verb: str, header: Mapping | None, parts: list, timeout: float | None = None) -> list[Part]:
+    def exchange(self, verb: str, header: Mapping | None, parts: list, timeout: float | None = None,
+                 before_root: Callable[[], None] | None = None) -> list[Part]:
         """Send ``verb`` with ``header`` to each rank, with ``parts[r]`` (rank r's fields): rank 0 on
         the verb's key, rank r >= 1 on its part key (docs/protocol.md, "Parts"), those first; return
-        every rank's checked reply (see :meth:`request` for the errors; a rank's names it and its key)."""
+        every rank's checked reply (see :meth:`request` for the errors; a rank's names it and its key).
+        On a coupler of several ranks only the ranks :attr:`mine` are sent to and answer here, and
+        `before_root` (a barrier of the coupler's ranks) runs after their queries, before rank 0's."""
         if verb not in VERBS:
             raise ProtocolError(f"unknown verb {verb!r}")
         timeout = self.timeout if timeout is None else timeout
@@ -168,17 +173,23 @@ class ParticipantClient:
             if reason:
                 raise ParticipantDied(self.name, reason)
             self.wait_alive(timeout)
-        self._wait_ranks(len(parts), timeout)
+        ranks = [r for r in range(len(parts)) if self.mine is None or r in self.mine]
+        self._wait_ranks([r for r in ranks if r], timeout)
         req = {**(header or {}), "run_id": self.run_id, "participant": self.name, "verb": verb}
-        payloads = [encode(req, f) for f in parts]
-        calls = [self._query(key(self.run_id, self.name, verb) if r == 0 else part_key(self.run_id, self.name, verb, r),
-                             payloads[r], timeout) for r in reversed(range(len(parts)))][::-1]
+        payloads = {r: encode(req, parts[r]) for r in ranks}
+        calls = {r: self._query(part_key(self.run_id, self.name, verb, r), payloads[r], timeout)
+                 for r in reversed(ranks) if r}
+        if before_root is not None:
+            before_root()
+        if 0 in ranks:  # rank 0's request last: it broadcasts the verb to the others
+            calls[0] = self._query(key(self.run_id, self.name, verb), payloads[0], timeout)
+        calls = dict(sorted(calls.items()))
         deadline = time.monotonic() + timeout
         try:
-            while not all(c.done.is_set() for c in calls):
-                if next(c for c in calls if not c.done.is_set()).done.wait(self.poll):
+            while not all(c.done.is_set() for c in calls.values()):
+                if next(c for c in calls.values() if not c.done.is_set()).done.wait(self.poll):
                     continue
-                for r, c in enumerate(calls):  # a rank that died first is named (mpirun then ends the others)
+                for r, c in calls.items():  # a rank that died first is named (mpirun then ends the others)
                     if r and ((c.done.is_set() and not c.replies) or r in self._ranks_lost):
                         raise ParticipantDied(self.name, self._rank_gone(r, c.key))
                 if not self._alive:
@@ -188,25 +199,26 @@ class ParticipantClient:
                 if time.monotonic() > deadline:
                     raise ParticipantTimeout(self.name, verb, timeout)
         except BaseException:
-            for c in calls:
+            for c in calls.values():
                 c.cancel.cancel()
             raise
-        out = [self._checked(r, c, req, verb) for r, c in enumerate(calls)]
+        out = [self._checked(r, c, req, verb) for r, c in calls.items()]
+        first = out[0].header if out and out[0].rank == 0 else {}
         st = self.stats
         st["calls"] += 1
         st["seconds"] += time.perf_counter() - t0
-        st["remote_seconds"] += float(out[0].header.get("elapsed", 0.0))
-        st["bytes_out"] += sum(len(p) for p in payloads)
-        st["bytes_in"] += sum(c.nbytes for c in calls)
-        st["shm_out"] += bool(out[0].header.get("rx_shm"))
-        st["shm_in"] += sum(c.shm for c in calls)
+        st["remote_seconds"] += float(first.get("elapsed", 0.0))
+        st["bytes_out"] += sum(len(p) for p in payloads.values())
+        st["bytes_in"] += sum(c.nbytes for c in calls.values())
+        st["shm_out"] += bool(first.get("rx_shm"))
+        st["shm_in"] += sum(c.shm for c in calls.values())
         return out
 
-    def _wait_ranks(self, count: int, timeout: float) -> None:
-        """Wait until the tokens of ranks 1..count-1 are seen (rank 0 declares its own after their
+    def _wait_ranks(self, ranks: list[int], timeout: float) -> None:
+        """Wait until the tokens of `ranks` (>= 1) are seen (rank 0 declares its own after their
         queryables, but each travels on its rank's session); a lost one is :meth:`_rank_gone`."""
         deadline = time.monotonic() + timeout
-        while missing := [r for r in range(1, count) if r not in self._ranks_alive]:
+        while missing := [r for r in ranks if r not in self._ranks_alive]:
             lost = [r for r in missing if r in self._ranks_lost]
             if lost:
                 raise ParticipantDied(self.name, self._rank_gone(lost[0], part_key(self.run_id, self.name, "*", lost[0])))
@@ -356,7 +368,7 @@ class CouplerSession:
 
     def __init__(self, run_id: str | None = None, *, mode: str = "peer", listen_host: str | None = "127.0.0.1",
                  port: int | None = None, connect: Iterable[str] = (), advertise: str | None = None,
-                 shared_memory: bool = True, **kwargs):
+                 shared_memory: bool = True, token: bool = True, **kwargs):
         self.run_id = check_name("run id", run_id or new_run_id())
         connect = list(connect)
         if listen_host is not None and mode != "client":
@@ -371,7 +383,8 @@ class CouplerSession:
         self.shared_memory = shared_memory
         if shared_memory:
             warm_up_shm()  # the first large request must not pay for the pool
-        self._token = self.session.liveliness().declare_token(alive_key(self.run_id, COUPLER))
+        # the participants watch this token: a coupler rank other than 0 declares none (token=False)
+        self._token = self.session.liveliness().declare_token(alive_key(self.run_id, COUPLER)) if token else None
         self.clients: dict[str, ParticipantClient] = {}
 
     def client(self, name: str, timeout: float = DEFAULT_TIMEOUT, **kwargs) -> ParticipantClient:
@@ -384,7 +397,8 @@ class CouplerSession:
         for c in self.clients.values():
             c.close()
         try:
-            self._token.undeclare()
+            if self._token is not None:
+                self._token.undeclare()
         except Exception:  # noqa: BLE001
             pass
         try:

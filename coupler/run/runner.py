@@ -104,9 +104,15 @@ def _as_arrays(fields: dict) -> dict:
     return {k: np.asarray(f.data if isinstance(f, Field) else f) for k, f in fields.items()}
 
 
-def run(scene, log=print, progress: bool | None = True, run_id: str | None = None) -> dict:
-    """Run the coupled `scene`; return its summary (also in ``summary.json``)."""
+def run(scene, log=print, progress: bool | None = True, run_id: str | None = None, comm=None,
+        run_class=None) -> dict:
+    """Run the coupled `scene`; return its summary (also in ``summary.json``). On a coupler of
+    several ranks (`comm`, `run_class` :class:`coupler.run.ranks.RanksRun`) every rank calls it;
+    rank 0 writes the summary and the report."""
+    run_class = run_class or Run
+    root = comm is None or comm.rank == 0
     plan = make_plan(scene)
+    run_class.admit(scene, plan, comm)
     log(f"memory: {check_memory(scene, estimate(scene))}")
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -118,11 +124,13 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     summary = {"case": str(scene.case_dir), "scene": str(scene.path), "description": scene.description,
                "run_id": run_id,
                **plan.as_dict(), "status": "running", "steps": [], "phases_seconds": phases.seconds}
-    write_summary(out, summary)
+    if root:
+        write_summary(out, summary)
     start = time.perf_counter()
     try:
-        with processes(scene, plan, run_id, out) as (session, launcher):
-            result = Run(scene, plan, session, launcher, out, phases, summary, log, run_id).execute(progress)
+        with run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
+            result = run_class(scene, plan, session, launcher, out, phases, summary, log, run_id,
+                               **({"comm": comm} if comm is not None else {})).execute(progress)
         summary.update(result, status="completed")
     except BaseException as exc:
         summary["status"] = run_status(exc)
@@ -130,8 +138,9 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
         raise
     finally:
         summary["wall_seconds"] = time.perf_counter() - start
-        write_summary(out, summary)
-        publish(out, summary, scene.output["pictures"], log)
+        if root:
+            write_summary(out, summary)
+            publish(out, summary, scene.output["pictures"], log)
     return summary
 
 
@@ -195,6 +204,17 @@ def served_in_process(p, run_id: str):
 
 class Run:
     """One execution of a plan (set up by :meth:`start`, stepped by :meth:`execute`)."""
+
+    #: this process writes the run's files (rank 0 of a coupler on several ranks)
+    root = True
+
+    @staticmethod
+    def admit(scene, plan: Plan, comm) -> None:
+        """SceneError for what this kind of run cannot do (one process: everything)."""
+
+    @staticmethod
+    def processes(scene, plan: Plan, run_id: str, logs, comm=None):
+        return processes(scene, plan, run_id, logs)
 
     def __init__(self, scene, plan: Plan, session, launcher, out: Path, phases: Phases, summary: dict, log,
                  run_id: str = ""):
@@ -298,19 +318,7 @@ class Run:
         steps = self.scene.time["steps"]
         if window.index % self.scene.output["every"] == 0 or window.index == steps - 1:
             start = time.perf_counter()
-            accepted = {(e.target_participant, e.target_field): op.deliver(value)
-                        for (e, op), value in zip(self._accelerated(), self._split(x))}
-            for name, series in self.series.items():
-                fields = {**self.outputs[name], **self.inputs.get(name, {})}
-                fields.update({f: v for (n, f), v in accepted.items() if n == name})
-                mesh = self.meshes[name]
-                fields = mesh_fields(fields, mesh, name)
-                if isinstance(mesh, StructuredGrid):
-                    series.write(window.index, window.t_end, cell_data=fields)
-                else:  # per point, or per cell (a P0 field)
-                    points = {k: v for k, v in fields.items() if len(v) == mesh.num_points}
-                    series.write(window.index, window.t_end, point_data=points,
-                                 cell_data={k: v for k, v in fields.items() if k not in points})
+            self.write_fields(window, x)
             self.phases.add("output", time.perf_counter() - start)
         record["figures"] = {name: figures for name, figures in self.figures.items() if figures}
         for op in self.operators:
@@ -318,14 +326,29 @@ class Run:
                 record.setdefault(key, {}).update(figures)  # operators of one kind share a key
         for name, monitor in self.monitors.items():
             record[name] = monitor.figures(self.outputs)
-        u = self.outputs.get("solid", {}).get("displacement")
-        if u is not None:
-            record["max_displacement"] = float(np.max(np.linalg.norm(u, axis=1)))
+        largest = self.max_displacement()
+        if largest is not None:
+            record["max_displacement"] = largest
         self.summary["steps"].append(record)
         self.summary.update(self.context.summary())
-        write_summary(self.out, self.summary)
+        if self.root:
+            write_summary(self.out, self.summary)
         if not inner.converged:
             raise inner.error(window.index)
+
+    def max_displacement(self) -> float | None:
+        """The largest displacement of the solid's vertices (None without a solid displacement)."""
+        u = self.outputs.get("solid", {}).get("displacement")
+        return None if u is None else float(np.max(np.linalg.norm(u, axis=1)))
+
+    def write_fields(self, window, x) -> None:
+        """Every participant's fields of the converged step `window` in its VTU series."""
+        accepted = {(e.target_participant, e.target_field): op.deliver(value)
+                    for (e, op), value in zip(self._accelerated(), self._split(x))}
+        for name, series in self.series.items():
+            fields = {**self.outputs[name], **self.inputs.get(name, {})}
+            fields.update({f: v for (n, f), v in accepted.items() if n == name})
+            write_series(series, self.meshes[name], name, window, fields)
 
     # -- the run ----------------------------------------------------------------------
     def execute(self, progress) -> dict:
@@ -352,7 +375,7 @@ class Run:
             bar.close()
         self.summary["accelerator"] = result.accelerator
         self.finish()
-        if plan.implicit:
+        if plan.implicit and self.root:
             residual_plot(self.out / "residuals.png", result)
         for name in self.monitors:
             for line in MONITORS[name][1](self.summary["steps"]):
@@ -384,6 +407,17 @@ class Run:
     def restore(self, window) -> None:
         for client in self.clients.values():
             self.phases.remote("checkpoint", client, "restore_state", window.index)
+
+
+def write_series(series: Series, mesh, name: str, window, fields: dict) -> None:
+    """Participant `name`'s `fields` on its `mesh` (or grid) as the VTU of step `window`."""
+    fields = mesh_fields(fields, mesh, name)
+    if isinstance(mesh, StructuredGrid):
+        series.write(window.index, window.t_end, cell_data=fields)
+    else:  # per point, or per cell (a P0 field)
+        points = {k: v for k, v in fields.items() if len(v) == mesh.num_points}
+        series.write(window.index, window.t_end, point_data=points,
+                     cell_data={k: v for k, v in fields.items() if k not in points})
 
 
 def mesh_fields(fields: dict, mesh, participant: str) -> dict:

@@ -118,7 +118,8 @@ TABLES = {
                  "interface": "the solid boundary (or list of boundaries) the fluid pressure acts on (flow)",
                  "deformation": "true: the fluid sees the deformed solid (two-way); false: the undeformed one",
                  "traction": "what of the fluid's stress loads the rock: 'pressure' (default, -p n) or 'full' "
-                             "((-p I + tau) n with the viscous wall shear)"},
+                             "((-p I + tau) n with the viscous wall shear)",
+                 "ranks": "MPI ranks of the coupler itself (default 1; mpirun -n P varcouple run gives P)"},
     "messaging": {"mode": "zenoh mode: peer (default) or client", "connect": "zenoh endpoints to connect to",
                   "timeout": "seconds to wait for a participant's answer"},
     "resources": {"memory_limit": "memory this run may use [bytes] (default: what the machine has available)",
@@ -233,7 +234,8 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
                     "columns": coupling.integer("columns", 100),
                     "interface": _interface(coupling),
                     "deformation": coupling.boolean("deformation", True),
-                    "traction": coupling.string("traction", "pressure", TRACTIONS)}
+                    "traction": coupling.string("traction", "pressure", TRACTIONS),
+                    "ranks": coupling.integer("ranks", 1)}
     if coupling_cfg["traction"] == "full" and "flow" not in effects:
         raise coupling.error("traction", "'full' (the viscous stress of a flow) needs the effect 'flow'")
     solid_kind = solver_cfg["solid"].kind if "solid" in solver_cfg else "a fixed solid"

@@ -1,0 +1,57 @@
+"""What one rank of a coupler on several ranks holds of a participant (docs/scaling.md, step 3):
+the parts of the participant's ranks assigned to it (round-robin: participant rank r to coupler
+rank r mod P), their rows of every output field and the rows of every input they need, in the
+participant's input numbering. :meth:`Held.fetch` carries output rows to whatever rows a coupler
+rank works on (its slab of the grid, the vertices of its solid cells) and :meth:`Held.inputs`
+the values a coupler rank computed to the input rows of its parts, through
+:class:`transfer.rows.Rows`: nothing is gathered."""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from coupler.errors import CouplerError
+from transfer.rows import Rows
+
+
+def assigned(rank: int, coupler_ranks: int, parts: int) -> list[int]:
+    """The participant ranks (of `parts`) coupler rank `rank` talks to: round-robin."""
+    return list(range(rank, parts, coupler_ranks))
+
+
+class Held:
+    """Coupler rank's share of participant `name`: its parts' row ids (``ids``, concatenated in
+    part order: ``out_ids``), their input rows (``in_ids``) and the latest output fields at
+    ``out_ids`` (:attr:`fields`). ``count``: the rows of the whole participant."""
+
+    def __init__(self, comm, name: str, ranks: list[int], ids: list[np.ndarray], inputs: list[np.ndarray]):
+        self.comm, self.name, self.ranks = comm, name, ranks
+        self.ids, self.input_rows = ids, inputs
+        self.out_ids = np.concatenate(ids).astype(np.int64) if ids else np.zeros(0, np.int64)
+        self.in_ids = np.concatenate(inputs).astype(np.int64) if inputs else np.zeros(0, np.int64)
+        self.count = comm.allreduce(len(self.out_ids))
+        if len(self.out_ids) and (self.out_ids.min() < 0 or self.out_ids.max() >= self.count):
+            raise CouplerError(f"participant {name!r}: its parts' row ids reach outside 0..{self.count - 1}")
+        self.rows = Rows(comm, self.count)
+        once = self.rows.block(self.out_ids, np.ones(len(self.out_ids)), add=True)
+        if comm.allreduce(int(np.count_nonzero(once != 1))):
+            raise CouplerError(f"participant {name!r}: its parts do not number each of its {self.count} rows once")
+        self.fields: dict[str, np.ndarray] = {}
+
+    def fetch(self, field: str, wanted: np.ndarray) -> np.ndarray:
+        """The output `field` at the rows `wanted` (any rows of the whole). Collective."""
+        return self.rows.move(self.out_ids, self.fields[field], wanted)
+
+    def inputs(self, held: np.ndarray, values) -> list[np.ndarray]:
+        """Each of this rank's parts' input rows of a field that every coupler rank gives at its
+        rows `held`. Collective."""
+        rows = self.rows.move(held, values, self.in_ids)
+        return np.split(rows, np.cumsum([len(i) for i in self.input_rows])[:-1]) if self.ranks else []
+
+    def max_norm(self, field: str) -> float:
+        """max over the rows of |value| (the Euclidean norm of each row of a vector field). Collective."""
+        a = self.fields.get(field)
+        local = float(np.max(np.linalg.norm(a.reshape(len(a), -1), axis=1))) if a is not None and len(a) else 0.0
+        return self.comm.allreduce(local, op=MPI.MAX)
+

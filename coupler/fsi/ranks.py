@@ -1,0 +1,314 @@
+"""The exchanges of a flow scene on a coupler of P ranks (docs/scaling.md, step 3): every rank
+holds a slab of the fluid grid (:class:`GridSlab`: every rank knows the grid by origin, spacing
+and shape) and the solid parts assigned to it (:class:`SolidPart`), and the operators are the
+distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the deformed solid
+(:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3), the
+solid fraction and the solid velocity on the grid (Step 6, before Step 1).
+
+The interface vector of the fixed point (one pressure per interface vertex, numbered as the
+serial run numbers them: by increasing solid vertex id) is, until the accelerators take a
+communicator, gathered whole on every rank (a surface field); every rank then runs the same
+accelerator on the same vector and takes the same decisions."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+from coupler.errors import CouplerError
+from coupler.protocol.slabs import slab_bounds
+from transfer import Mesh, StructuredGrid
+from transfer.distributed import Part, assemble
+from transfer.rows import Rows
+
+from .held import Held
+from .interface import sampling_points
+
+
+class GridSlab:
+    """This coupler rank's slab of the grid `G` along its longest axis: ``part`` (Q0 cells, global
+    ids ``ids``)."""
+
+    def __init__(self, comm, G: StructuredGrid, where: str):
+        try:
+            d, bounds = slab_bounds(G.shape, comm.size, "longest")
+        except ValueError as exc:
+            raise CouplerError(f"{where}: {comm.size} coupler ranks: {exc}") from None
+        lower, upper = [0, 0, 0], list(G.shape)
+        lower[d], upper[d] = bounds[comm.rank], bounds[comm.rank + 1]
+        self.G, self.part = G, Part.grid_block(G, lower, upper, "Q0")
+        self.ids = self.part.global_dofs
+        self.cell_volume = float(np.prod(G.spacing))
+
+
+class SolidPart:
+    """The solid cells of this coupler rank's solid parts (``geometry`` of each), with the
+    coordinates of every vertex they use (owned here or fetched from the rank holding it):
+    ``vertices`` (global ids), ``reference`` (their coordinates), ``cells`` (local), the wetted
+    ``triangles`` of these cells (global ids) and the numbering of the interface vertices."""
+
+    def __init__(self, comm, held: Held, geometry: list[dict]):
+        self.comm, self.held = comm, held
+        points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
+        cells = [np.asarray(g["cells"], np.int64).reshape(-1, 4) for g in geometry]
+        triangles = [np.asarray(g["interface_triangles"], np.int64).reshape(-1, 3)
+                     for g in geometry if "interface_triangles" in g]
+        cells = np.concatenate(cells) if cells else np.zeros((0, 4), np.int64)
+        self.num_cells = comm.allreduce(len(cells))
+        self.vertices, local = np.unique(cells, return_inverse=True)
+        self.reference = held.rows.move(held.out_ids, np.concatenate(points) if points else np.zeros((0, 3)),
+                                        self.vertices).reshape(-1, 3)
+        self.mesh = (Mesh(self.reference, local.reshape(-1, 4), "tetra", name="solid part", reorient=True)
+                     if len(cells) else Mesh.empty("tetra", "solid part"))
+        self.cells = self.mesh.cells
+        self.triangles = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
+        self.wetted = comm.allreduce(len(self.triangles)) > 0
+        self._interface_numbering()
+
+    def _interface_numbering(self) -> None:
+        """``interface_ids`` (the interface index of each of this rank's triangle vertices
+        ``interface_vertices``), ``interface_count``, and ``input_interface`` (the interface index of
+        each input row of the solid parts, -1 off the interface): the serial order, nothing gathered."""
+        rows = self.held.rows
+        self.interface_vertices = np.unique(self.triangles)
+        flags = rows.block(self.interface_vertices, np.ones(len(self.interface_vertices))) > 0.5
+        first = self.comm.exscan(int(flags.sum())) or 0
+        self.interface_count = self.comm.allreduce(int(flags.sum()))
+        index = np.where(flags, first + np.cumsum(flags) - 1, -1).astype(float)
+        block = np.arange(rows.ranges[self.comm.rank], rows.ranges[self.comm.rank + 1], dtype=np.int64)
+        self.interface_ids = rows.move(block, index, self.interface_vertices).astype(np.int64)
+        self.input_interface = rows.move(block, index, self.held.in_ids).astype(np.int64)
+
+    def part(self, points=None) -> Part:
+        """The P1 transfer part of these cells, at `points` (the deformed vertices) or undeformed."""
+        mesh = self.mesh if points is None or not len(self.vertices) else Mesh(points, self.cells, "tetra",
+                                                                                name="deformed solid part")
+        return Part(mesh, "P1", self.vertices)
+
+
+class WettedSlabs:
+    """:class:`coupler.fsi.interface.WettedInterface` on several ranks: this rank's wetted
+    triangles moved into the fluid (normals summed over every rank's triangles), the pressure
+    traced from the grid slabs (distributed pseudo-L2), the interface vector whole on every rank."""
+
+    method = "surface trace"
+
+    def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, points=None):
+        self.comm, self.solid = comm, solid
+        self.rows = Rows(comm, solid.interface_count)
+        ids, vertices = solid.interface_ids, solid.interface_vertices
+        at = np.searchsorted(solid.vertices, vertices)
+        here = (solid.reference if points is None else points)[at]
+        triangles = np.searchsorted(vertices, solid.triangles)
+        a, b, c = (here[triangles[:, i]] for i in range(3))
+        area_normals = 0.5 * np.cross(b - a, c - a)
+        normals = self.rows.move(ids[triangles].ravel(), np.repeat(area_normals, 3, axis=0), ids, add=True)
+        length = np.linalg.norm(normals.reshape(-1, 3), axis=1)
+        if comm.allreduce(bool(np.any(length <= 0)), op=MPI.LOR):
+            raise CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel (a folded surface)")
+        normals = normals.reshape(-1, 3) / length[:, None]
+        moved, offsets = sampling_points(here, normals, solid.reference[at], slab.G)
+        self.offset = comm.allreduce(float(offsets.max()) if len(offsets) else 0.0, op=MPI.MAX)
+        surface = (Mesh(moved, triangles, "triangle", name="interface") if len(triangles)
+                   else Mesh.empty("triangle", "interface"))
+        self.transfer = assemble(slab.part, Part(surface, "P1", ids), "pseudo_l2", comm)
+        uncovered = solid.interface_count - self.transfer.num_covered
+        if uncovered:
+            raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled up to "
+                               f"{self.offset:.3g} m outside the solid ({uncovered} of {solid.interface_count} "
+                               f"vertices outside the grid): extend the grid beyond the wetted boundary")
+        self.weights = self.rows.whole(self.transfer.row_sums())  # lumped surface mass, whole
+        self.area = comm.allreduce(float(surface.cell_measures().sum()) if len(triangles) else 0.0)
+        self.size = solid.interface_count
+        self.num_triangles = comm.allreduce(len(triangles))
+
+    def from_fluid(self, pressure) -> np.ndarray:
+        """The interface vector (whole, on every rank) from the cell pressure at this rank's slab."""
+        return self.rows.whole(self.rows.block(self.solid.interface_ids, self.transfer.apply(pressure)))
+
+    def to_solid_parts(self, x) -> list[np.ndarray]:
+        """The interface pressure (whole) at the input rows of each solid part held here (zero off
+        the interface)."""
+        index = self.solid.input_interface
+        values = np.where(index >= 0, np.asarray(x)[np.maximum(index, 0)], 0.0)
+        held = self.solid.held
+        return np.split(values, np.cumsum([len(i) for i in held.input_rows])[:-1]) if held.ranks else []
+
+    def describe(self) -> dict:
+        return {"method": self.method, "vertices": int(self.size), "triangles": int(self.num_triangles),
+                "offset": self.offset, "sampled_area": self.area,
+                "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+
+
+class SolidOnSlabs:
+    """:class:`coupler.fsi.interface.SolidOnGrid` on several ranks (the wetted surface, pressure
+    traction): ``fraction`` and ``to_fluid`` on this rank's slab, ``interface``, rebuilt from the
+    deformed solid when its displacement changes (the same rules: zero below 1e-12 of the grid
+    spacing, unchanged since the last build)."""
+
+    def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, deform: bool = True,
+                 wetted: bool = True):
+        self.comm, self.solid, self.slab, self.where = comm, solid, slab, where
+        self.wetted = wetted
+        self.deform = bool(deform) and solid.wetted
+        self.threshold = 1e-12 * float(np.min(slab.G.spacing))
+        self.builds, self.build_seconds, self.skipped = 0, 0.0, 0
+        self.max_displacement = 0.0
+        self._u = None
+        self._build(None)
+        self.reference_weights = self.interface.weights if wetted else None
+        self.builds, self.build_seconds = 0, 0.0
+
+    def _build(self, u) -> None:
+        start = time.perf_counter()
+        comm, solid = self.comm, self.solid
+        points = None if u is None else solid.reference + u
+        try:
+            part = solid.part(points)
+            failed = ""
+        except Exception as exc:  # noqa: BLE001 - an inverted tetrahedron, on some rank
+            part, failed = None, str(exc)
+        failed = next((f for f in comm.allgather(failed) if f), "")
+        if failed:
+            raise CouplerError(f"the deformed solid is not a valid mesh (largest displacement "
+                               f"{self.max_displacement:.3g} m): {failed}; the coupling iteration diverges: use "
+                               f"[coupling] acceleration = 'iqn-ils' or 'aitken', or a smaller relaxation")
+        to_fluid = assemble(part, self.slab.part, "pseudo_l2", comm)
+        volumes = to_fluid.diagonal()
+        measure = float(part.mesh.cell_measures().sum()) if part.num_cells else 0.0
+        inside, total = comm.allreduce(np.array([volumes.sum(), measure]))
+        self.outside = max(1.0 - float(inside) / float(total), 0.0)
+        self.to_fluid, self.fraction = to_fluid, volumes / self.slab.cell_volume
+        self.interface = WettedSlabs(comm, solid, self.slab, self.where, points) if self.wetted else None
+        self.builds += 1
+        self.build_seconds += time.perf_counter() - start
+
+    def update(self, u) -> bool:
+        """Rebuild from the displacement u at this rank's solid vertices if it changed. Collective."""
+        if not self.deform or u is None:
+            return False
+        u = np.asarray(u, float).reshape(len(self.solid.vertices), 3)
+        size = self.comm.allreduce(float(np.max(np.abs(u))) if u.size else 0.0, op=MPI.MAX)
+        self.max_displacement = max(self.max_displacement, size)
+        if size <= self.threshold:
+            u = None
+        same = (u is None and self._u is None) or (
+            u is not None and self._u is not None and self.comm.allreduce(bool(np.array_equal(u, self._u)), op=MPI.LAND))
+        if same:
+            self.skipped += 1
+            return False
+        self._build(u)
+        self._u = None if u is None else u.copy()
+        return True
+
+    def describe(self) -> dict:
+        cells = self.comm.allreduce(int(np.count_nonzero(self.fraction > 0)))
+        return {"deformed": self.deform, "rebuilds": self.builds, "rebuild_seconds": self.build_seconds,
+                "seconds_per_rebuild": self.build_seconds / self.builds if self.builds else None,
+                "skipped": self.skipped, "solid_volume_outside_grid": self.outside,
+                "fluid_cells_with_solid": cells}
+
+
+class RanksContext:
+    """What the operators of a coupler rank are built from: :class:`coupler.fsi.context.OperatorContext`'s
+    scene, meshes (the grid whole; the solid's whole mesh is never built), phases and log, and
+    `comm`, each participant's :class:`Held` share and the geometry of each part held here."""
+
+    def __init__(self, context, comm, held: dict[str, Held], parts: dict[str, list[dict]]):
+        self.context, self.comm, self.held, self.parts = context, comm, held, parts
+        self.scene, self.phases, self.log = context.scene, context.phases, context.log
+
+    def shared(self, key: str, build):
+        return self.context.shared(key, lambda _: build(self))
+
+    def summary(self) -> dict:
+        return self.context.summary()
+
+
+class FluidSolidRanks:
+    """:class:`coupler.fsi.context.FluidSolid` on several ranks: the solid as this rank's grid slab
+    sees it, updated from the solid's latest displacement whenever an operator asks."""
+
+    def __init__(self, ctx: RanksContext):
+        scene, comm = ctx.scene, ctx.comm
+        start = time.perf_counter()
+        where = f"{scene.path}: [geometry.fluid]"
+        self.ctx, self.solid_held, self.fluid_held = ctx, ctx.held["solid"], ctx.held["fluid"]
+        self.slab = GridSlab(comm, ctx.context.meshes["fluid"], where)
+        self.solid = SolidPart(comm, self.solid_held, ctx.parts["solid"])
+        self.on_grid = SolidOnSlabs(comm, self.solid, self.slab, where, deform=scene.coupling["deformation"])
+        ctx.phases.add("transfer", time.perf_counter() - start)
+        interface = self.on_grid.interface
+        self.interface = {**interface.describe(), "traction": scene.coupling["traction"]}
+        ctx.log(f"interface {scene.coupling['interface']}: {interface.size} vertices, {interface.num_triangles} "
+                f"triangles, pressure sampled up to {interface.offset:.3g} m into the fluid ({comm.size} coupler "
+                f"ranks: this rank {len(self.slab.ids)} grid cells, {self.solid.mesh.num_cells} solid cells)")
+        self._seen = None
+
+    def update(self) -> SolidOnSlabs:
+        """The solid on the slabs as its latest displacement deforms it, once per new output. Collective."""
+        u = self.solid_held.fields.get("displacement")
+        if u is not None and u is self._seen:
+            return self.on_grid
+        self._seen = u
+        local = None if u is None else self.solid_held.fetch("displacement", self.solid.vertices)
+        self.ctx.phases.timed("geometry update", self.on_grid.update, local)
+        return self.on_grid
+
+    def summary(self) -> dict:
+        return {"interface": self.interface, "geometry_update": self.on_grid.describe()}
+
+
+def fluid_solid_ranks(ctx: RanksContext) -> FluidSolidRanks:
+    return ctx.shared("fluid_solid", FluidSolidRanks)
+
+
+class PressureTraceRanks:
+    """:class:`coupler.fsi.operators.PressureTrace` on several ranks: the interface vector whole
+    on every rank, delivered at the input rows of the solid parts held here."""
+
+    units = "Pa"
+
+    def __init__(self, ctx: RanksContext, exchange=None):
+        self.fs = fluid_solid_ranks(ctx)
+        self.size, self.weights = self.fs.on_grid.interface.size, self.fs.on_grid.reference_weights
+
+    def evaluate(self, outputs=None) -> np.ndarray:
+        return self.fs.on_grid.interface.from_fluid(self.fs.fluid_held.fetch("pressure", self.fs.slab.ids))
+
+    def deliver(self, x) -> list[np.ndarray]:
+        return self.fs.on_grid.interface.to_solid_parts(x)
+
+
+class SolidFractionRanks:
+    """:class:`coupler.fsi.operators.SolidFraction` (exact fractions) on this rank's slab,
+    delivered at the input rows of the fluid parts held here."""
+
+    units = "1"
+
+    def __init__(self, ctx: RanksContext, exchange=None):
+        self.fs = fluid_solid_ranks(ctx)
+
+    def evaluate(self, outputs=None) -> np.ndarray:
+        return self.fs.update().fraction
+
+    def deliver(self, value) -> list[np.ndarray]:
+        return self.fs.fluid_held.inputs(self.fs.slab.ids, value)
+
+
+class SolidVelocityRanks(SolidFractionRanks):
+    """:class:`coupler.fsi.operators.SolidVelocity` on this rank's slab (pseudo-L2 from the
+    deformed solid cells held here, zero where the solid does not reach)."""
+
+    units = "m/s"
+
+    def evaluate(self, outputs=None) -> np.ndarray:
+        on_grid = self.fs.update()
+        return on_grid.to_fluid.apply(self.fs.solid_held.fetch("velocity", self.fs.solid.vertices), fill=0.0)
+
+
+#: the operators a coupler on several ranks has (the others refuse P > 1: coupler.run.ranks)
+OPERATORS_RANKS = {"pressure_trace": PressureTraceRanks, "solid_fraction": SolidFractionRanks,
+                   "solid_velocity": SolidVelocityRanks}

@@ -1,0 +1,323 @@
+"""The coupler on P MPI ranks (docs/scaling.md, step 3): ``mpirun -n P varcouple run CASE``,
+or ``[coupling] ranks = P`` (``varcouple run`` then starts itself under ``mpirun -n P``:
+:func:`coupler.run.execute.relaunch`).
+
+Every rank runs the same plan and loop (:class:`RanksRun`). Rank 0 starts the participants,
+keeps the zenoh router (its listening session) and their control verbs (announce, configure,
+save/restore, finish); every other rank opens its own session to it. Each coupler rank talks to
+the participant ranks assigned to it (round-robin, :func:`coupler.fsi.held.assigned`): it sends
+their requests and receives their parts directly, and holds their rows
+(:class:`coupler.fsi.held.Held`). The operators are the distributed ones of
+:mod:`coupler.fsi.ranks`. Whatever fails on one rank is raised on every rank (:func:`agree`).
+
+Interim, until the accelerators and the output take a communicator: the interface vector (a
+surface field) is whole on every rank, which run the same accelerator; rank 0 gathers each
+participant's fields to write the VTU files of an output step, and writes the summary.
+Operators, checks, monitors and pictures that need a whole field on one process refuse P > 1
+(:meth:`RanksRun.admit`)."""
+
+from __future__ import annotations
+
+import pickle
+from contextlib import ExitStack, contextmanager
+
+import numpy as np
+
+from coupler.errors import CouplerError, SceneError
+from coupler.fsi.context import OperatorContext
+from coupler.fsi.held import Held, assigned
+from coupler.fsi.ranks import OPERATORS_RANKS, RanksContext
+from coupler.output.results import Series
+from coupler.protocol.wire import Field, SolveReport
+from coupler.run.client import CouplerSession
+from coupler.run.launch import Launcher
+from coupler.run.runner import Run, write_series
+from coupler.run.solves import StepSolves
+from transfer import Mesh, StructuredGrid
+
+
+def agree(comm, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` on every rank; when it raises on any rank, every rank raises (a rank
+    that failed its own exception, the others that of the lowest failed rank). Collective."""
+    failure = None
+    try:
+        result = fn(*args, **kwargs)
+    except Exception as exc:  # noqa: BLE001 - passed on to every rank
+        failure, result = exc, None
+    sent = failure
+    if failure is not None:
+        try:
+            pickle.loads(pickle.dumps(failure))
+        except Exception:  # noqa: BLE001 - an exception that does not travel: its text does
+            sent = CouplerError(f"{type(failure).__name__}: {failure}")
+    first = next((f for f in comm.allgather(sent) if f is not None), None)
+    if failure is not None:
+        raise failure
+    if first is not None:
+        raise first
+    return result
+
+
+class RanksRun(Run):
+    """:class:`coupler.run.runner.Run` on the ranks of `comm` (module docstring)."""
+
+    @staticmethod
+    def admit(scene, plan, comm) -> None:
+        """SceneError (every rank) for what needs a whole field on one process."""
+        P = comm.size
+        ranks = f"with {P} coupler ranks ([coupling] ranks or mpirun -n {P})"
+        for e in plan.exchanges:
+            if e.operator not in OPERATORS_RANKS:
+                raise SceneError(f"{scene.path}: [physics] effects: the exchange to {e.target} uses the operator "
+                                 f"{e.operator!r}, which needs whole fields on one process: not {ranks}; on "
+                                 f"several ranks: {', '.join(OPERATORS_RANKS)}")
+            if e.options.get("fraction") == "cell_centre":
+                raise SceneError(f"{scene.path}: [solvers.fluid] fraction: 'cell_centre' samples the whole solid "
+                                 f"mesh on one process: not {ranks}; use 'exact'")
+        for p in plan.participants:
+            if p.in_process:
+                raise SceneError(f"{scene.path}: [solvers.{p.name}]: {p.kind!r} is served whole in the coupler's "
+                                 f"process: not {ranks}")
+        if plan.monitors:
+            raise SceneError(f"{scene.path}: [physics] effects: the figures {', '.join(plan.monitors)} need whole "
+                             f"fields on one process: not {ranks}")
+        if scene.check:
+            raise SceneError(f"{scene.path}: [check] kind: {scene.check['kind']!r} compares whole fields on one "
+                             f"process: not {ranks}")
+        if scene.output["pictures"]:
+            raise SceneError(f"{scene.path}: [output] pictures: the pictures are rendered from whole fields on "
+                             f"one process: set it false {ranks}")
+
+    @staticmethod
+    @contextmanager
+    def processes(scene, plan, run_id: str, logs, comm=None):
+        """Rank 0: the listening session, a zenoh router in peer mode (a peer routes nothing
+        between the others), and the launcher; every other rank: its own session, a client of
+        rank 0's, with no liveliness token of its own (the participants watch rank 0's)."""
+        with ExitStack() as stack:
+            m = scene.messaging
+            if comm.rank == 0:
+                session = agree(comm, CouplerSession, run_id, mode="router" if m["mode"] == "peer" else m["mode"],
+                                connect=m["connect"], connect_timeout=min(10.0, m["timeout"]))
+                stack.callback(session.close)
+                comm.bcast(session.endpoints)
+                yield session, stack.enter_context(Launcher(run_id, logs, session.endpoints))
+            else:
+                agree(comm, lambda: None)
+                endpoints = comm.bcast(None)
+                yield stack.enter_context(CouplerSession(run_id, mode="client", listen_host=None, connect=endpoints,
+                                                         token=False)), None
+
+    def __init__(self, *args, comm, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.comm, self.root = comm, comm.rank == 0
+        if not self.root:
+            self.log = lambda line: None
+        self.held: dict[str, Held] = {}
+
+    def _on_root(self, fn, *args):
+        """`fn` on rank 0, its result on every rank (its failure raised on every rank)."""
+        return self.comm.bcast(agree(self.comm, fn, *args) if self.root else agree(self.comm, lambda: None))
+
+    # -- set-up ---------------------------------------------------------------------
+    def start(self) -> None:
+        comm, timeout = self.comm, self.scene.messaging["timeout"]
+        for p in self.plan.participants:
+            check = None
+            if self.root:
+                self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=p.arguments)
+                check = (lambda name=p.name: self.launcher.check(name))
+                self.log(f"started {p.name}: {p.kind} ({p.ranks} rank{'s' * (p.ranks > 1)}), log in "
+                         f"{self.launcher.log_dir / p.name}.log")
+            self.clients[p.name] = self.session.client(p.name, timeout=timeout, process_check=check)
+        announced, parts, meshes = {}, {}, {}
+        for p in self.plan.participants:
+            client = self.clients[p.name]
+            announced[p.name] = self._on_root(self._configure, client, p.config, timeout)
+            client.parts = int(announced[p.name].get("parts", 1))
+            client.mine = assigned(comm.rank, comm.size, client.parts)
+            replies = agree(comm, self._exchange, client, "geometry", None, [None] * client.parts, timeout)
+            header = comm.bcast(replies[0].header if self.root else None)
+            self.held[p.name], parts[p.name] = self._hold(p.name, header, replies)
+            if "grid" in header:
+                g = header["grid"]
+                meshes[p.name] = StructuredGrid(g["origin"], g["spacing"], g["shape"], name=f"{p.name} grid")
+            cells = comm.allreduce(sum(len(part.get("cell_ids", ())) for part in parts[p.name]))
+            self.log(f"{p.name}: {announced[p.name].get('kind')} on {meshes[p.name].num_cells if p.name in meshes else cells} "
+                     f"cells; coupler rank 0 holds its ranks {client.mine}")
+        self.summary["participants_announced"] = announced
+        self.summary["coupler_ranks"] = comm.size
+        self.summary["sizes"] = {name: {"cells": meshes[name].num_cells, "vertices": meshes[name].num_points}
+                                 if name in meshes else
+                                 {"cells": comm.allreduce(sum(len(part["cell_ids"]) for part in parts[name])),
+                                  "vertices": held.count} for name, held in self.held.items()}
+        self.meshes = meshes
+        self.context = OperatorContext(self.scene, meshes, {}, self.phases, self.log)
+        ranks_context = RanksContext(self.context, comm, self.held, parts)
+        self.operators = agree(comm, lambda: [OPERATORS_RANKS[e.operator](ranks_context, e)
+                                              for e in self.plan.exchanges])
+        self.monitors = {}
+        self.summary.update(self.context.summary())
+        self.geometry = parts
+        self.series = {name: Series(self.out, name, meshes.get(name)) for name in self.held} if self.root else {}
+
+    def _configure(self, client, config, timeout) -> dict:
+        client.wait_alive(timeout)
+        announced = client.announce()
+        self.phases.remote(f"{client.name} setup", client, "configure", config)
+        return announced
+
+    def _exchange(self, client, verb: str, header, parts: list, timeout=None):
+        client.wait_alive(timeout)
+        return client.exchange(verb, header, parts, timeout, before_root=self.comm.Barrier)
+
+    def _hold(self, name: str, header: dict, replies) -> tuple[Held, list[dict]]:
+        """This rank's share of participant `name` from its parts' geometry replies."""
+        location = "cell_ids" if header.get("location") == "cells" else "point_ids"
+        geometry = [{k: np.asarray(f.data) for k, f in part.fields.items()} for part in replies]
+        for part, g in zip(replies, geometry):
+            if location not in g:
+                raise part.fail(name, f"its geometry part has no {location!r}: the rows of its fields have no owners")
+        ids = [g[location].astype(np.int64) for g in geometry]
+        inputs = [g.get("input_ids", g[location]).astype(np.int64) for g in geometry]
+        return agree(self.comm, Held, self.comm, name, self.clients[name].mine, ids, inputs), geometry
+
+    # -- one coupling iteration -------------------------------------------------------
+    def _advance(self, name: str, window, iteration: int, inputs: dict) -> None:
+        client, held, comm = self.clients[name], self.held[name], self.comm
+        parts = [None] * client.parts
+        for i, r in enumerate(held.ranks):
+            parts[r] = {k: Field(k, values[i], units) for k, (values, units) in inputs.items()}
+        header = {"window": int(window.index), "iteration": int(iteration), "t": float(window.t_start),
+                  "dt": float(window.dt)}
+        replies = agree(comm, self.phases.remote, name, _Caller(self._exchange, client), "call", client,
+                        "advance", header, parts, None)
+        shapes = comm.bcast({k: (np.asarray(f.data).shape[1:], np.asarray(f.data).dtype)
+                             for k, f in replies[0].fields.items()} if self.root else None)
+        held.fields = agree(comm, _joined, name, replies, held, shapes)
+        self.inputs[name] = {k: values for k, (values, _) in inputs.items()}
+        reports = comm.bcast((replies[0].header.get("solves", []), replies[0].header.get("figures", {}))
+                             if self.root else None)
+        client.last_solves, client.last_figures = _reports(*reports)
+        if iteration == 0 and name == self.plan.participants[0].name:
+            self.solves = StepSolves(self.allow)
+        self.solves.add(name, iteration, client.last_solves)
+        self.figures[name] = client.last_figures
+
+    def iterate(self, window, iteration: int, x) -> np.ndarray:
+        """One pass of Steps 1-6 with the (whole) interface vector x; returns H(x), whole."""
+        given = {id(e): value for (e, _), value in zip(self._accelerated(), self._split(x))}
+        self.context.window = window
+        try:
+            for p in self.plan.participants:
+                inputs = {}
+                for e, op in zip(self.plan.exchanges, self.operators):
+                    if e.target_participant != p.name:
+                        continue
+                    value = given[id(e)] if e.accelerated else self.phases.timed("transfer", op.evaluate)
+                    inputs[e.target_field] = (self.phases.timed("transfer", op.deliver, value), op.units)
+                self._advance(p.name, window, iteration, inputs)
+            H = [self.phases.timed("transfer", op.evaluate) for _, op in self._accelerated()]
+        except CouplerError as exc:
+            if type(exc) is not CouplerError:
+                raise
+            raise CouplerError(f"{window}, iteration {iteration}: {exc}") from None
+        return np.concatenate([np.ravel(h) for h in H]) if H else np.asarray(x)
+
+    # -- a converged step -------------------------------------------------------------
+    def max_displacement(self) -> float | None:
+        solid = self.held.get("solid")
+        return solid.max_norm("displacement") if solid is not None and "displacement" in solid.fields else None
+
+    def write_fields(self, window, x) -> None:
+        """Interim (until the output writes per-rank pieces): rank 0 gathers each participant's
+        rows and its mesh and writes the VTU files of the step."""
+        accepted = {(e.target_participant, e.target_field): op.deliver(value)
+                    for (e, op), value in zip(self._accelerated(), self._split(x))}
+        for name, held in self.held.items():
+            inputs = {**self.inputs.get(name, {}), **{f: v for (n, f), v in accepted.items() if n == name}}
+            rows = [(held.out_ids, held.fields)] + [(held.in_ids, {k: _rows(v) for k, v in inputs.items()})]
+            geometry = self.geometry[name]
+            solid = [(g["point_ids"], g["points"], g["cell_ids"], g["cells"]) for g in geometry if "cells" in g]
+            pieces = self.comm.gather((rows, solid), root=0)
+            if self.root:
+                mesh = self.meshes.get(name) or _whole_mesh(name, [s for _, found in pieces for s in found])
+                self.series[name].mesh = mesh
+                write_series(self.series[name], mesh, name, window, _whole_fields(held.count, pieces))
+
+    def execute(self, progress) -> dict:
+        return super().execute(progress and self.root)
+
+    # -- control verbs: rank 0 --------------------------------------------------------
+    def finish(self) -> None:
+        for client in self.clients.values():
+            client.finished = True  # the participants' tokens go: no warning on this rank
+        self._on_root(super().finish)
+
+    def save(self, window) -> None:
+        self._on_root(super().save, window)
+
+    def restore(self, window) -> None:
+        self._on_root(super().restore, window)
+
+
+class _Caller:
+    """``phases.remote``'s view of a call: ``stats`` of the client, the call as a verb."""
+
+    def __init__(self, fn, client):
+        self.fn, self.stats = fn, client.stats
+
+    def call(self, *args):
+        return self.fn(*args)
+
+
+def _joined(name: str, replies, held: Held, shapes: dict) -> dict[str, np.ndarray]:
+    """The output fields at ``held.out_ids`` from this rank's parts (each checked: rank 0's fields,
+    one row per id)."""
+    out = {}
+    for k, (shape, dtype) in shapes.items():
+        pieces = []
+        for part, ids in zip(replies, held.ids):
+            if k not in part.fields or len(part.fields) != len(shapes):
+                raise part.fail(name, f"its fields {sorted(part.fields)} are not rank 0's {sorted(shapes)}")
+            a = np.asarray(part.fields[k].data)
+            if a.shape[:1] != ids.shape:
+                raise part.fail(name, f"{k!r} has {a.shape[0] if a.ndim else 0} rows, its ids {len(ids)}")
+            pieces.append(a)
+        out[k] = np.concatenate(pieces) if pieces else np.zeros((0, *shape), dtype)
+    return out
+
+
+def _reports(solves, figures):
+    return [SolveReport.from_dict(d) for d in solves], {str(k): float(v) for k, v in figures.items()}
+
+
+def _rows(per_part) -> np.ndarray:
+    """An input given per part (a list of arrays) as one array of rows."""
+    return np.concatenate(per_part) if len(per_part) else np.zeros(0)
+
+
+def _whole_fields(count: int, pieces) -> dict[str, np.ndarray]:
+    """Every field of a participant in input numbering from every rank's (ids, fields) rows."""
+    out: dict[str, np.ndarray] = {}
+    for rows, _ in pieces:
+        for ids, fields in rows:
+            for k, v in fields.items():
+                v = np.asarray(v)
+                if len(v) != len(ids):
+                    continue
+                if k not in out:
+                    out[k] = np.zeros((count, *v.shape[1:]), v.dtype)
+                out[k][ids] = v
+    return out
+
+
+def _whole_mesh(name: str, parts) -> Mesh:
+    """The whole solid mesh (for rank 0's VTU files) from the parts' geometry."""
+    count = sum(len(p[0]) for p in parts)
+    points = np.zeros((count, 3))
+    cells = np.zeros((sum(len(p[2]) for p in parts), 4), np.int64)
+    for point_ids, xyz, cell_ids, tets in parts:
+        points[point_ids] = xyz
+        cells[cell_ids] = tets
+    return Mesh(points, cells, "tetra", name=f"{name} mesh", reorient=True)

@@ -1,0 +1,61 @@
+"""The rows 0..count-1 of a field spread over the ranks of a communicator, nothing gathered: a
+PETSc vector split in blocks (:func:`transfer.petsc.ownership`) through which any rank puts the
+values of the rows it holds and gets those of the rows it needs (the halo of a part, the inputs
+of another process's part). Used by the coupler on several ranks (docs/scaling.md, step 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .petsc import _Local, ownership
+
+
+class Rows:
+    """Rows 0..`count`-1 over the ranks of `comm`; :meth:`move` carries values from the rows a
+    rank holds to the rows it asks for (collective)."""
+
+    def __init__(self, comm, count: int):
+        self.comm, self.count = comm, int(count)
+        self.ranges = ownership(self.count, comm.size)
+        self.vec = PETSc.Vec().createMPI((int(self.ranges[comm.rank + 1] - self.ranges[comm.rank]), self.count),
+                                         comm=comm)
+        self._scatters: dict = {}
+
+    def _local(self, ids: np.ndarray) -> _Local:
+        """The scatter of `ids`, kept with the array (callers pass the same arrays every iteration)."""
+        found = self._scatters.get(id(ids))
+        if found is None or found[0] is not ids:
+            found = self._scatters[id(ids)] = (ids, _Local(self.vec, ids))
+        return found[1]
+
+    def move(self, held: np.ndarray, values, wanted: np.ndarray, add: bool = False) -> np.ndarray:
+        """The values at the rows `wanted` from every rank's `values` at its rows `held` ((n,) or
+        (n, k)); with `add` the values given for one row by several ranks are summed, else they
+        must be equal. Rows nobody holds read zero. Collective."""
+        values = np.asarray(values, dtype=np.float64)
+        columns = values.reshape(len(held), -1)
+        width = self.comm.allreduce(columns.shape[1] if len(held) else 0, op=MPI.MAX)
+        out = np.zeros((len(wanted), width))
+        source, target = self._local(held), self._local(wanted)
+        for c in range(width):
+            self.vec.zeroEntries()
+            source.put(columns[:, c] if columns.shape[1] else np.zeros(len(held)),
+                       PETSc.InsertMode.ADD_VALUES if add else PETSc.InsertMode.INSERT_VALUES)
+            out[:, c] = target.get()
+        return out.reshape((len(wanted),) + values.shape[1:]) if values.ndim > 1 else out[:, 0]
+
+    def block(self, held: np.ndarray, values, add: bool = False) -> np.ndarray:
+        """This rank's block of the rows (``ranges[rank]`` to ``ranges[rank + 1]``) from every
+        rank's `values` at its rows `held` ((n,) only). Collective."""
+        self.vec.zeroEntries()
+        self._local(held).put(np.asarray(values, np.float64),
+                                                    PETSc.InsertMode.ADD_VALUES if add else
+                                                    PETSc.InsertMode.INSERT_VALUES)
+        return self.vec.array.copy()
+
+    def whole(self, block: np.ndarray) -> np.ndarray:
+        """Every rank's block joined, on every rank (the interim gather of a surface field)."""
+        return np.concatenate(self.comm.allgather(np.asarray(block)))
+
