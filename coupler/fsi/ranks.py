@@ -246,6 +246,12 @@ class FluidSolidRanks:
                 f"triangles, pressure sampled up to {interface.offset:.3g} m into the fluid ({comm.size} coupler "
                 f"ranks: this rank {len(self.slab.ids)} grid cells, {self.solid.mesh.num_cells} solid cells)")
         self._seen = None
+        #: what each coupler rank holds (summary.json "coupler_ranks")
+        self.holdings = comm.allgather({"grid_cells": len(self.slab.ids), "solid_cells": self.solid.mesh.num_cells,
+                                        "solid_vertices": len(self.solid.vertices),
+                                        "solid_rows": len(self.solid_held.out_ids),
+                                        "fluid_rows": len(self.fluid_held.out_ids),
+                                        "interface_triangles": len(self.solid.triangles)})
 
     def update(self) -> SolidOnSlabs:
         """The solid on the slabs as its latest displacement deforms it, once per new output. Collective."""
@@ -258,7 +264,8 @@ class FluidSolidRanks:
         return self.on_grid
 
     def summary(self) -> dict:
-        return {"interface": self.interface, "geometry_update": self.on_grid.describe()}
+        return {"interface": self.interface, "geometry_update": self.on_grid.describe(),
+                "coupler_ranks": self.holdings}
 
 
 def fluid_solid_ranks(ctx: RanksContext) -> FluidSolidRanks:

@@ -66,27 +66,27 @@ class RanksRun(Run):
         """SceneError (every rank) for what needs a whole field on one process."""
         P = comm.size
         ranks = f"with {P} coupler ranks ([coupling] ranks or mpirun -n {P})"
-        for e in plan.exchanges:
-            if e.operator not in OPERATORS_RANKS:
-                raise SceneError(f"{scene.path}: [physics] effects: the exchange to {e.target} uses the operator "
-                                 f"{e.operator!r}, which needs whole fields on one process: not {ranks}; on "
-                                 f"several ranks: {', '.join(OPERATORS_RANKS)}")
-            if e.options.get("fraction") == "cell_centre":
-                raise SceneError(f"{scene.path}: [solvers.fluid] fraction: 'cell_centre' samples the whole solid "
-                                 f"mesh on one process: not {ranks}; use 'exact'")
-        for p in plan.participants:
-            if p.in_process:
-                raise SceneError(f"{scene.path}: [solvers.{p.name}]: {p.kind!r} is served whole in the coupler's "
-                                 f"process: not {ranks}")
-        if plan.monitors:
-            raise SceneError(f"{scene.path}: [physics] effects: the figures {', '.join(plan.monitors)} need whole "
-                             f"fields on one process: not {ranks}")
         if scene.check:
             raise SceneError(f"{scene.path}: [check] kind: {scene.check['kind']!r} compares whole fields on one "
                              f"process: not {ranks}")
         if scene.output["pictures"]:
             raise SceneError(f"{scene.path}: [output] pictures: the pictures are rendered from whole fields on "
                              f"one process: set it false {ranks}")
+        if plan.monitors:
+            raise SceneError(f"{scene.path}: [physics] effects: the figures {', '.join(plan.monitors)} need whole "
+                             f"fields on one process: not {ranks}")
+        for p in plan.participants:
+            if p.in_process:
+                raise SceneError(f"{scene.path}: [solvers.{p.name}]: {p.kind!r} is served whole in the coupler's "
+                                 f"process: not {ranks}")
+        for e in plan.exchanges:
+            if e.operator not in OPERATORS_RANKS:
+                raise SceneError(f"{scene.path}: [physics] effects: the exchange to {e.target} uses the operator "
+                                 f"{e.operator!r}, which needs whole fields on one process: not {ranks}; on "
+                                 f"several ranks: {', '.join(OPERATORS_RANKS)}")
+            if e.options.get("fraction") == "cell_centre":
+                raise SceneError(f"{scene.path}: [flow] solid_fraction: 'cell_centre' samples the whole solid "
+                                 f"mesh on one process: not {ranks}; use 'exact'")
 
     @staticmethod
     @contextmanager
@@ -146,7 +146,6 @@ class RanksRun(Run):
             self.log(f"{p.name}: {announced[p.name].get('kind')} on {meshes[p.name].num_cells if p.name in meshes else cells} "
                      f"cells; coupler rank 0 holds its ranks {client.mine}")
         self.summary["participants_announced"] = announced
-        self.summary["coupler_ranks"] = comm.size
         self.summary["sizes"] = {name: {"cells": meshes[name].num_cells, "vertices": meshes[name].num_points}
                                  if name in meshes else
                                  {"cells": comm.allreduce(sum(len(part["cell_ids"]) for part in parts[name])),
