@@ -17,11 +17,14 @@ Two scenes (one time step each):
   per-cell costs stand out from the processes' fixed memory (Python, dolfinx, PETSc, MPI).
 
 With ``--fluid chorin`` the fluid is the Chorin fluid on M slab ranks instead (``python -m
-fluid_chorin``, each rank measured).
+fluid_chorin``, each rank measured). ``--coupler-ranks 1 2`` runs each pair with the coupler on
+P ranks too (``[coupling] ranks = P``: each coupler rank ``python -m coupler.cli`` measured), into
+bench/results/ranks_coupler.json by default.
 
 Docs: docs/scaling.md "A coupled run on several ranks: what is gathered where".
 
-    .venv/bin/python bench/ranks.py [--scenes small large] [--pairs 1,1 2,1 1,2 2,2] [--fluid chorin] [-o FILE]
+    .venv/bin/python bench/ranks.py [--scenes small large] [--pairs 1,1 2,1 1,2 2,2] [--fluid chorin]
+                                    [--coupler-ranks 1 2] [-o FILE]
 """
 
 from __future__ import annotations
@@ -62,13 +65,14 @@ SCENES = {
 FLUIDS = {"openfoam": {}, "chorin": {'participant = "openfoam"': 'participant = "chorin"', "max_iterations = 3000\n": ""}}
 
 
-def scene_text(scene: str, solid_ranks: int, fluid_ranks: int, fluid: str = "openfoam") -> str:
+def scene_text(scene: str, solid_ranks: int, fluid_ranks: int, fluid: str = "openfoam", coupler_ranks: int = 1) -> str:
     text = (SMALL / "scene.toml").read_text()
     for old, new in FLUIDS[fluid].items():
         text = text.replace(old, new)
     replace = {"steps = 2": "steps = 1",
                'participant = "solid_fenicsx"': f'participant = "solid_fenicsx"\nranks = {solid_ranks}',
-               f'participant = "{fluid}"': f'participant = "{fluid}"\nranks = {fluid_ranks}', **SCENES[scene]}
+               f'participant = "{fluid}"': f'participant = "{fluid}"\nranks = {fluid_ranks}',
+               'acceleration = "iqn-ils"': f'acceleration = "iqn-ils"\nranks = {coupler_ranks}', **SCENES[scene]}
     for old, new in replace.items():
         if old not in text:
             raise SystemExit(f"bench/ranks.py: {old!r} not in cases/small_fracture/scene.toml")
@@ -85,11 +89,13 @@ def _read(pid: int, name: str) -> str:
 
 def role(pid: int, root: int) -> str | None:
     """Which process of the run ``pid`` is (None: a launcher or helper not measured)."""
-    if pid == root:
-        return "coupler"
     argv = _read(pid, "cmdline").split("\0")
     env = dict(e.split("=", 1) for e in _read(pid, "environ").split("\0") if "=" in e)
     rank = env.get("OMPI_COMM_WORLD_RANK", "0")
+    if "coupler.cli" in argv:  # the coupler on P ranks, started by `varcouple run` under mpirun
+        return f"coupler rank {rank}"
+    if pid == root:
+        return "coupler"
     if "solid_fenicsx" in argv:
         return f"solid rank {rank}"
     if "fluid_openfoam" in argv:
@@ -108,14 +114,16 @@ def peak_rss_kb(pid: int) -> int:
     return 0
 
 
-def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, fluid: str = "openfoam") -> dict:
-    """One ``varcouple run``: wall time, status and the peak resident memory [MB] per process."""
-    case = work / f"{scene}_n{solid_ranks}_m{fluid_ranks}_{fluid}"
+def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, fluid: str = "openfoam",
+                 coupler_ranks: int = 1) -> dict:
+    """One ``varcouple run``: wall time, status and the peak resident memory [MB] per process
+    (with the coupler on several ranks the ``varcouple run`` that starts them is not measured)."""
+    case = work / f"{scene}_n{solid_ranks}_m{fluid_ranks}_{fluid}_p{coupler_ranks}"
     case.mkdir(parents=True)
     for f in SMALL.iterdir():
         if f.is_file() and f.name != "scene.toml":
             (case / f.name).symlink_to(f)
-    (case / "scene.toml").write_text(scene_text(scene, solid_ranks, fluid_ranks, fluid))
+    (case / "scene.toml").write_text(scene_text(scene, solid_ranks, fluid_ranks, fluid, coupler_ranks))
     out = case / "results"
     peaks: dict[str, int] = {}
     t0 = time.perf_counter()
@@ -127,7 +135,7 @@ def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, flu
         while not done.is_set():
             for pid in [proc.pid, *descendants(proc.pid)]:
                 name = role(pid, proc.pid)
-                if name is not None:
+                if name is not None and not (name == "coupler" and coupler_ranks > 1):
                     peaks[name] = max(peaks.get(name, 0), peak_rss_kb(pid))
             time.sleep(0.02)
 
@@ -139,6 +147,7 @@ def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, flu
     wall = time.perf_counter() - t0
     summary = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else {}
     return {"scene": scene, "fluid": fluid, "solid_ranks": solid_ranks, "fluid_ranks": fluid_ranks,
+            "coupler_ranks": coupler_ranks, "coupler_holdings": summary.get("coupler_ranks"),
             "exit": proc.returncode,
             "error": err.decode(errors="replace").strip().splitlines()[-1:] if proc.returncode else [],
             "status": summary.get("status"), "wall_seconds": round(wall, 2), "sizes": summary.get("sizes"),
@@ -152,19 +161,23 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", nargs="+", default=["1,1", "2,1", "1,2", "2,2"],
                     help="solid ranks,fluid ranks")
     ap.add_argument("--fluid", choices=list(FLUIDS), default="openfoam")
+    ap.add_argument("--coupler-ranks", nargs="+", type=int, default=None, metavar="P",
+                    help="coupler ranks of every run (default: 1, the one-process coupler)")
     ap.add_argument("-o", "--output", type=Path,
                     help="default bench/results/ranks.json (ranks_chorin.json with --fluid chorin)")
     args = ap.parse_args(argv)
     if args.output is None:
-        args.output = ROOT / "bench" / "results" / ("ranks.json" if args.fluid == "openfoam" else "ranks_chorin.json")
+        name = ("ranks_coupler.json" if args.coupler_ranks else
+                "ranks.json" if args.fluid == "openfoam" else "ranks_chorin.json")
+        args.output = ROOT / "bench" / "results" / name
     runs = []
     with tempfile.TemporaryDirectory(prefix="varcouple-ranks-") as tmp:
         for scene in args.scenes:
-            for pair in args.pairs:
+            for pair, p in ((pair, p) for pair in args.pairs for p in args.coupler_ranks or [1]):
                 n, m = (int(x) for x in pair.split(","))
-                run = measured_run(scene, n, m, Path(tmp), args.fluid)
+                run = measured_run(scene, n, m, Path(tmp), args.fluid, p)
                 runs.append(run)
-                print(f"{scene:6s} solid {n} fluid {m}: exit {run['exit']}, {run['wall_seconds']:6.1f} s, "
+                print(f"{scene:6s} solid {n} fluid {m} coupler {p}: exit {run['exit']}, {run['wall_seconds']:6.1f} s, "
                       + ", ".join(f"{k} {v:.0f} MB" for k, v in run["peak_rss_mb"].items()), flush=True)
     result = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                           "load_average_after": os.getloadavg()},
