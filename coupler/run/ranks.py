@@ -203,26 +203,6 @@ class RanksRun(Run):
         self.solves.add(name, iteration, client.last_solves)
         self.figures[name] = client.last_figures
 
-    def iterate(self, window, iteration: int, x) -> np.ndarray:
-        """One pass of Steps 1-6 with the (whole) interface vector x; returns H(x), whole."""
-        given = {id(e): value for (e, _), value in zip(self._accelerated(), self._split(x))}
-        self.context.window = window
-        try:
-            for p in self.plan.participants:
-                inputs = {}
-                for e, op in zip(self.plan.exchanges, self.operators):
-                    if e.target_participant != p.name:
-                        continue
-                    value = given[id(e)] if e.accelerated else self.phases.timed("transfer", op.evaluate)
-                    inputs[e.target_field] = (self.phases.timed("transfer", op.deliver, value), op.units)
-                self._advance(p.name, window, iteration, inputs)
-            H = [self.phases.timed("transfer", op.evaluate) for _, op in self._accelerated()]
-        except CouplerError as exc:
-            if type(exc) is not CouplerError:
-                raise
-            raise CouplerError(f"{window}, iteration {iteration}: {exc}") from None
-        return np.concatenate([np.ravel(h) for h in H]) if H else np.asarray(x)
-
     # -- a converged step -------------------------------------------------------------
     def max_displacement(self) -> float | None:
         solid = self.held.get("solid")
