@@ -241,4 +241,7 @@ class SolidOnGrid:
         return {"deformed": self.deform, "rebuilds": self.builds, "rebuild_seconds": self.build_seconds,
                 "seconds_per_rebuild": self.build_seconds / self.builds if self.builds else None,
                 "skipped": self.skipped, "solid_volume_outside_grid": self.outside,
-                "fluid_cells_with_solid": int(np.count_nonzero(self.fraction > 0))}
+                "fluid_cells_with_solid": self._cells_with_solid()}
+
+    def _cells_with_solid(self) -> int:
+        return int(np.count_nonzero(self.fraction > 0))

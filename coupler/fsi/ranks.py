@@ -24,7 +24,7 @@ from transfer.distributed import Part, assemble
 from transfer.rows import Rows
 
 from .held import Held
-from .interface import sampling_points
+from .interface import SolidOnGrid, WettedInterface, sampling_points
 
 
 class GridSlab:
@@ -136,10 +136,7 @@ class WettedSlabs:
         held = self.solid.held
         return np.split(values, np.cumsum([len(i) for i in held.input_rows])[:-1]) if held.ranks else []
 
-    def describe(self) -> dict:
-        return {"method": self.method, "vertices": int(self.size), "triangles": int(self.num_triangles),
-                "offset": self.offset, "sampled_area": self.area,
-                "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+    describe = WettedInterface.describe
 
 
 class SolidOnSlabs:
@@ -203,12 +200,10 @@ class SolidOnSlabs:
         self._u = None if u is None else u.copy()
         return True
 
-    def describe(self) -> dict:
-        cells = self.comm.allreduce(int(np.count_nonzero(self.fraction > 0)))
-        return {"deformed": self.deform, "rebuilds": self.builds, "rebuild_seconds": self.build_seconds,
-                "seconds_per_rebuild": self.build_seconds / self.builds if self.builds else None,
-                "skipped": self.skipped, "solid_volume_outside_grid": self.outside,
-                "fluid_cells_with_solid": cells}
+    describe = SolidOnGrid.describe
+
+    def _cells_with_solid(self) -> int:
+        return self.comm.allreduce(int(np.count_nonzero(self.fraction > 0)))
 
 
 class RanksContext:
