@@ -33,9 +33,10 @@ class Rows:
     def move(self, held: np.ndarray, values, wanted: np.ndarray, add: bool = False) -> np.ndarray:
         """The values at the rows `wanted` from every rank's `values` at its rows `held` ((n,) or
         (n, k)); with `add` the values given for one row by several ranks are summed, else they
-        must be equal. Rows nobody holds read zero. Collective."""
+        must be equal. Rows nobody holds read zero; a rank that holds none gets (k,) columns
+        of the others' width k (scalars when k is 1). Collective."""
         values = np.asarray(values, dtype=np.float64)
-        columns = values.reshape(len(held), -1)
+        columns = values.reshape(len(held), -1) if len(held) else np.zeros((0, 0))
         width = self.comm.allreduce(columns.shape[1] if len(held) else 0, op=MPI.MAX)
         out = np.zeros((len(wanted), width))
         source, target = self._local(held), self._local(wanted)
@@ -44,7 +45,8 @@ class Rows:
             source.put(columns[:, c] if columns.shape[1] else np.zeros(len(held)),
                        PETSc.InsertMode.ADD_VALUES if add else PETSc.InsertMode.INSERT_VALUES)
             out[:, c] = target.get()
-        return out.reshape((len(wanted),) + values.shape[1:]) if values.ndim > 1 else out[:, 0]
+        shape = values.shape[1:] if len(held) else (width,) * (width > 1)
+        return out.reshape((len(wanted),) + shape)
 
     def block(self, held: np.ndarray, values, add: bool = False) -> np.ndarray:
         """This rank's block of the rows (``ranges[rank]`` to ``ranges[rank + 1]``) from every
@@ -54,8 +56,4 @@ class Rows:
                                                     PETSc.InsertMode.ADD_VALUES if add else
                                                     PETSc.InsertMode.INSERT_VALUES)
         return self.vec.array.copy()
-
-    def whole(self, block: np.ndarray) -> np.ndarray:
-        """Every rank's block joined, on every rank (the interim gather of a surface field)."""
-        return np.concatenate(self.comm.allgather(np.asarray(block)))
 

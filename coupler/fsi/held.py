@@ -9,9 +9,9 @@ the values a coupler rank computed to the input rows of its parts, through
 from __future__ import annotations
 
 import numpy as np
-from mpi4py import MPI
 
 from coupler.errors import CouplerError
+from transfer import Mesh
 from transfer.rows import Rows
 
 
@@ -50,8 +50,20 @@ class Held:
         return np.split(rows, np.cumsum([len(i) for i in self.input_rows])[:-1]) if self.ranks else []
 
     def max_norm(self, field: str) -> float:
-        """max over the rows of |value| (the Euclidean norm of each row of a vector field). Collective."""
+        """max over this rank's rows of |value| (the Euclidean norm of each row of a vector
+        field; 0 without rows)."""
         a = self.fields.get(field)
-        local = float(np.max(np.linalg.norm(a.reshape(len(a), -1), axis=1))) if a is not None and len(a) else 0.0
-        return self.comm.allreduce(local, op=MPI.MAX)
+        return float(np.max(np.linalg.norm(a.reshape(len(a), -1), axis=1))) if a is not None and len(a) else 0.0
+
+    def mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
+        """(vertices, mesh): the tetrahedra of the parts held here (their `geometry`) on the global
+        `vertices` they use, with the coordinates of those owned elsewhere fetched. Collective."""
+        points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
+        cells = [np.asarray(g["cells"], np.int64).reshape(-1, 4) for g in geometry]
+        cells = np.concatenate(cells) if cells else np.zeros((0, 4), np.int64)
+        vertices, local = np.unique(cells, return_inverse=True)
+        reference = self.rows.move(self.out_ids, np.concatenate(points) if points else np.zeros((0, 3)),
+                                   vertices).reshape(-1, 3)
+        return vertices, (Mesh(reference, local.reshape(-1, 4), "tetra", name=f"{self.name} part", reorient=True)
+                          if len(cells) else Mesh.empty("tetra", f"{self.name} part"))
 

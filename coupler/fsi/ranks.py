@@ -6,9 +6,9 @@ distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the defo
 solid fraction and the solid velocity on the grid (Step 6, before Step 1).
 
 The interface vector of the fixed point (one pressure per interface vertex, numbered as the
-serial run numbers them: by increasing solid vertex id) is, until the accelerators take a
-communicator, gathered whole on every rank (a surface field); every rank then runs the same
-accelerator on the same vector and takes the same decisions."""
+serial run numbers them: by increasing solid vertex id) is split by rows over the ranks
+(:class:`transfer.rows.Rows`' blocks): each rank gives the accelerator and the loop its own
+rows and their weights (docs/scaling.md, step 4), nothing is gathered."""
 
 from __future__ import annotations
 
@@ -51,18 +51,10 @@ class SolidPart:
 
     def __init__(self, comm, held: Held, geometry: list[dict]):
         self.comm, self.held = comm, held
-        points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
-        cells = [np.asarray(g["cells"], np.int64).reshape(-1, 4) for g in geometry]
         triangles = [np.asarray(g["interface_triangles"], np.int64).reshape(-1, 3)
                      for g in geometry if "interface_triangles" in g]
-        cells = np.concatenate(cells) if cells else np.zeros((0, 4), np.int64)
-        self.num_cells = comm.allreduce(len(cells))
-        self.vertices, local = np.unique(cells, return_inverse=True)
-        self.reference = held.rows.move(held.out_ids, np.concatenate(points) if points else np.zeros((0, 3)),
-                                        self.vertices).reshape(-1, 3)
-        self.mesh = (Mesh(self.reference, local.reshape(-1, 4), "tetra", name="solid part", reorient=True)
-                     if len(cells) else Mesh.empty("tetra", "solid part"))
-        self.cells = self.mesh.cells
+        self.vertices, self.mesh = held.mesh(geometry)
+        self.reference, self.cells = self.mesh.points, self.mesh.cells
         self.triangles = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
         self.wetted = comm.allreduce(len(self.triangles)) > 0
         self._interface_numbering()
@@ -91,13 +83,16 @@ class SolidPart:
 class WettedSlabs:
     """:class:`coupler.fsi.interface.WettedInterface` on several ranks: this rank's wetted
     triangles moved into the fluid (normals summed over every rank's triangles), the pressure
-    traced from the grid slabs (distributed pseudo-L2), the interface vector whole on every rank."""
+    traced from the grid slabs (distributed pseudo-L2); the interface vector and its weights (the
+    lumped surface mass) at this rank's rows ``block`` of the interface numbering."""
 
     method = "surface trace"
 
     def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, points=None):
         self.comm, self.solid = comm, solid
         self.rows = Rows(comm, solid.interface_count)
+        self.block = np.arange(self.rows.ranges[comm.rank], self.rows.ranges[comm.rank + 1], dtype=np.int64)
+        self._inputs = np.maximum(solid.input_interface, 0)
         ids, vertices = solid.interface_ids, solid.interface_vertices
         at = np.searchsorted(solid.vertices, vertices)
         here = (solid.reference if points is None else points)[at]
@@ -119,20 +114,19 @@ class WettedSlabs:
             raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled up to "
                                f"{self.offset:.3g} m outside the solid ({uncovered} of {solid.interface_count} "
                                f"vertices outside the grid): extend the grid beyond the wetted boundary")
-        self.weights = self.rows.whole(self.transfer.row_sums())  # lumped surface mass, whole
+        self.weights = self.transfer.row_sums()  # the lumped surface mass at `block`
         self.area = comm.allreduce(float(surface.cell_measures().sum()) if len(triangles) else 0.0)
         self.size = solid.interface_count
         self.num_triangles = comm.allreduce(len(triangles))
 
     def from_fluid(self, pressure) -> np.ndarray:
-        """The interface vector (whole, on every rank) from the cell pressure at this rank's slab."""
-        return self.rows.whole(self.rows.block(self.solid.interface_ids, self.transfer.apply(pressure)))
+        """The interface vector at `block` from the cell pressure at this rank's slab. Collective."""
+        return self.rows.block(self.solid.interface_ids, self.transfer.apply(pressure))
 
     def to_solid_parts(self, x) -> list[np.ndarray]:
-        """The interface pressure (whole) at the input rows of each solid part held here (zero off
-        the interface)."""
-        index = self.solid.input_interface
-        values = np.where(index >= 0, np.asarray(x)[np.maximum(index, 0)], 0.0)
+        """The interface pressure `x` (at `block`, on every rank) at the input rows of each solid
+        part held here (zero off the interface). Collective."""
+        values = np.where(self.solid.input_interface >= 0, self.rows.move(self.block, x, self._inputs), 0.0)
         held = self.solid.held
         return np.split(values, np.cumsum([len(i) for i in held.input_rows])[:-1]) if held.ranks else []
 
@@ -246,7 +240,8 @@ class FluidSolidRanks:
                                         "solid_vertices": len(self.solid.vertices),
                                         "solid_rows": len(self.solid_held.out_ids),
                                         "fluid_rows": len(self.fluid_held.out_ids),
-                                        "interface_triangles": len(self.solid.triangles)})
+                                        "interface_triangles": len(self.solid.triangles),
+                                        "interface_rows": len(interface.block)})
 
     def update(self) -> SolidOnSlabs:
         """The solid on the slabs as its latest displacement deforms it, once per new output. Collective."""
@@ -268,14 +263,16 @@ def fluid_solid_ranks(ctx: RanksContext) -> FluidSolidRanks:
 
 
 class PressureTraceRanks:
-    """:class:`coupler.fsi.operators.PressureTrace` on several ranks: the interface vector whole
-    on every rank, delivered at the input rows of the solid parts held here."""
+    """:class:`coupler.fsi.operators.PressureTrace` on several ranks: ``size`` and ``weights``
+    are this rank's rows of the interface vector, delivered at the input rows of the solid parts
+    held here."""
 
     units = "Pa"
 
     def __init__(self, ctx: RanksContext, exchange=None):
         self.fs = fluid_solid_ranks(ctx)
-        self.size, self.weights = self.fs.on_grid.interface.size, self.fs.on_grid.reference_weights
+        self.weights = self.fs.on_grid.reference_weights
+        self.size = len(self.weights)
 
     def evaluate(self, outputs=None) -> np.ndarray:
         return self.fs.on_grid.interface.from_fluid(self.fs.fluid_held.fetch("pressure", self.fs.slab.ids))

@@ -10,10 +10,11 @@ their requests and receives their parts directly, and holds their rows
 (:class:`coupler.fsi.held.Held`). The operators are the distributed ones of
 :mod:`coupler.fsi.ranks`. Whatever fails on one rank is raised on every rank (:func:`agree`).
 
-Interim, until the accelerators and the output take a communicator: the interface vector (a
-surface field) is whole on every rank, which run the same accelerator; rank 0 gathers each
-participant's fields to write the VTU files of an output step, and writes the summary.
-Operators, checks, monitors and pictures that need a whole field on one process refuse P > 1
+Nothing is gathered: each rank gives the accelerator and the loop its own rows of the interface
+vector and their weights (``comm``: docs/scaling.md, step 4), writes the piece of each
+participant it works on (:meth:`RanksRun.pieces`: a ``.pvtu`` of per-rank ``.vtu`` files, step
+5), and the summary's figures are reduced over the ranks (rank 0 writes it). Operators, checks,
+monitors and pictures that need a whole field on one process refuse P > 1
 (:meth:`RanksRun.admit`)."""
 
 from __future__ import annotations
@@ -26,14 +27,14 @@ import numpy as np
 from coupler.errors import CouplerError, SceneError
 from coupler.fsi.context import OperatorContext
 from coupler.fsi.held import Held, assigned
-from coupler.fsi.ranks import OPERATORS_RANKS, RanksContext
-from coupler.output.results import Series
+from coupler.fsi.ranks import OPERATORS_RANKS, GridSlab, RanksContext
+from coupler.output.results import REDUCTIONS, Series, reduce_figures
 from coupler.protocol.wire import Field, SolveReport
 from coupler.run.client import CouplerSession
 from coupler.run.launch import Launcher
 from coupler.run.runner import Run, write_series
 from coupler.run.solves import StepSolves
-from transfer import Mesh, StructuredGrid
+from transfer import StructuredGrid
 
 
 def agree(comm, fn, *args, **kwargs):
@@ -157,8 +158,18 @@ class RanksRun(Run):
                                               for e in self.plan.exchanges])
         self.monitors = {}
         self.summary.update(self.context.summary())
-        self.geometry = parts
-        self.series = {name: Series(self.out, name, meshes.get(name)) for name in self.held} if self.root else {}
+        self.pieces = agree(comm, lambda: {name: self.piece(name, parts[name]) for name in self.held})
+        self.series = {name: Series(self.out, name, mesh, comm) for name, (mesh, _) in self.pieces.items()}
+
+    def piece(self, name: str, geometry: list[dict]):
+        """(mesh, row ids): what this rank writes of participant `name`: its slab of a grid
+        (:class:`coupler.fsi.ranks.GridSlab`, cell rows), or the tetrahedra of the parts held here
+        on the vertices they use (point rows). Collective."""
+        if name in self.meshes:
+            slab = GridSlab(self.comm, self.meshes[name], f"{self.scene.path}: [geometry.{name}]")
+            return slab.part.mesh, slab.ids
+        vertices, mesh = self.held[name].mesh(geometry)
+        return mesh, vertices
 
     def _configure(self, client, config, timeout) -> dict:
         client.wait_alive(timeout)
@@ -206,23 +217,22 @@ class RanksRun(Run):
     # -- a converged step -------------------------------------------------------------
     def max_displacement(self) -> float | None:
         solid = self.held.get("solid")
-        return solid.max_norm("displacement") if solid is not None and "displacement" in solid.fields else None
+        if solid is None or "displacement" not in solid.fields:
+            return None
+        local = {"max_displacement": solid.max_norm("displacement")}
+        return reduce_figures(local, REDUCTIONS, self.comm)["max_displacement"]
 
     def write_fields(self, window, x) -> None:
-        """Interim (until the output writes per-rank pieces): rank 0 gathers each participant's
-        rows and its mesh and writes the VTU files of the step."""
+        """Each rank writes its piece of every participant (:meth:`piece`): the outputs and inputs
+        of the step moved from the rows held here to the piece's rows. Collective."""
         accepted = {(e.target_participant, e.target_field): op.deliver(value)
                     for (e, op), value in zip(self._accelerated(), self._split(x))}
         for name, held in self.held.items():
+            mesh, ids = self.pieces[name]
             inputs = {**self.inputs.get(name, {}), **{f: v for (n, f), v in accepted.items() if n == name}}
-            rows = [(held.out_ids, held.fields)] + [(held.in_ids, {k: _rows(v) for k, v in inputs.items()})]
-            geometry = self.geometry[name]
-            solid = [(g["point_ids"], g["points"], g["cell_ids"], g["cells"]) for g in geometry if "cells" in g]
-            pieces = self.comm.gather((rows, solid), root=0)
-            if self.root:
-                mesh = self.meshes.get(name) or _whole_mesh(name, [s for _, found in pieces for s in found])
-                self.series[name].mesh = mesh
-                write_series(self.series[name], mesh, name, window, _whole_fields(held.count, pieces))
+            fields = {k: held.rows.move(held.out_ids, v, ids) for k, v in held.fields.items()}
+            fields.update({k: held.rows.move(held.in_ids, _rows(v), ids) for k, v in inputs.items()})
+            write_series(self.series[name], mesh, name, window, fields)
 
     def execute(self, progress) -> dict:
         return super().execute(progress and self.root)
@@ -274,29 +284,3 @@ def _reports(solves, figures):
 def _rows(per_part) -> np.ndarray:
     """An input given per part (a list of arrays) as one array of rows."""
     return np.concatenate(per_part) if len(per_part) else np.zeros(0)
-
-
-def _whole_fields(count: int, pieces) -> dict[str, np.ndarray]:
-    """Every field of a participant in input numbering from every rank's (ids, fields) rows."""
-    out: dict[str, np.ndarray] = {}
-    for rows, _ in pieces:
-        for ids, fields in rows:
-            for k, v in fields.items():
-                v = np.asarray(v)
-                if len(v) != len(ids):
-                    continue
-                if k not in out:
-                    out[k] = np.zeros((count, *v.shape[1:]), v.dtype)
-                out[k][ids] = v
-    return out
-
-
-def _whole_mesh(name: str, parts) -> Mesh:
-    """The whole solid mesh (for rank 0's VTU files) from the parts' geometry."""
-    count = sum(len(p[0]) for p in parts)
-    points = np.zeros((count, 3))
-    cells = np.zeros((sum(len(p[2]) for p in parts), 4), np.int64)
-    for point_ids, xyz, cell_ids, tets in parts:
-        points[point_ids] = xyz
-        cells[cell_ids] = tets
-    return Mesh(points, cells, "tetra", name=f"{name} mesh", reorient=True)

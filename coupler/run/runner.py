@@ -207,6 +207,8 @@ class Run:
 
     #: this process writes the run's files (rank 0 of a coupler on several ranks)
     root = True
+    #: the coupler's ranks when the interface vector is split by rows over them (None: one process)
+    comm = None
 
     @staticmethod
     def admit(scene, plan: Plan, comm) -> None:
@@ -331,8 +333,7 @@ class Run:
             record["max_displacement"] = largest
         self.summary["steps"].append(record)
         self.summary.update(self.context.summary())
-        if self.root:
-            write_summary(self.out, self.summary)
+        write_summary(self.out, self.summary, comm=self.comm)
         if not inner.converged:
             raise inner.error(window.index)
 
@@ -361,7 +362,7 @@ class Run:
             x0 = np.concatenate([op.initial() if hasattr(op, "initial") else np.zeros(op.size) for _, op in accelerated])
             weights = np.concatenate([op.weights for _, op in accelerated])
             accelerator = make_accelerator(c["acceleration"], relaxation=c["relaxation"], reuse=c["reuse"],
-                                           max_columns=c["columns"])
+                                           max_columns=c["columns"], comm=self.comm)
             mode, checkpoint = "implicit", self
         else:
             x0, weights, accelerator, mode, checkpoint = np.zeros(0), None, None, "explicit", None
@@ -370,7 +371,7 @@ class Run:
             result = run_coupled(steps, dt, self.iterate, x0, accelerator, tolerance=scene.coupling["tolerance"],
                                  max_iterations=scene.coupling["max_iterations"], checkpoint=checkpoint,
                                  on_converged=self.on_converged, progress=bar, weights=weights, coupling=mode,
-                                 unmet=self.unmet)
+                                 unmet=self.unmet, comm=self.comm)
         finally:
             bar.close()
         self.summary["accelerator"] = result.accelerator

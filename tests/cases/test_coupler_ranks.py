@@ -38,11 +38,18 @@ def holdings(out) -> list[dict]:
 @needs_mpi
 def test_two_coupler_ranks_give_the_serial_run(tmp_path):
     """Solid and fluid on 2 ranks each: coupler ranks 0 and 1 each talk to one rank of each; the
-    fields of every VTU file and every summary figure equal the one-rank coupler's to 1e-10, with
-    the same iterations; each rank holds half the grid and its solid rank's cells only."""
+    fields of every VTU file (joined from each rank's piece) and every summary figure equal the
+    one-rank coupler's to 1e-10, with the same iterations; each rank holds half the grid, its
+    solid rank's cells and a part of the interface vector only, and writes its pieces."""
     serial, ranks = coupled(tmp_path, 1, 2, 2), coupled(tmp_path, 2, 2, 2)
     assert_same(serial, ranks, "coupler on 2 ranks")
+    assert sorted(f.name for f in ranks.glob("*_0000*")) == [
+        "fluid_0000.pvtu", "fluid_0000_p0.vtu", "fluid_0000_p1.vtu",
+        "solid_0000.pvtu", "solid_0000_p0.vtu", "solid_0000_p1.vtu"]
     held = holdings(ranks)
+    interface = json.loads((serial / "summary.json").read_text())["interface"]["vertices"]
+    assert sum(h["interface_rows"] for h in held) == interface == 462
+    assert all(0 < h["interface_rows"] < interface for h in held)
     assert len(held) == 2
     assert sum(h["grid_cells"] for h in held) == 21 * 11 * 11 and all(h["grid_cells"] < 21 * 11 * 11 for h in held)
     assert sum(h["solid_cells"] for h in held) == 4800 and all(0 < h["solid_cells"] < 4800 for h in held)
