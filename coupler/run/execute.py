@@ -7,7 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
-from contextlib import nullcontext
+from contextlib import ExitStack, nullcontext
 
 from coupler.errors import CouplerError, NotConverged, RunFailed, SceneError, one_line
 from coupler.protocol.mpi import mpi_environment
@@ -65,7 +65,11 @@ def execute(scene, origin: str, log=print) -> dict:
         run_id = new_run_id()
         lock = OutputLock(scene.output_dir, run_id)
         out = prepare(scene.output_dir, origin)
-    with lock:
+    with ExitStack() as stack:
+        if comm is None:
+            stack.enter_context(lock)
+        else:  # rank 0's lock refused (another run writes there): every rank raises it
+            agree(comm, stack.enter_context, lock)
         if getattr(lock, "note", None):
             log(f"note: {out}: {lock.note}")
         try:

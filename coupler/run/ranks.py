@@ -45,6 +45,13 @@ def agree(comm, fn, *args, **kwargs):
         result = fn(*args, **kwargs)
     except Exception as exc:  # noqa: BLE001 - passed on to every rank
         failure, result = exc, None
+    vote(comm, failure)
+    return result
+
+
+def vote(comm, failure: Exception | None) -> None:
+    """Raise `failure` (this rank's) or, when it is None, the failure of the lowest rank that
+    has one; return when no rank has one. Collective."""
     sent = failure
     if failure is not None:
         try:
@@ -56,7 +63,6 @@ def agree(comm, fn, *args, **kwargs):
         raise failure
     if first is not None:
         raise first
-    return result
 
 
 class RanksRun(Run):
@@ -178,8 +184,22 @@ class RanksRun(Run):
         return announced
 
     def _exchange(self, client, verb: str, header, parts: list, timeout=None):
-        client.wait_alive(timeout)
-        return client.exchange(verb, header, parts, timeout, before_root=self.comm.Barrier)
+        """`client`'s exchange of this rank's parts; the coupler's ranks vote once every rank has
+        sent its requests, before rank 0's (which starts the participant's ranks): a rank that
+        failed before votes its failure, and every rank raises it instead of waiting."""
+        voted = []
+
+        def ready():
+            voted.append(True)
+            vote(self.comm, None)
+
+        try:
+            client.wait_alive(timeout)
+            return client.exchange(verb, header, parts, timeout, before_root=ready)
+        except Exception as exc:
+            if not voted:
+                vote(self.comm, exc)
+            raise
 
     def _hold(self, name: str, header: dict, replies) -> tuple[Held, list[dict]]:
         """This rank's share of participant `name` from its parts' geometry replies."""
