@@ -115,7 +115,7 @@ class CaseSpec:
     substeps: int                      # pimpleFoam time steps per coupling step
     outer_correctors: int              # PIMPLE outer iterations per time step at most
     solid_velocity: str                # "bodies": one velocity source per solid body (zones.py); "none"
-    ranks: int                         # MPI ranks of the solver (decomposed case, parallel.py)
+    ranks: int                         # processors of the decomposed case (parallel.py): the participant's ranks
     decomposition: str                 # decomposePar method with ranks > 1
     rho: float = 1000.0
     mu: float = 1.0e-3
@@ -147,7 +147,8 @@ class CaseSpec:
         return [[0.0, 0.0], [1.0, self.drag_value()]]
 
     @classmethod
-    def from_config(cls, config: dict) -> "CaseSpec":
+    def from_config(cls, config: dict, ranks: int = 1) -> "CaseSpec":
+        """The case of a fluid configuration, decomposed in ``ranks`` processors (the participant's)."""
         grid = Grid.from_config(config.get("grid"))
         faces = face_conditions(config)
         for d, (a, b) in enumerate((("xmin", "xmax"), ("ymin", "ymax"), ("zmin", "zmax"))):
@@ -156,7 +157,7 @@ class CaseSpec:
                 raise ValueError(f"'empty' needs both {a} and {b} and one cell in that direction")
         settings = PARTICIPANT.configuration(config)
         del settings["keep_case"]  # the coupler's: it gives case_dir then
-        spec = cls(grid, faces, **settings,
+        spec = cls(grid, faces, **settings, ranks=int(ranks),
                    rho=float(config.get("rho", 1000.0)), mu=float(config.get("mu", 1.0e-3)),
                    drag_table=config.get("drag_table"), dt=float(config.get("dt", 1.0)),
                    transient=bool(config.get("transient", False)))

@@ -204,6 +204,7 @@ def read_label_list(path) -> np.ndarray:
 def read_patches(path) -> dict[str, tuple[int, int]]:
     """``constant/polyMesh/boundary``: {patch: (startFace, nFaces)}."""
     text = Path(path).read_text(errors="replace")
+    _header(text.encode(), path)  # FieldFormatError naming the file without one
     text = text[text.index("}", text.index("FoamFile")) + 1:]
     out = {}
     for name, body in re.findall(r"(\w+)\s*\{([^}]*)\}", text):

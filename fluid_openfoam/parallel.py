@@ -7,13 +7,15 @@ that is also what a graph partitioner would aim for. ``scotch`` is not offered: 
 OpenFOAM v1912 ships only the dummy ``libscotchDecomp.so`` (decomposePar stops with "Please
 install <scotch>"). Every solve then runs ``mpirun -np N <solver> -parallel``.
 
-The participant never reconstructs: it writes the solver's inputs (the ``solid`` drag field
-and the masked inlet velocity ``U``) straight into ``processorI/<time>/`` and reads ``U`` and
-``p`` from there, through ``processorI/constant/polyMesh/cellProcAddressing`` (the global
-cell of each local cell; blockMesh numbering, x fastest). Processor patches get
-``"procBoundary.*" { type processor; value uniform 0; }``: the solver overwrites their
-values with the neighbour's cells before it uses them. Time directories live in every
-``processorI``; the case root keeps only ``0`` and the dictionaries.
+Nothing is reconstructed: the solver's inputs (the ``solid`` drag field and the masked inlet
+velocity ``U``) are written straight into ``processorI/<time>/`` and ``U`` and ``p`` read from
+there, through ``processorI/constant/polyMesh/cellProcAddressing`` (the global cell of each
+local cell; blockMesh numbering, x fastest). The participant runs as one process per processor
+(rank r handles ``processor<r>`` only: :class:`Decomposition` with ``mine = [r]``); one process
+may also handle every processor (``mine`` None: arrays of the whole grid). Processor patches get
+``"procBoundary.*" { type processor; value uniform 0; }``: the solver overwrites their values
+with the neighbour's cells before it uses them. Time directories live in every ``processorI``;
+the case root keeps only ``0`` and the dictionaries.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from . import case as _case
+from .errors import OpenFOAMError
 from .fields import read_internal_field, read_label_list, read_patches
 from .settings import DECOMPOSITIONS
 
@@ -70,33 +73,60 @@ def patch_cells(mesh_dir) -> dict[str, np.ndarray]:
 
 
 class Decomposition:
-    """The processor directories of a decomposed case and the maps between them and the grid."""
+    """The processor directories of a decomposed case this process handles (``mine``: their
+    numbers; None: every processor) and the maps between them and the grid. Its arrays hold the
+    rows of :attr:`cell_ids`: the grid's cells in grid order when it handles every processor,
+    else its processors' cells in their local order (``cellProcAddressing``)."""
 
-    def __init__(self, case_dir, spec: _case.CaseSpec):
+    def __init__(self, case_dir, spec: _case.CaseSpec, mine: list[int] | None = None):
         self.case = Path(case_dir)
         self.spec = spec
         self.ranks = int(spec.ranks)
         self.method = spec.decomposition
-        self.processors = [self.case / f"processor{r}" for r in range(self.ranks)]
+        self.whole = mine is None
+        self.processors = [self.case / f"processor{r}" for r in (range(self.ranks) if mine is None else mine)]
         self.cells: list[np.ndarray] = []
+        self.rows: list[np.ndarray] = []  # where each processor's cells go in this process's arrays
         self.patch_cells: list[dict[str, np.ndarray]] = []
 
     def decompose(self, run) -> None:
         """Write system/decomposeParDict and run decomposePar (``run`` is the solver's
-        :meth:`OpenFOAMSolver.run`); read every processor's cell addressing and patches."""
+        :meth:`OpenFOAMSolver.run`; once, by one process)."""
         (self.case / "system" / "decomposeParDict").write_text(
             decompose_par_dict(self.ranks, self.method, self.spec.grid.shape))
         run("decomposePar", "-force")
-        self.cells, self.patch_cells = [], []
+
+    def read_addressing(self) -> None:
+        """Read the cell addressing and patches of this process's processors; OpenFOAMError naming
+        the file when one is missing or malformed, or when they do not number the grid's cells
+        (handling every processor: each cell once)."""
+        self.cells, self.rows, self.patch_cells = [], [], []
+        n = self.spec.grid.n_cells
         for proc in self.processors:
             mesh = proc / "constant" / "polyMesh"
-            self.cells.append(read_label_list(mesh / "cellProcAddressing"))
-            self.patch_cells.append(patch_cells(mesh))
-        covered = np.zeros(self.spec.grid.n_cells, dtype=int)
-        for cells in self.cells:
-            np.add.at(covered, cells, 1)
-        if not np.all(covered == 1):
-            raise RuntimeError(f"{self.case}: cellProcAddressing does not cover every cell once")
+            for name in ("cellProcAddressing", "boundary", "owner"):
+                if not (mesh / name).is_file():
+                    raise OpenFOAMError(f"{mesh / name}: missing (decomposePar did not write {proc.name})")
+            cells = read_label_list(mesh / "cellProcAddressing")  # a FieldFormatError names the file
+            patches = patch_cells(mesh)
+            if len(cells) == 0 or cells.min() < 0 or cells.max() >= n or len(np.unique(cells)) != len(cells):
+                raise OpenFOAMError(f"{mesh / 'cellProcAddressing'}: not distinct cells of the grid's 0..{n - 1}")
+            if "xmin" not in patches:
+                raise OpenFOAMError(f"{mesh / 'boundary'}: no patch xmin")
+            self.cells.append(cells)
+            self.patch_cells.append(patches)
+        self.rows = list(self.cells) if self.whole else [np.arange(len(c)) for c in self.cells]
+        if self.whole:
+            covered = np.zeros(n, dtype=int)
+            for cells in self.cells:
+                np.add.at(covered, cells, 1)
+            if not np.all(covered == 1):
+                raise OpenFOAMError(f"{self.case}: cellProcAddressing does not cover every cell once")
+
+    @property
+    def cell_ids(self) -> np.ndarray:
+        """The grid cell of each row of this process's arrays."""
+        return np.arange(self.spec.grid.n_cells) if self.whole else np.concatenate(self.cells)
 
     def mpi_command(self, command: list[str]) -> list[str]:
         """``mpirun -np N <solver> -parallel ...`` for a solver command line, to run with the
@@ -108,7 +138,7 @@ class Decomposition:
 
     @property
     def time_root(self) -> Path:
-        """Where the time directories appear (processor0; every processor has the same)."""
+        """Where this process's time directories appear (its first processor; every one has the same)."""
         return self.processors[0]
 
     def remove_time(self, name: str) -> None:
@@ -116,11 +146,11 @@ class Decomposition:
             shutil.rmtree(proc / name, ignore_errors=True)
 
     def read(self, time: str, name: str) -> np.ndarray:
-        """A cell field of every processor's ``time`` directory, in global cell order."""
+        """A cell field of this process's processors' ``time`` directory, in the rows of :attr:`cell_ids`."""
         parts = [read_internal_field(proc / time / name, len(cells)) for proc, cells in zip(self.processors, self.cells)]
-        out = np.empty((self.spec.grid.n_cells, *parts[0].shape[1:]))
-        for cells, part in zip(self.cells, parts):
-            out[cells] = part
+        out = np.empty((sum(len(c) for c in self.cells), *parts[0].shape[1:]))
+        for rows, part in zip(self.rows, parts):
+            out[rows] = part
         return out
 
     def write_cell_sets(self, sets: dict[str, np.ndarray]) -> None:
@@ -135,6 +165,7 @@ class Decomposition:
                 write_cell_set(folder / name, name, np.flatnonzero(np.isin(cells, members)))
 
     def write_inputs(self, time: str, fraction: np.ndarray, drag: np.ndarray) -> None:
-        """:func:`fluid_openfoam.case.write_inputs` in every processor's ``time`` directory."""
-        for proc, cells, patches in zip(self.processors, self.cells, self.patch_cells):
-            _case.write_inputs(proc / time, self.spec, fraction[cells], drag[cells], patches["xmin"], processor=True)
+        """:func:`fluid_openfoam.case.write_inputs` in each processor's ``time`` directory
+        (``fraction``, ``drag``: the rows of :attr:`cell_ids`)."""
+        for proc, rows, patches in zip(self.processors, self.rows, self.patch_cells):
+            _case.write_inputs(proc / time, self.spec, fraction[rows], drag[rows], patches["xmin"], processor=True)

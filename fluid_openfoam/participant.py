@@ -39,6 +39,18 @@ the body move through it); ``"none"`` penalizes the solid towards rest. A zero v
 (OpenFOAM's kinematic p times rho) and ``velocity`` (n_cells, 3) in m/s, at cell
 centres, x fastest.
 
+MPI: with ``[solvers.fluid] ranks = M > 1`` the participant runs as M processes (``mpirun -n
+M``), the case decomposed in M processors: rank r handles ``processor<r>`` only
+(:mod:`fluid_openfoam.solver`, :mod:`fluid_openfoam.parallel`). Rank 0 writes the case and runs
+every OpenFOAM binary (``mpirun -np M simpleFoam -parallel``) while the others wait on the
+participant's communicator; each rank writes the drag and inlet of its own cells and answers
+with their pressure and velocity (``cell_ids``: ``cellProcAddressing``; docs/protocol.md,
+"Parts"). Its inputs (``input_ids``) are its cells and those the drag of its cells reads (one
+cell further along each axis with the "wall" penalization: :data:`transfer.penalization.REACH`);
+with rigid bodies (``solid_velocity = "bodies"`` and ``transient``) the whole grid (a body
+connects across the processors). The processes share the case directory: one host, or a shared
+file system.
+
 State: the time directory the solver starts from. Each ``advance`` starts from the current
 one (a warm start) and makes its result current; ``save_state(w)`` remembers it,
 ``restore_state(w)`` goes back to it, so a repeated window gives identical outputs.
@@ -53,8 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coupler.protocol.participant import scratch_dir
-from coupler.protocol.participant import Participant
+from coupler.protocol.participant import Participant, on_root, scratch_dir
 from coupler.protocol.wire import Field
 
 from .case import CaseSpec
@@ -80,16 +91,16 @@ class FluidParticipant(Participant):
                 "accepts": ["solid_fraction", "solid_velocity"], "location": "cells"}
 
     def configure(self, config: dict) -> None:
-        if config.get("location", "cells") != "cells":
-            raise ValueError(f"fluid_openfoam serves cell values only (location 'cells'), got {config.get('location')!r}")
-        spec = CaseSpec.from_config(config)
+        spec = on_root(self.comm, self._spec, config)
         self._cleanup()
         self.solver = self.spec = None
         case_dir = config.get("case_dir")
-        if case_dir is None:
+        if case_dir is None and self.rank == 0:
             self._tmp = scratch_dir(self.run_id, self.name)
             case_dir = self._tmp / "case"
-        solver = OpenFOAMSolver(case_dir, spec)
+        if self.comm is not None:
+            case_dir = self.comm.bcast(case_dir, root=0)  # rank 0's scratch directory: the case of all
+        solver = OpenFOAMSolver(case_dir, spec, comm=self.comm)
         try:
             solver.setup()
         except Exception:
@@ -97,23 +108,47 @@ class FluidParticipant(Participant):
             raise
         self.spec, self.solver = spec, solver
         self.saved = {}
-        self.fraction = np.zeros(spec.grid.n_cells)
-        log.info("fluid_openfoam: grid %s (%d cells), nu %g, drag %g 1/s, case %s", spec.grid.shape,
-                 spec.grid.n_cells, spec.nu, spec.drag_value(), case_dir)
+        self.fraction = np.zeros(len(solver.input_ids))
+        log.info("fluid_openfoam: grid %s (%d cells), nu %g, drag %g 1/s, case %s%s", spec.grid.shape,
+                 spec.grid.n_cells, spec.nu, spec.drag_value(), case_dir,
+                 f"; rank {self.rank} of {self.size}: processor{self.rank}, {len(solver.cell_ids)} cells, "
+                 f"{len(solver.input_ids)} input cells" if self.size > 1 else "")
+
+    def _spec(self, config: dict) -> CaseSpec:
+        if config.get("location", "cells") != "cells":
+            raise ValueError(f"fluid_openfoam serves cell values only (location 'cells'), got {config.get('location')!r}")
+        return CaseSpec.from_config(config, ranks=self.size)
 
     def geometry(self):
         if self.spec is None:
             raise RuntimeError("geometry before configure")
-        return {"grid": self.spec.grid.to_json(), "location": "cells"}, None
+        header = {"grid": self.spec.grid.to_json(), "location": "cells"}
+        if self.size == 1:
+            return header, None
+        return header, {"cell_ids": self.solver.cell_ids, "input_ids": self.solver.input_ids}
+
+    def input_problem(self, inputs) -> str | None:
+        """An input that is not one row per input cell of this process (:attr:`OpenFOAMSolver.input_ids`)."""
+        if self.solver is None:
+            return "advance before configure"
+        n = len(self.solver.input_ids)
+        if "solid_velocity" in inputs and self.spec.solid_velocity == "bodies" and not self.solver.whole_inputs:
+            return ("input 'solid_velocity' with solid_velocity 'bodies' needs every cell's inputs (a body connects "
+                    "across the processors): a steady fluid on several ranks receives its processor's cells only")
+        for name, f in inputs.items():
+            want = (n,) if name == "solid_fraction" else (n, 3)
+            if name in ("solid_fraction", "solid_velocity") and f.data.shape != want:
+                mine = "" if self.size == 1 else (f" (rank {self.rank}'s input_ids: processor{self.rank}'s cells and "
+                                                  f"{'the whole grid' if self.solver.whole_inputs else 'their drag reach'})")
+                return f"input {name!r} has shape {f.data.shape}, expected {want}{mine}"
+        return None
 
     def advance(self, window, iteration, t, dt, inputs):
         if self.solver is None:
             raise RuntimeError("advance before configure")
-        n = self.spec.grid.n_cells
-        for name, f in inputs.items():
-            want = (n,) if name == "solid_fraction" else (n, 3)
-            if name in ("solid_fraction", "solid_velocity") and f.data.shape != want:
-                raise ValueError(f"input {name!r} has shape {f.data.shape}, expected {want}")
+        problem = self.input_problem(inputs)
+        if problem:
+            raise ValueError(problem)
         if "solid_fraction" in inputs:
             self.fraction = np.array(inputs["solid_fraction"].data, dtype=np.float64)
         velocity = inputs["solid_velocity"].data if "solid_velocity" in inputs else None

@@ -16,12 +16,10 @@ PARTICIPANT = ParticipantSpec(
     description="incompressible flow on the structured grid by stock OpenFOAM v1912 (simpleFoam, pimpleFoam with "
                 "dynamics), the solid immersed by volume penalization",
     settings=Settings(
-        Setting("ranks", "integer", "MPI ranks of the OpenFOAM solver; the participant stays one process "
-                "(decomposePar once, mpirun -np N simpleFoam -parallel, fields per processor, no reconstructPar; "
-                "fluid_openfoam/parallel.py)", default=1, minimum=1),
-        Setting("decomposition", "string", "decomposePar method (N = nx ny nz blocks with the fewest cut faces; "
-                "Debian's v1912 ships only a dummy scotch library)", default="simple", choices=DECOMPOSITIONS,
-                only=When.above("ranks", 1))) + PENALIZATION + Settings(
+        Setting("decomposition", "string", "decomposePar's method (N = nx ny nz blocks with the "
+                "fewest cut faces; Debian's v1912 ships only a dummy scotch library); the participant runs as one "
+                "process per processor, the solver as mpirun -np N simpleFoam -parallel (fluid_openfoam/parallel.py)",
+                default="simple", choices=DECOMPOSITIONS, only=When.above("ranks", 1))) + PENALIZATION + Settings(
         Setting("max_iterations", "integer", "simpleFoam iterations per coupling iteration at most (a warning in "
                 "the fluid's log when they run out)", default=2000, minimum=1),
         Setting("tolerance", "number", "simpleFoam's residualControl of p and U (with dynamics: PIMPLE's, the "

@@ -14,11 +14,21 @@ simpleFoam's time directories are pseudo-time iteration counts (``deltaT 1``); i
 at its end (``writeControl runTime`` with the interval equal to the iteration budget, or
 earlier when ``residualControl`` is met). Each launch pays OpenFOAM's start-up, which
 matters on small grids.
+
+On several processes (``comm``, one per processor of the decomposed case: the participant on
+M ranks) rank 0 writes the case, runs blockMesh, topoSet, decomposePar and every solve
+(``mpirun -np M <solver> -parallel``, from an environment without the participant's own MPI
+job: :func:`openfoam_env`) while the other ranks wait, sleeping, on ``comm``; each rank writes the
+inputs of its own processor and reads its results (:mod:`fluid_openfoam.parallel`). Its arrays
+hold its processor's cells (:attr:`OpenFOAMSolver.cell_ids`), its inputs the cells the drag of
+those reads (:attr:`OpenFOAMSolver.input_ids`; the whole grid with rigid bodies). A failure on
+any rank is every rank's :class:`~coupler.protocol.errors.RanksError` naming it.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import re
 import shutil
 import subprocess
@@ -30,20 +40,18 @@ import numpy as np
 from coupler.protocol.exits import describe_exit, oom_kills
 from coupler.protocol.fluid_faces import closed_faces, dropped_velocity
 from coupler.protocol.mpi import mpi_environment
+from coupler.protocol.participant import on_each, on_root
 
 from . import case as _case
+from .errors import OpenFOAMError
 from .fields import read_internal_field
 from .parallel import Decomposition, patch_cells
-from transfer.penalization import drag_fraction
+from transfer.penalization import drag_fraction, drag_fraction_of, reach
 from .zones import body_sources, write_cell_set
 
 log = logging.getLogger("varcouple.fluid_openfoam")
 
 OPENFOAM_DIR = "/usr/share/openfoam"
-
-
-class OpenFOAMError(RuntimeError):
-    """An OpenFOAM binary failed or produced unusable output."""
 
 
 _RESIDUAL = re.compile(r"Solving for (\w+), Initial residual = ([^,]+),")
@@ -69,8 +77,11 @@ def final_residual(log_text: str, transient: bool) -> float:
 
 def openfoam_env() -> dict:
     """This environment with OpenFOAM's data directory and the Open MPI settings of
-    :func:`coupler.mpi_env.mpi_environment` (the solver's ranks)."""
-    env = mpi_environment()
+    :func:`coupler.mpi_env.mpi_environment` (the solver's ranks), without the variables of the
+    MPI job this process may be a rank of (``OMPI_*``, ``PMIX_*``: mpirun refuses to start from
+    within a job, "mpirun does not support recursive calls")."""
+    env = mpi_environment(env={k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
+                          if "OMPI_COMM_WORLD_SIZE" in os.environ else None)
     env.setdefault("WM_PROJECT_DIR", OPENFOAM_DIR)
     return env
 
@@ -94,16 +105,23 @@ def time_dirs(case_dir: Path) -> dict[float, str]:
 
 
 class OpenFOAMSolver:
-    """One OpenFOAM case on disk, written from a :class:`case.CaseSpec`."""
+    """One OpenFOAM case on disk, written from a :class:`case.CaseSpec`; with ``comm`` (of
+    ``spec.ranks`` processes) this process's rank handles its own processor (module doc)."""
 
-    def __init__(self, case_dir, spec: _case.CaseSpec, application: str | None = None):
+    def __init__(self, case_dir, spec: _case.CaseSpec, application: str | None = None, comm=None):
         self.case = Path(case_dir)
         self.spec = spec
         self.application = application or ("pimpleFoam" if spec.transient else "simpleFoam")
+        self.comm = comm if comm is not None and comm.Get_size() > 1 else None
+        self.rank = self.comm.Get_rank() if self.comm is not None else 0
+        if self.comm is not None and self.comm.Get_size() != spec.ranks:
+            raise ValueError(f"{self.comm.Get_size()} processes for a case decomposed in {spec.ranks}")
         self.n = spec.grid.n_cells
         self.start = "0"
         self.last_run: dict = {}
         self.parallel: Decomposition | None = None  # ranks > 1: the processor directories
+        #: the grid cell of each row of the arrays this process returns, and of its inputs (whole grid: arange)
+        self.cell_ids = self.input_ids = np.arange(self.n)
         self.sources: list = []
         self.warned_faces: set[str] = set()
 
@@ -140,18 +158,29 @@ class OpenFOAMSolver:
                                 f"{_tail(logf)}")
         return dt
 
+    # ------------------------------------------------------------------ the case
     def setup(self) -> None:
-        """Write the case, run blockMesh and topoSet (once)."""
+        """Write the case, run blockMesh and topoSet (once), and decomposePar with ranks > 1."""
+        self.start = "0"
+        self.parallel = None
+        if self.spec.ranks > 1:  # decomposePar once; fields per processor from now on (parallel.py)
+            self.parallel = Decomposition(self.case, self.spec, None if self.comm is None else [self.rank])
+        on_root(self.comm, self._write_case)
+        if self.parallel is None:
+            self.patch_cells = self.read_patch_cells()
+            return
+        on_each(self.comm, self.parallel.read_addressing)
+        self.cell_ids = self.parallel.cell_ids
+        if self.comm is not None and not (self.spec.transient and self.spec.solid_velocity == "bodies"):
+            self.input_ids = reach(self.cell_ids, self.spec.grid.shape, self.spec.penalization)
+
+    def _write_case(self) -> None:
         if self.case.exists():
             shutil.rmtree(self.case)
         _case.write_case(self.case, self.spec)
         self.run("blockMesh")
         self.run("topoSet")
-        self.start = "0"
-        self.patch_cells = self.read_patch_cells()
-        self.parallel = None
-        if self.spec.ranks > 1:  # decomposePar once; fields per processor from now on (parallel.py)
-            self.parallel = Decomposition(self.case, self.spec)
+        if self.parallel is not None:
             self.parallel.decompose(self.run)
 
     def read_patch_cells(self) -> dict[str, np.ndarray]:
@@ -160,24 +189,40 @@ class OpenFOAMSolver:
         lists the i = 0 column, j fastest then k (checked in tests/test_fluid_inlet.py)."""
         return patch_cells(self.case / "constant" / "polyMesh")
 
+    @property
+    def whole_inputs(self) -> bool:
+        """This process receives the inputs of every cell of the grid."""
+        return len(self.input_ids) == self.n
+
     # ------------------------------------------------------------------ one solve
     def write_solid(self, fraction) -> None:
+        """The drag field (and masked inlet) of this process's cells from the solid fraction of
+        its input cells (:attr:`input_ids`)."""
         frac = np.asarray(fraction, dtype=np.float64).reshape(-1)
-        if frac.shape != (self.n,):
-            raise ValueError(f"solid_fraction has {frac.size} values, expected {self.n} (one per cell)")
+        if frac.shape != self.input_ids.shape:
+            raise ValueError(f"solid_fraction has {frac.size} values, expected {len(self.input_ids)} (one per "
+                             f"{'cell' if self.whole_inputs else 'input cell'})")
         if not np.all(np.isfinite(frac)):
-            raise ValueError(f"solid_fraction holds NaN/inf at cell {int(np.argmin(np.isfinite(frac)))}")
+            raise ValueError(f"solid_fraction holds NaN/inf at cell "
+                             f"{int(self.input_ids[np.argmin(np.isfinite(frac))])}")
         frac = np.clip(frac, 0.0, 1.0)
-        T = drag_fraction(frac, self.spec.grid.shape, self.spec.grid.spacing, self.spec.nu, self.spec.drag_value(),
-                          self.spec.penalization, self.spec.penalization_exponent)
-        if self.parallel is not None:
-            self.parallel.write_inputs(self.start, frac, T)
-            return
-        _case.write_inputs(self.case / self.start, self.spec, frac, T, self.patch_cells["xmin"])
+        args = (self.spec.grid.shape, self.spec.grid.spacing, self.spec.nu, self.spec.drag_value(),
+                self.spec.penalization, self.spec.penalization_exponent)
+        if not self.whole_inputs:
+            own, T = frac[np.searchsorted(self.input_ids, self.cell_ids)], drag_fraction_of(
+                self.cell_ids, self.input_ids, frac, *args)
+        else:
+            T = drag_fraction(frac, *args)
+            if self.parallel is None:
+                _case.write_inputs(self.case / self.start, self.spec, frac, T, self.patch_cells["xmin"])
+                return
+            own, T = frac[self.cell_ids], T[self.cell_ids]
+        self.parallel.write_inputs(self.start, own, T)
 
     def write_sources(self, fraction, velocity) -> None:
         """constant/fvOptions with one velocity source per solid body (:mod:`zones`) when the
-        spec asks for it and the velocity is nonzero, and their cellSets."""
+        spec asks for it and the velocity is nonzero, and their cellSets (rank 0 the case's,
+        each rank its processor's)."""
         self.sources = []
         if velocity is not None and self.spec.solid_velocity == "bodies":
             vel = np.asarray(velocity, dtype=np.float64).reshape(self.n, 3)
@@ -190,12 +235,13 @@ class OpenFOAMSolver:
                     if face not in self.warned_faces:
                         self.warned_faces.add(face)
                         log.warning("%s", dropped_velocity(face, value))
-        sets = self.case / "constant" / "polyMesh" / "sets"
-        for src in self.sources:
-            write_cell_set(sets / src.name, src.name, src.cells)
         if self.parallel is not None:
             self.parallel.write_cell_sets({src.name: src.cells for src in self.sources})
-        (self.case / "constant" / "fvOptions").write_text(_case.fv_options(self.spec.table(), self.sources))
+        if self.rank == 0:
+            sets = self.case / "constant" / "polyMesh" / "sets"
+            for src in self.sources:
+                write_cell_set(sets / src.name, src.name, src.cells)
+            (self.case / "constant" / "fvOptions").write_text(_case.fv_options(self.spec.table(), self.sources))
 
     def control(self, t: float | None, dt: float | None) -> str:
         """controlDict of one run from the start time: simpleFoam for at most
@@ -216,18 +262,32 @@ class OpenFOAMSolver:
 
     def solve(self, solid_fraction, solid_velocity=None, t: float | None = None,
               dt: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Solve from the current start time with this solid fraction (and velocity); returns
-        ``(U (n,3) m/s, p (n,) kinematic m^2/s^2)`` and makes the result the new start.
-        Transient specs advance from ``t`` over ``dt`` (:meth:`control`)."""
+        """Solve from the current start time with this solid fraction (and velocity) of the
+        input cells; returns ``(U (n,3) m/s, p (n,) kinematic m^2/s^2)`` of :attr:`cell_ids` and
+        makes the result the new start. Transient specs advance from ``t`` over ``dt``
+        (:meth:`control`)."""
+        t0 = float(self.start)
+        on_each(self.comm, self._prepare, solid_fraction, solid_velocity, t, dt)
+        wall = on_root(self.comm, self.run, self.application)
+        end, self.last_run = on_root(self.comm, self._ended, t0, wall)
+        U, p = on_each(self.comm, self._results, end)
+        self.start = end
+        log.info("%s: %s -> %s, %d iterations, converged %s, %.3f s", self.application, self.last_run["start"],
+                 end, self.last_run["iterations"], self.last_run["converged"], wall)
+        return U, p
+
+    def _prepare(self, solid_fraction, solid_velocity, t, dt) -> None:
+        """The inputs of a run from the start time, its controlDict, no results after the start."""
         self.write_solid(solid_fraction)
         self.write_sources(np.asarray(solid_fraction, dtype=np.float64).reshape(-1), solid_velocity)
-        t0 = float(self.start)
-        budget = self.spec.max_iterations
-        (self.case / "system" / "controlDict").write_text(self.control(t, dt))
+        if self.rank == 0:
+            (self.case / "system" / "controlDict").write_text(self.control(t, dt))
         for t, name in time_dirs(self.time_root).items():
-            if t > t0:  # stale results of a window being repeated (restore_state)
+            if t > float(self.start):  # stale results of a window being repeated (restore_state)
                 self.remove_time(name)
-        wall = self.run(self.application)
+
+    def _ended(self, t0: float, wall: float) -> tuple[str, dict]:
+        """The time directory the run wrote and how it ended (from its log)."""
         logf = self.case / f"log.{self.application}"
         text = logf.read_text(errors="replace")
         new = {t: name for t, name in time_dirs(self.time_root).items() if t > t0}
@@ -242,24 +302,24 @@ class OpenFOAMSolver:
         else:
             m = re.search(r"SIMPLE solution converged in (\S+) iterations", text)
             iters = int(round(float(end) - t0))  # the log names the converged *time*, not a count
-        self.last_run = {"wall": wall, "iterations": iters, "converged": bool(m),
-                         "residual": final_residual(text, self.spec.transient), "start": self.start, "end": end,
-                         "velocity_sources": [src.velocity.tolist() for src in self.sources],
-                         "dropped": [src.dropped for src in self.sources if src.dropped]}
+        run = {"wall": wall, "iterations": iters, "converged": bool(m),
+               "residual": final_residual(text, self.spec.transient), "start": self.start, "end": end,
+               "velocity_sources": [src.velocity.tolist() for src in self.sources],
+               "dropped": [src.dropped for src in self.sources if src.dropped]}
         if not m:
             log.warning("%s: not converged to %g within %d %s (%s -> %s)", self.application, self.spec.tolerance,
-                        self.spec.outer_correctors if self.spec.transient else budget,
+                        self.spec.outer_correctors if self.spec.transient else self.spec.max_iterations,
                         "PIMPLE iterations per time step" if self.spec.transient else "iterations", self.start, end)
+        return end, run
+
+    def _results(self, end: str) -> tuple[np.ndarray, np.ndarray]:
         U, p = self.read_cells(end, "U"), self.read_cells(end, "p")
         for name, arr in (("U", U), ("p", p)):
             bad = ~np.isfinite(arr)
             if bad.any():
-                cell = int(np.argmax(bad.reshape(self.n, -1).any(axis=1)))
+                cell = int(self.cell_ids[np.argmax(bad.reshape(len(arr), -1).any(axis=1))])
                 raise OpenFOAMError(f"{self.application} produced non-finite {name} (first at cell {cell}) in "
-                                    f"{self.case / end}; log tail:\n{_tail(logf)}")
-        self.start = end
-        log.info("%s: %s -> %s, %d iterations, converged %s, %.3f s", self.application, self.last_run["start"],
-                 end, iters, bool(m), wall)
+                                    f"{self.time_root / end}; log tail:\n{_tail(self.case / f'log.{self.application}')}")
         return U, p
 
     def report(self) -> dict:
@@ -281,16 +341,17 @@ class OpenFOAMSolver:
     # ------------------------------------------- serial case or processor directories
     @property
     def time_root(self) -> Path:
-        """The directory holding the time directories (processor0 when decomposed)."""
+        """The directory holding the time directories (this process's first processor when decomposed)."""
         return self.case if self.parallel is None else self.parallel.time_root
 
     def remove_time(self, name: str) -> None:
         if self.parallel is not None:
             self.parallel.remove_time(name)
-        shutil.rmtree(self.case / name, ignore_errors=True)
+        if self.rank == 0:
+            shutil.rmtree(self.case / name, ignore_errors=True)
 
     def read_cells(self, time: str, name: str) -> np.ndarray:
-        """A cell field of time directory ``time``, in grid order (gathered when decomposed)."""
+        """A cell field of time directory ``time`` at :attr:`cell_ids` (from the processors when decomposed)."""
         if self.parallel is not None:
             return self.parallel.read(time, name)
         return read_internal_field(self.case / time / name, self.n)

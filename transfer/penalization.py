@@ -82,3 +82,43 @@ def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str,
             D[tuple(sl_c)] += np.where(hit, nu / h ** 2 * (h / d - 1.0), 0.0)
     T = np.where(solid, 1.0, np.minimum(D / d_max, 1.0))
     return T.reshape(-1)
+
+
+def _ijk(cells: np.ndarray, shape) -> np.ndarray:
+    nx, ny, _ = (int(s) for s in shape)
+    return np.stack([cells % nx, cells // nx % ny, cells // (nx * ny)], axis=1)
+
+
+def reach(cells, shape, mode: str) -> np.ndarray:
+    """The cells whose fractions :func:`drag_fraction` of ``cells`` reads (grid indices, x fastest,
+    sorted): each cell and those within ``REACH[mode]`` cells of it along each axis."""
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1)
+    ijk, found = _ijk(cells, shape), [cells]
+    nx, ny, _ = (int(s) for s in shape)
+    for axis, n in enumerate(int(s) for s in shape):
+        for step in (s for s in range(-REACH[mode], REACH[mode] + 1) if s):
+            moved = ijk[(ijk[:, axis] + step >= 0) & (ijk[:, axis] + step < n)].copy()
+            moved[:, axis] += step
+            found.append((moved[:, 2] * ny + moved[:, 1]) * nx + moved[:, 0])
+    return np.unique(np.concatenate(found))
+
+
+def drag_fraction_of(cells, ids, fraction, shape, spacing, nu: float, d_max: float, mode: str,
+                     exponent: float | None = None) -> np.ndarray:
+    """:func:`drag_fraction` of the grid's ``cells`` (grid indices) from the fractions at ``ids``
+    only (``fraction[k]`` of cell ``ids[k]``; ``ids`` must hold :func:`reach` of ``cells``): the
+    same values as on the whole grid, computed on the box around ``ids`` (other cells of the box
+    are read as fluid; none is within reach of ``cells``)."""
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1)
+    at = _ijk(ids, shape)
+    lo = at.min(axis=0) if len(ids) else np.zeros(3, np.int64)
+    box = (at.max(axis=0) + 1 - lo) if len(ids) else np.ones(3, np.int64)
+
+    def local(ijk):
+        ijk = ijk - lo
+        return (ijk[:, 2] * box[1] + ijk[:, 1]) * box[0] + ijk[:, 0]
+
+    F = np.zeros(int(np.prod(box)))
+    F[local(at)] = np.asarray(fraction, dtype=np.float64).reshape(-1)
+    return drag_fraction(F, box, spacing, nu, d_max, mode, exponent)[local(_ijk(cells, shape))]

@@ -12,6 +12,12 @@ class ProtocolError(CouplerError):
     iteration). Such data is rejected, never used."""
 
 
+class RanksError(CouplerError):
+    """A failure that every rank of a participant on several MPI ranks raises together, once the
+    ranks agreed on it (:func:`coupler.protocol.participant.agree`): each rank answers it as its
+    error reply and keeps serving, where another exception on a rank other than 0 aborts the job."""
+
+
 class ParticipantFailure(CouplerError):
     """Base class of the errors that name the participant that failed (``name``)."""
 

@@ -20,9 +20,10 @@ the same method of their own participant object (so collective solver code runs 
 ``geometry`` and ``advance`` are answered per rank: each rank takes the coupler's request for its
 part (its own rows of the inputs) and answers with its own part (docs/protocol.md, "Parts"); the
 other verbs' reply is rank 0's return value. A non-root rank whose method raises aborts
-the MPI job (the coupler then sees the participant die, with the log). Between verbs the other
-ranks sleep (:func:`_wait_for_root`) instead of spinning in the broadcast: a waiting rank leaves
-its core to the solvers that run meanwhile (the other participant, its ranks).
+the MPI job (the coupler then sees the participant die, with the log), unless the ranks agreed on
+the failure (:func:`agree`: :class:`~coupler.protocol.errors.RanksError`, every rank's error reply).
+Between verbs the other ranks sleep (:func:`idle_barrier`) instead of spinning in the broadcast: a
+waiting rank leaves its core to the solvers that run meanwhile (the other participant, its ranks).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from pathlib import Path
 from typing import Callable, Mapping
 
 from coupler.errors import CouplerError
-from coupler.protocol.errors import ProtocolError
+from coupler.protocol.errors import ProtocolError, RanksError
 from coupler.protocol.transport import PART_VERBS
 from coupler.protocol.wire import Field, SolveReport
 
@@ -169,12 +170,62 @@ def _mpi_world_size() -> int:
 PART_WAIT = 30.0
 
 
+def _problems(comm, problem: str | None) -> str | None:
+    """Every rank's problem (None: none), gathered on every rank: ``rank r: <problem>; ...`` or None."""
+    problems = [(r, p) for r, p in enumerate(comm.allgather(problem)) if p]
+    return "; ".join(f"rank {r}: {p}" for r, p in problems) or None
+
+
 def _agree(comm, problem: str | None) -> None:
     """Every rank learns whether each has its request (collective): ProtocolError on all ranks,
     naming each rank that has none, so none enters the solver's collective code without it."""
-    problems = [(r, p) for r, p in enumerate(comm.allgather(problem)) if p]
-    if problems:
-        raise ProtocolError("; ".join(f"rank {r}: {p}" for r, p in problems))
+    if (text := _problems(comm, problem)) is not None:
+        raise ProtocolError(text)
+
+
+def agree(comm, problem: str | None) -> None:
+    """Every rank of ``comm`` learns each rank's ``problem`` (None: it has none; collective, the
+    ranks that come first sleep in :func:`idle_barrier`) and, when any rank has one, raises
+    :class:`RanksError` naming each such rank: so no rank goes on alone into collective code, and
+    every rank answers the verb with that error instead of aborting the MPI job."""
+    idle_barrier(comm)
+    if (text := _problems(comm, problem)) is not None:
+        raise RanksError(text)
+
+
+def on_root(comm, work, *args):
+    """``work(*args)`` run by rank 0 of ``comm`` alone, its result returned on every rank (the
+    others sleep meanwhile, :func:`idle_barrier`); its exception is raised on rank 0 as it is and
+    is the other ranks' :class:`RanksError`. ``comm`` None: ``work(*args)``."""
+    if comm is None:
+        return work(*args)
+    out = error = None
+    if comm.Get_rank() == 0:
+        try:
+            out = work(*args)
+        except Exception as exc:  # noqa: BLE001 - shared with the other ranks, raised below
+            error = exc
+    idle_barrier(comm)
+    out, text = comm.bcast((out, None if error is None else f"{type(error).__name__}: {error}"), root=0)
+    if error is not None:
+        raise error
+    if text is not None:
+        raise RanksError(f"rank 0: {text}")
+    return out
+
+
+def on_each(comm, work, *args):
+    """``work(*args)`` on every rank of ``comm``; a rank's exception is every rank's
+    :class:`RanksError` naming it (:func:`agree`). ``comm`` None: ``work(*args)``."""
+    if comm is None:
+        return work(*args)
+    out = problem = None
+    try:
+        out = work(*args)
+    except Exception as exc:  # noqa: BLE001 - agreed below
+        problem = f"{type(exc).__name__}: {exc}"
+    agree(comm, problem)
+    return out
 
 
 class _MpiRoot:
@@ -202,18 +253,18 @@ class _MpiRoot:
         return call
 
     def _send(self, message):
-        self.comm.Ibarrier().Wait()  # the other ranks wait in theirs (_wait_for_root)
+        self.comm.Ibarrier().Wait()  # the other ranks wait in theirs (idle_barrier)
         self.comm.bcast(message, root=0)
 
     def stop(self):
         self._send(("__stop__", ()))
 
 
-def _wait_for_root(comm, poll: float = 1e-3) -> None:
-    """Wait until rank 0 has a call to broadcast, sleeping between tests of a nonblocking
-    barrier: Open MPI's blocking collectives poll without yielding, so a rank waiting in
-    ``bcast`` for the next verb would take a core for the whole of the other participants'
-    solves."""
+def idle_barrier(comm, poll: float = 1e-3) -> None:
+    """Wait until every rank of ``comm`` has come here (rank 0 with its next call to broadcast),
+    sleeping between tests of a nonblocking barrier: Open MPI's blocking collectives poll without
+    yielding, so a rank waiting in ``bcast`` for the next verb (or for rank 0's solver) would take
+    a core for the whole of the other participants' solves."""
     request = comm.Ibarrier()
     while not request.Test():
         time.sleep(poll)
@@ -224,7 +275,7 @@ def _mpi_worker(handler: Participant, comm, parts) -> None:
     rank's request from ``parts`` (a :class:`~coupler.protocol.server.PartServer`) and answer it
     with this rank's part."""
     while True:
-        _wait_for_root(comm)
+        idle_barrier(comm)
         verb, args = comm.bcast(None, root=0)
         if verb == "__stop__":
             return
@@ -249,6 +300,11 @@ def _mpi_worker(handler: Participant, comm, parts) -> None:
         try:
             out = getattr(handler, verb)(*args)
             handler.take_reports()  # rank 0 reports for all ranks
+        except RanksError as exc:  # every rank has it (agree): rank 0 answers it too
+            handler.take_reports()
+            if request is not None:
+                parts.reply(*request[:3], error=exc)
+            continue
         except Exception:  # noqa: BLE001
             log.exception("rank %d: %s failed; aborting the MPI job", comm.Get_rank(), verb)
             comm.Abort(1)

@@ -1,5 +1,5 @@
 """A participant on several MPI ranks: the ranks other than 0 sleep while they wait for rank
-0's next verb (coupler/protocol/participant.py, _wait_for_root) instead of spinning in the
+0's next verb (coupler/protocol/participant.py, idle_barrier) instead of spinning in the
 broadcast, so they leave the cores to the other participants' solvers; and they still get
 every verb with its arguments."""
 

@@ -124,13 +124,17 @@ def test_an_unknown_participant_names_those_of_the_role(tmp_path):
         scene(tmp_path, '[solvers.fluid]\nparticipant = "spring_solid"\n')
 
 
-def test_openfoam_runs_its_own_ranks_in_one_process(tmp_path):
-    """openfoam declares ranks: one process, its solver on the ranks; the solid is started on them."""
+def test_openfoam_runs_one_process_per_processor(tmp_path):
+    """openfoam on ranks = 2 is started on 2 MPI ranks, one per processor of the decomposed case
+    (it declares no ranks of its own); so is the solid on its ranks."""
     plan = make_plan(scene(tmp_path, "[solvers.fluid]\nranks = 2\n[solvers.solid]\nranks = 3\n"))
     fluid, solid = plan.participant("fluid"), plan.participant("solid")
-    assert (fluid.ranks, fluid.config["ranks"], fluid.config["decomposition"]) == (1, 2, "simple")
+    assert (fluid.ranks, fluid.config["decomposition"]) == (2, "simple") and "ranks" not in fluid.config
     assert solid.ranks == 3 and "ranks" not in solid.config
-    assert any("openfoam on 2 MPI ranks" in task for task in plan.tasks)
+    assert any("openfoam on 2 MPI ranks (simple decomposition by decomposePar once; one participant process per "
+               "processor" in task for task in plan.tasks)
+    with pytest.raises(SceneError, match=r"\[solvers.fluid\] decomposition: applies to ranks > 1 only"):
+        make_plan(scene(tmp_path, '[solvers.fluid]\ndecomposition = "simple"\n'))
 
 
 def test_the_participants_are_configured_with_their_validated_settings(tmp_path):

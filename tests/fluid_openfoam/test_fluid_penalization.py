@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from transfer.penalization import PENALIZATIONS, REACH, drag_fraction
+from transfer.penalization import PENALIZATIONS, REACH, drag_fraction, drag_fraction_of, reach
 
 
 def test_wall_drag_in_one_dimension():
@@ -35,3 +35,26 @@ def test_reach_is_how_far_the_drag_of_a_cell_reads_fractions(mode):
     changed = np.argwhere((before != after).reshape(shape[::-1]))
     assert np.abs(changed - centre).sum(axis=1).max() == REACH[mode]
     assert len(changed) == {0: 1, 1: 7}[REACH[mode]]
+
+
+@pytest.mark.parametrize("mode", PENALIZATIONS)
+def test_the_drag_of_some_cells_from_their_reach_is_the_whole_grids(mode):
+    """drag_fraction_of a scattered set of cells (an OpenFOAM processor need not be a box), from the
+    fractions of reach(cells) only, equals drag_fraction of the whole grid there bitwise; reach is the
+    cells and their neighbours within REACH[mode] steps along each axis (grid edges cut off)."""
+    shape = (7, 6, 5)
+    rng = np.random.default_rng(2)
+    f = np.where(rng.random(int(np.prod(shape))) < 0.4, 1.0, rng.uniform(0.0, 0.6, int(np.prod(shape))))
+    cells = np.sort(rng.choice(f.size, 40, replace=False))
+    ids = reach(cells, shape, mode)
+    whole = drag_fraction(f, shape, [1e-3, 2e-3, 1.5e-3], 1e-6, 1e3, mode, 2.0)
+    part = drag_fraction_of(cells, ids, f[ids], shape, [1e-3, 2e-3, 1.5e-3], 1e-6, 1e3, mode, 2.0)
+    np.testing.assert_array_equal(part, whole[cells])
+    assert len(np.unique(whole[cells])) > 10  # the drag varies: not an equality of zeros
+    corner = reach([0], shape, mode)  # cell (0, 0, 0): itself and +1 along each axis
+    assert corner.tolist() == ([0, 1, 7, 42] if REACH[mode] else [0])
+    if REACH[mode]:  # without its neighbours' fractions a wall cell's drag is wrong
+        wet = cells[(whole[cells] > 0) & (whole[cells] < 1)][:1]
+        assert len(wet) == 1
+        alone = drag_fraction_of(wet, wet, f[wet], shape, [1e-3, 2e-3, 1.5e-3], 1e-6, 1e3, mode)
+        assert alone[0] != whole[wet[0]]

@@ -216,10 +216,10 @@ def plan(scene, plan) -> None:
                               "mean velocity of its wetted cells; rotation and deformation within a body are not)"
                               if s["solid_velocity"] == "bodies" else
                               "openfoam: the solid velocity is not applied (penalization towards rest)")
-        if s["ranks"] > 1:
-            plan.tasks.append(f"fluid: openfoam on {s['ranks']} MPI ranks ({s['decomposition']} "
-                              f"decomposition by decomposePar once; fields written and read per processor, no "
-                              f"reconstructPar)")
+        if solver.ranks > 1:
+            plan.tasks.append(f"fluid: openfoam on {solver.ranks} MPI ranks ({s['decomposition']} "
+                              f"decomposition by decomposePar once; one participant process per processor, each "
+                              f"writing and reading its own processor's fields, no reconstructPar)")
     if solver.kind == "chorin":
         quasi = (", transient: Chorin projection time steps over each step (implicit Euler) and an elastodynamic "
                  "solid" if dynamic else ", quasi-static: Chorin projection in pseudo-time to steady state and a "

@@ -1,0 +1,168 @@
+"""The OpenFOAM fluid on 2 MPI ranks behind the coupler's client (docs/protocol.md, "Parts"): rank r
+handles processor<r> of the decomposed case only. Each rank's part holds its processor's cells
+(cellProcAddressing) and declares as input_ids those and the cells their wall drag reads; it receives
+exactly those rows; the coupler's join equals, bitwise, the whole arrays one process gave from the same
+decomposed case (the participant before it ran per processor). A processor directory missing or
+malformed, a result file malformed and a rank that dies are one-line errors naming the participant,
+the rank and the file or key."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import uuid
+
+import numpy as np
+import pytest
+
+from coupler.protocol.errors import ParticipantDied, ParticipantError
+from coupler.run.client import CouplerSession
+from coupler.run.launch import Launcher
+from fluid_openfoam.case import CaseSpec
+from fluid_openfoam.fields import read_label_list
+from fluid_openfoam.solver import OpenFOAMSolver
+from transfer.penalization import reach
+
+pytestmark = pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil.which("mpirun") is None
+                                or shutil.which("decomposePar") is None,
+                                reason="OpenFOAM (simpleFoam, decomposePar) or mpirun not installed")
+
+RECORDING = '''
+import os, shutil, signal
+import numpy as np
+from coupler.protocol.participant import main
+from fluid_openfoam import parallel, solver
+from fluid_openfoam.participant import FluidParticipant
+
+class Recording(FluidParticipant):
+    """The OpenFOAM fluid saving, per rank, the ids it declared and the input rows it received; its
+    argument breaks processor1 ("malformed", "missing": after decomposePar; "result": its U after the
+    solve) or kills rank 1 in advance ("die")."""
+    def geometry(self):
+        header, fields = super().geometry()
+        self.declared = fields
+        return header, fields
+
+    def advance(self, window, iteration, t, dt, inputs):
+        if self.rank == 1 and self.extra_args == ["die"]:
+            os.kill(os.getpid(), signal.SIGKILL)
+        np.savez(os.path.join(os.environ["RECORD_DIR"], f"rank{self.rank}.npz"), **self.declared,
+                 **{name: f.data for name, f in inputs.items()})
+        return super().advance(window, iteration, t, dt, inputs)
+
+decompose, ended = parallel.Decomposition.decompose, solver.OpenFOAMSolver._ended
+
+def broken_decompose(self, run):
+    decompose(self, run)
+    mesh = self.case / "processor1" / "constant" / "polyMesh"
+    if os.environ["FAULT"] == "malformed":
+        (mesh / "cellProcAddressing").write_text("not a label list")
+    if os.environ["FAULT"] == "missing":
+        shutil.rmtree(self.case / "processor1")
+
+def broken_result(self, t0, wall):
+    end, run = ended(self, t0, wall)
+    (self.case / "processor1" / end / "U").write_bytes(b"FoamFile { format binary; }\\ninternalField nonsense;")
+    return end, run
+
+parallel.Decomposition.decompose = broken_decompose
+if os.environ["FAULT"] == "result":
+    solver.OpenFOAMSolver._ended = broken_result
+main(Recording)
+'''
+
+
+def config(case_dir) -> dict:
+    """A 3D duct (16 x 8 x 4 cells of 1 mm) with a velocity inlet, split in x by decomposePar."""
+    return {"grid": {"origin": [0, 0, 0], "spacing": [1e-3] * 3, "shape": [16, 8, 4]}, "location": "cells",
+            "inlet": {"velocity": [0.01, 0, 0]}, "mu": 1e-3, "rho": 1000.0, "tolerance": 1e-8,
+            "max_iterations": 400, "case_dir": str(case_dir)}
+
+
+def step_fraction() -> np.ndarray:
+    """Solid below y = 2.3 mm (a sub-cell wall) and a block from x = 6 to 9 mm: wall drag on both processors
+    and next to their boundary, inlet masking on processor 0."""
+    spec = CaseSpec.from_config(config(""))
+    c, h = spec.grid.cell_centres(), spec.grid.spacing[1]
+    frac = np.clip((2.3e-3 - (c[:, 1] - h / 2)) / h, 0.0, 1.0)
+    frac[(c[:, 0] > 6e-3) & (c[:, 0] < 9e-3) & (c[:, 1] < 5e-3)] = 1.0
+    return frac
+
+
+@pytest.fixture
+def fluid(tmp_path):
+    opened = []
+
+    def start(fault: str = ""):
+        (tmp_path / "recording_openfoam.py").write_text(RECORDING)
+        coupler = CouplerSession(f"test-{uuid.uuid4().hex[:12]}")
+        env = dict(os.environ, RECORD_DIR=str(tmp_path), FAULT=fault,
+                   PYTHONPATH=os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
+        launcher = Launcher(coupler.run_id, tmp_path, coupler.endpoints, env=env)
+        opened.append((coupler, launcher))
+        launcher.start("fluid", "recording_openfoam", ranks=2, extra_args=[fault] if fault else [])
+        client = coupler.client("fluid", 120, process_check=lambda: launcher.check("fluid"))
+        client.wait_alive(60)
+        return client
+
+    yield start
+    for coupler, launcher in opened:
+        launcher.stop_all(timeout=3.0)
+        coupler.close()
+
+
+def test_each_rank_publishes_its_processor_and_the_join_is_the_whole_arrays(fluid, tmp_path):
+    client = fluid()
+    client.configure(config(tmp_path / "case"))
+    header, _ = client.geometry()
+    assert header["grid"]["shape"] == [16, 8, 4] and client.parts == 2
+    fraction = step_fraction()
+    out = client.advance(0, 0, 0.0, 1.0, {"solid_fraction": fraction})
+    for rank in (0, 1):
+        mine = read_label_list(tmp_path / "case" / f"processor{rank}" / "constant" / "polyMesh" / "cellProcAddressing")
+        got = np.load(tmp_path / f"rank{rank}.npz")
+        assert np.array_equal(got["cell_ids"], mine) and len(mine) == 256  # its processor's cells, no other
+        assert np.array_equal(got["input_ids"], reach(mine, (16, 8, 4), "wall"))
+        assert len(got["input_ids"]) == 256 + 32  # and the plane of cells across the processor boundary
+        assert np.array_equal(got["solid_fraction"], fraction[got["input_ids"]])
+    # the whole arrays of one process handling both processors of the same decomposition
+    whole = OpenFOAMSolver(tmp_path / "whole", CaseSpec.from_config(config(""), ranks=2))
+    whole.setup()
+    U, p = whole.solve(fraction)
+    assert np.array_equal(out["velocity"].data, U) and np.array_equal(out["pressure"].data, p * 1000.0)
+    assert np.abs(U).max() > 1e-3 and np.ptp(p) > 0
+    # rigid bodies need every cell's velocity: a steady fluid's ranks refuse it before solving
+    with pytest.raises(ParticipantError, match=r"rank 0: input 'solid_velocity' with solid_velocity 'bodies' needs "
+                                               r"every cell's inputs .*; rank 1: varcouple/.*/fluid/advance/1: input"):
+        client.advance(0, 1, 0.0, 1.0, {"solid_fraction": fraction, "solid_velocity": np.zeros((fraction.size, 3))})
+
+
+@pytest.mark.parametrize("fault, text", [
+    ("malformed", "{case}/processor1/constant/polyMesh/cellProcAddressing: no FoamFile header"),
+    ("missing", "{case}/processor1/constant/polyMesh/cellProcAddressing: missing (decomposePar did not write "
+                "processor1)")])
+def test_a_broken_processor_directory_names_the_rank_and_the_file(fluid, tmp_path, fault, text):
+    client = fluid(fault)
+    error = "FieldFormatError" if fault == "malformed" else "OpenFOAMError"
+    with pytest.raises(ParticipantError) as info:
+        client.configure(config(tmp_path / "case"))
+    assert str(info.value) == (f"participant 'fluid' failed: RanksError: rank 1: {error}: "
+                               + text.format(case=tmp_path / "case"))
+
+
+def test_a_malformed_result_names_the_rank_and_the_file(fluid, tmp_path):
+    client = fluid("result")
+    client.configure(config(tmp_path / "case"))
+    client.geometry()
+    with pytest.raises(ParticipantError, match=r"^participant 'fluid' failed: RanksError: rank 1: FieldFormatError: "
+                                               + f"{tmp_path}/case/processor1/" + r"\d+/U: "):
+        client.advance(0, 0, 0.0, 1.0, {"solid_fraction": step_fraction()})
+
+
+def test_a_rank_that_dies_is_named_with_its_key(fluid, tmp_path):
+    client = fluid("die")
+    client.configure(config(tmp_path / "case"))
+    client.geometry()
+    with pytest.raises(ParticipantDied) as info:
+        client.advance(0, 0, 0.0, 1.0, {"solid_fraction": step_fraction()})
+    assert f"participant 'fluid' died: rank 1 gave no reply on varcouple/{client.run_id}/fluid/advance/1" in str(info.value)
