@@ -137,6 +137,30 @@ def test_each_rank_publishes_its_processor_and_the_join_is_the_whole_arrays(flui
         client.advance(0, 1, 0.0, 1.0, {"solid_fraction": fraction, "solid_velocity": np.zeros((fraction.size, 3))})
 
 
+def test_rigid_bodies_take_every_cells_inputs_and_give_the_whole_arrays(fluid, tmp_path):
+    """Transient with a moving body (solid_velocity "bodies"): a body connects across the processors,
+    so each rank asks for every cell's inputs; rank 0 writes the velocity source, each rank its
+    processor's cellSet; the join is bitwise one process's arrays. The body spans z and moves in z:
+    those faces are open."""
+    cfg = {**config(tmp_path / "case"), "transient": True, "dt": 0.01,
+           "boundaries": {"zmin": {"pressure": 0.0}, "zmax": {"pressure": 0.0}}}
+    client = fluid()
+    client.configure(cfg)
+    client.geometry()
+    fraction = step_fraction()
+    velocity = np.where(fraction[:, None] > 0.5, [0.0, 0.0, 2e-3], 0.0)
+    out = client.advance(0, 0, 0.0, 0.01, {"solid_fraction": fraction, "solid_velocity": velocity})
+    for rank in (0, 1):
+        got = np.load(tmp_path / f"rank{rank}.npz")
+        assert np.array_equal(got["input_ids"], np.arange(fraction.size)) and len(got["cell_ids"]) == 256
+        assert np.array_equal(got["solid_velocity"], velocity)
+    whole = OpenFOAMSolver(tmp_path / "whole", CaseSpec.from_config(cfg, ranks=2))
+    whole.setup()
+    U, p = whole.solve(fraction, velocity, 0.0, 0.01)
+    assert len(whole.sources) == 1 and np.mean(U[fraction > 0.99, 2]) > 1e-3  # the body moves the fluid
+    assert np.array_equal(out["velocity"].data, U) and np.array_equal(out["pressure"].data, p * 1000.0)
+
+
 @pytest.mark.parametrize("fault, text", [
     ("malformed", "{case}/processor1/constant/polyMesh/cellProcAddressing: no FoamFile header"),
     ("missing", "{case}/processor1/constant/polyMesh/cellProcAddressing: missing (decomposePar did not write "
