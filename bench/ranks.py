@@ -4,9 +4,9 @@ on M MPI ranks (N, M in {1, 2}).
 
 Each run is ``varcouple run`` in a child process, its process tree read from /proc every
 20 ms: the coupler (the ``varcouple run`` process), the solid's ranks (``python -m
-solid_fenicsx``, rank from ``OMPI_COMM_WORLD_RANK``), the fluid participant (``python -m
-fluid_openfoam``, one process whatever M) and simpleFoam's ranks (relaunched every coupling
-iteration: the largest over the launches). A process that lives less than the polling interval
+solid_fenicsx``, rank from ``OMPI_COMM_WORLD_RANK``), the fluid participant's ranks (``python -m
+fluid_openfoam``, one process per processor of the decomposed case) and simpleFoam's ranks
+(relaunched every coupling iteration: the largest over the launches). A process that lives less than the polling interval
 may be missed; the figures are lower bounds by at most the last 20 ms of growth.
 
 Two scenes (one time step each):
@@ -99,7 +99,7 @@ def role(pid: int, root: int) -> str | None:
     if "solid_fenicsx" in argv:
         return f"solid rank {rank}"
     if "fluid_openfoam" in argv:
-        return "fluid participant"
+        return f"fluid rank {rank}"
     if "fluid_chorin" in argv:
         return f"chorin rank {rank}"
     if argv and Path(argv[0]).name in ("simpleFoam", "pimpleFoam"):
