@@ -138,8 +138,9 @@ class FluidParticipant(Participant):
         for name, f in inputs.items():
             want = (n,) if name == "solid_fraction" else (n, 3)
             if name in ("solid_fraction", "solid_velocity") and f.data.shape != want:
-                mine = "" if self.size == 1 else (f" (rank {self.rank}'s input_ids: processor{self.rank}'s cells and "
-                                                  f"{'the whole grid' if self.solver.whole_inputs else 'their drag reach'})")
+                mine = "" if self.size == 1 else (f" (rank {self.rank}'s input_ids: " + (
+                    "the whole grid)" if self.solver.whole_inputs else
+                    f"processor{self.rank}'s cells and those their drag reads)"))
                 return f"input {name!r} has shape {f.data.shape}, expected {want}{mine}"
         return None
 
