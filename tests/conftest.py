@@ -7,6 +7,8 @@ box faces, so two jittered meshes of the same box cover exactly the same domain.
 
 from __future__ import annotations
 
+import os
+import uuid
 import warnings
 
 import numpy as np
@@ -85,3 +87,32 @@ def signals_not_ignored(request, signals_at_start):
         deliver_stopping_signals()
         warnings.warn(f"{request.node.nodeid} left {', '.join(sorted(found))} in the test process "
                       "(given back)", RuntimeWarning)
+
+
+@pytest.fixture
+def launch_script(tmp_path):
+    """``launch_script(name, module, text, extra_args=(), env=None, ranks=2, timeout=60)``: writes the
+    participant script ``text`` as ``tmp_path/<module>.py``, starts it as participant ``name`` on
+    ``ranks`` MPI ranks behind a new coupler session (``env`` added to the environment) and returns
+    its client once alive; all it started is stopped after the test."""
+    from coupler.run.client import CouplerSession
+    from coupler.run.launch import Launcher
+
+    opened = []
+
+    def start(name: str, module: str, text: str, extra_args=(), env=None, ranks: int = 2, timeout: float = 60.0):
+        (tmp_path / f"{module}.py").write_text(text)
+        coupler = CouplerSession(f"test-{uuid.uuid4().hex[:12]}")
+        environ = dict(os.environ, **(env or {}),
+                       PYTHONPATH=os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
+        launcher = Launcher(coupler.run_id, tmp_path, coupler.endpoints, env=environ)
+        opened.append((coupler, launcher))
+        launcher.start(name, module, ranks=ranks, extra_args=list(extra_args))
+        client = coupler.client(name, timeout, process_check=lambda: launcher.check(name))
+        client.wait_alive(60)
+        return client
+
+    yield start
+    for coupler, launcher in opened:
+        launcher.stop_all(timeout=3.0)
+        coupler.close()

@@ -6,17 +6,13 @@ the rank, its key, the input and its input planes."""
 
 from __future__ import annotations
 
-import os
 import shutil
-import uuid
 
 import numpy as np
 import pytest
 
 from coupler.protocol.errors import ParticipantError
 from coupler.protocol.wire import Field
-from coupler.run.client import CouplerSession
-from coupler.run.launch import Launcher
 from fluid_chorin.participant import ChorinParticipant
 from mpi_chorin_cases import plates
 
@@ -56,27 +52,15 @@ def config() -> tuple[dict, dict[str, np.ndarray]]:
 
 
 @pytest.fixture
-def fluid(tmp_path):
-    opened = []
-
+def fluid(tmp_path, launch_script):
     def start(fault: str = ""):
-        (tmp_path / "recording_chorin.py").write_text(RECORDING)
-        coupler = CouplerSession(f"test-{uuid.uuid4().hex[:12]}")
-        env = dict(os.environ, RECORD_DIR=str(tmp_path),
-                   PYTHONPATH=os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
-        launcher = Launcher(coupler.run_id, tmp_path, coupler.endpoints, env=env)
-        opened.append((coupler, launcher))
-        launcher.start("fluid", "recording_chorin", ranks=2, extra_args=[fault] if fault else [])
-        client = coupler.client("fluid", 60, process_check=lambda: launcher.check("fluid"))
-        client.wait_alive(60)
+        client = launch_script("fluid", "recording_chorin", RECORDING, [fault] if fault else [],
+                               {"RECORD_DIR": str(tmp_path)})
         client.configure(config()[0])
         client.geometry()
         return client
 
-    yield start
-    for coupler, launcher in opened:
-        launcher.stop_all(timeout=3.0)
-        coupler.close()
+    return start
 
 
 def test_each_rank_receives_the_rows_it_declared_and_the_fields_are_one_process(fluid, tmp_path):

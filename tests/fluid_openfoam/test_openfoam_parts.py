@@ -8,16 +8,12 @@ the rank and the file or key."""
 
 from __future__ import annotations
 
-import os
 import shutil
-import uuid
 
 import numpy as np
 import pytest
 
 from coupler.protocol.errors import ParticipantDied, ParticipantError
-from coupler.run.client import CouplerSession
-from coupler.run.launch import Launcher
 from fluid_openfoam.case import CaseSpec
 from fluid_openfoam.fields import read_label_list
 from fluid_openfoam.solver import OpenFOAMSolver
@@ -90,25 +86,9 @@ def step_fraction() -> np.ndarray:
 
 
 @pytest.fixture
-def fluid(tmp_path):
-    opened = []
-
-    def start(fault: str = ""):
-        (tmp_path / "recording_openfoam.py").write_text(RECORDING)
-        coupler = CouplerSession(f"test-{uuid.uuid4().hex[:12]}")
-        env = dict(os.environ, RECORD_DIR=str(tmp_path), FAULT=fault,
-                   PYTHONPATH=os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
-        launcher = Launcher(coupler.run_id, tmp_path, coupler.endpoints, env=env)
-        opened.append((coupler, launcher))
-        launcher.start("fluid", "recording_openfoam", ranks=2, extra_args=[fault] if fault else [])
-        client = coupler.client("fluid", 120, process_check=lambda: launcher.check("fluid"))
-        client.wait_alive(60)
-        return client
-
-    yield start
-    for coupler, launcher in opened:
-        launcher.stop_all(timeout=3.0)
-        coupler.close()
+def fluid(tmp_path, launch_script):
+    return lambda fault="": launch_script("fluid", "recording_openfoam", RECORDING, [fault] if fault else [],
+                                          {"RECORD_DIR": str(tmp_path), "FAULT": fault}, timeout=120)
 
 
 def test_each_rank_publishes_its_processor_and_the_join_is_the_whole_arrays(fluid, tmp_path):
