@@ -141,7 +141,7 @@ def test_openfoam_ranks_listen_on_no_network(tmp_path, monkeypatch):
         """))
     fake.chmod(0o755)
     monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
-    spec = CaseSpec.from_config({"grid": {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [2, 2, 2]}, "ranks": 2})
+    spec = CaseSpec.from_config({"grid": {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [2, 2, 2]}}, ranks=2)
     (tmp_path / "case").mkdir()
     solver = OpenFOAMSolver(tmp_path / "case", spec)
     solver.parallel = Decomposition(solver.case, spec)  # mpi_command only: nothing to decompose
