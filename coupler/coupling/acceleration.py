@@ -25,7 +25,7 @@ meshed.
 
 Every accelerator takes an optional ``comm`` (an mpi4py communicator): x, H(x), the
 weights and IQN-ILS's secant columns then hold this rank's rows only (any number, none
-too), every inner product is a local sum and one allreduce (:mod:`coupler.coupling.rows`),
+too), every inner product is a local sum and one allreduce (:mod:`coupler.coupling.row_sums`),
 and the factors derived from them (Aitken's omega, the QR's triangle, the least-squares
 coefficients, the columns filtered out) are the same on every rank. ``comm=None`` is the
 serial computation, unchanged.
@@ -56,7 +56,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from coupler.coupling.convergence import as_weights, inner
-from coupler.coupling.rows import Rows
+from coupler.coupling.row_sums import RowSums
 
 __all__ = ["Accelerator", "ConstantRelaxation", "Aitken", "IQNILS", "FilteredQR",
            "filtered_qr", "make_accelerator", "ACCELERATIONS"]
@@ -92,9 +92,9 @@ class Accelerator:
         self.weights = as_weights(weights, comm=self.comm)
 
     @property
-    def rows(self) -> Rows:
+    def rows(self) -> RowSums:
         """The sums over the ranks' rows (serial when `comm` is None)."""
-        return Rows(self.comm)
+        return RowSums(self.comm)
 
     def _check(self, x, Hx) -> tuple[np.ndarray, np.ndarray]:
         x = _vector(x)
@@ -262,7 +262,7 @@ def filtered_qr(V: np.ndarray, filter: str = "QR2", eps: float = 1e-8, weights=N
     V = np.asarray(V, dtype=float)
     if V.ndim != 2:
         raise ValueError("filtered_qr: V must be a 2-D array of columns")
-    rows = Rows(comm)
+    rows = RowSums(comm)
     n_local, m = V.shape
     w = as_weights(weights, n_local, comm)
     S = V if w is None else np.sqrt(w)[:, None] * V
@@ -295,7 +295,7 @@ def filtered_qr(V: np.ndarray, filter: str = "QR2", eps: float = 1e-8, weights=N
 
 
 def _gram_schmidt(S: np.ndarray, columns: list[int], norms: np.ndarray, eps: float, most: int,
-                  rows: Rows) -> tuple[np.ndarray, np.ndarray, list[int]]:
+                  rows: RowSums) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Thin QR of ``S[:, columns]`` by classical Gram-Schmidt with one re-orthogonalisation
     (CGS2: twice is enough, Giraud et al. 2005), at most `most` columns; a column whose part
     orthogonal to the columns accepted so far is zero or below ``eps`` times its norm is

@@ -25,7 +25,7 @@ floored so that an interface field that vanishes (no load in a window) gives a
 finite number instead of 0/0.
 
 With ``comm`` (an mpi4py communicator) the vectors and weights hold this rank's rows only
-(:mod:`coupler.coupling.rows`): the norms are local sums and one allreduce, the same on
+(:mod:`coupler.coupling.row_sums`): the norms are local sums and one allreduce, the same on
 every rank; ``comm=None`` is the serial computation, unchanged.
 """
 
@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from coupler.coupling.rows import Rows, inner, norm  # noqa: F401  (inner, norm: the M-inner product's API)
+from coupler.coupling.row_sums import RowSums, inner, norm  # noqa: F401  (inner, norm: the M-inner product's API)
 
 #: Denominator floor of the relative residual: below this the reference norm counts as zero.
 REFERENCE_FLOOR = 1e-300
@@ -48,7 +48,7 @@ def as_weights(weights, size: int | None = None, comm=None) -> np.ndarray | None
     raises when one rank's weights are wrong, or when all ranks' weights are zero."""
     if weights is None:
         return None
-    rows = Rows(comm)
+    rows = RowSums(comm)
     w = np.asarray(weights, dtype=float).ravel()
     local = [size is not None and w.size != size, not np.all(np.isfinite(w)) or np.any(w < 0), w.size > 0,
              np.any(w > 0)]
@@ -108,7 +108,7 @@ def interface_residual(x, Hx, weights=None, comm=None) -> Residual:
     if x.shape != Hx.shape:
         raise ValueError(f"interface residual: x has {x.size} values, H(x) has {Hx.size}")
     w = as_weights(weights, x.size, comm)
-    rows = Rows(comm)
+    rows = RowSums(comm)
     if not rows.distributed:
         return Residual(norm(Hx - x, w), norm(Hx, w))
     absolute, reference = rows.norms([Hx - x, Hx], w)

@@ -18,7 +18,7 @@ supplies
 
 With ``comm`` (an mpi4py communicator) every coupler rank runs the loop on its own rows of
 ``x`` (and of the weights): ``iterate`` returns this rank's rows of ``H(x)``, the residual
-norms and the accelerator's factors are reduced over the ranks (:mod:`coupler.coupling.rows`),
+norms and the accelerator's factors are reduced over the ranks (:mod:`coupler.coupling.row_sums`),
 so every rank takes the same decisions (converged, diverged, the next iterate's factors) and
 raises the same errors.
 
@@ -55,7 +55,7 @@ import numpy as np
 
 from coupler.coupling.acceleration import Accelerator, ConstantRelaxation
 from coupler.coupling.convergence import ConvergenceMonitor, as_weights
-from coupler.coupling.rows import Rows
+from coupler.coupling.row_sums import RowSums
 from coupler.errors import CouplerError, NotConverged
 
 __all__ = ["TimeWindow", "Checkpoint", "StepRecord", "CouplingResult", "CouplingError", "CouplingDiverged",
@@ -194,7 +194,7 @@ class NonFiniteInterface(CouplingError):
         self.where = where
 
 
-def _check_finite(v: np.ndarray, window: TimeWindow, iteration: int, where: str, rows: Rows = Rows()) -> None:
+def _check_finite(v: np.ndarray, window: TimeWindow, iteration: int, where: str, rows: RowSums = RowSums()) -> None:
     """Raise NonFiniteInterface on every rank when some rank's rows of `v` hold NaN or inf
     (counts over all ranks, the first bad dof in global numbering: lower ranks' rows first)."""
     finite = np.isfinite(v)
@@ -321,7 +321,7 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
     x = np.asarray(x0, dtype=float).ravel().copy()
     size = x.size
     first = TimeWindow(0, float(t0), float(t0) + dt)
-    rows = Rows(comm)
+    rows = RowSums(comm)
     _check_finite(x, first, 0, "the initial interface value x0", rows)
     w = as_weights(weights, size, comm)
     implicit = coupling == "implicit"
@@ -330,7 +330,7 @@ def run_coupled(steps: int, dt: float, iterate: Callable[[TimeWindow, int, np.nd
             accelerator = ConstantRelaxation(1.0)
         if accelerator.comm is None:
             accelerator.comm = comm
-        elif Rows(accelerator.comm).comm is not rows.comm:
+        elif RowSums(accelerator.comm).comm is not rows.comm:
             raise ValueError("run_coupled: the accelerator's comm is not the loop's")
         if w is not None and accelerator.weights is None:
             accelerator.set_weights(w)

@@ -5,7 +5,7 @@ The interface vector ``x`` of the coupling iteration (paper, section 2.3), its i
 IQN-ILS's secant columns may be split by rows over the ranks of an MPI communicator: each
 rank holds its own rows, any number of them, none too. An inner product is then a local sum
 plus an allreduce, and a block of them (``k`` columns against one vector) travels in one
-allreduce of ``k`` numbers. :class:`Rows` holds the communicator and does those sums, so the
+allreduce of ``k`` numbers. :class:`RowSums` holds the communicator and does those sums, so the
 accelerators and the convergence test are written once: with ``comm=None`` (or a single
 rank) every method is the serial expression, no MPI is involved and results are unchanged
 bit for bit.
@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-__all__ = ["Rows", "inner", "norm"]
+__all__ = ["RowSums", "inner", "norm"]
 
 
 def inner(u: np.ndarray, v: np.ndarray, weights: np.ndarray | None = None) -> float:
@@ -37,7 +37,7 @@ def norm(v: np.ndarray, weights: np.ndarray | None = None) -> float:
     return float(np.sqrt(np.dot(weights * v, v)))
 
 
-class Rows:
+class RowSums:
     """Sums over the rows that the ranks of `comm` hold (``None``: one process holds them all).
 
     The methods are collective: every rank calls them in the same order, with its own rows.
