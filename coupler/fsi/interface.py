@@ -148,6 +148,14 @@ class VolumeInterface:
 DEPTHS = (2.2, 3.4)
 
 
+def invalid_deformation(largest: float, reason) -> CouplerError:
+    """The error of a deformed solid that is no valid mesh (an inverted tetrahedron: the coupling
+    iteration ran away), `largest` the largest displacement."""
+    return CouplerError(f"the deformed solid is not a valid mesh (largest displacement {largest:.3g} m): {reason}; "
+                        f"the coupling iteration diverges: use [coupling] acceleration = 'iqn-ils' or 'aitken', "
+                        f"or a smaller relaxation")
+
+
 class SolidOnGrid:
     """The solid as the fluid sees it, from the solid's current shape (two-way coupling).
 
@@ -175,12 +183,17 @@ class SolidOnGrid:
         self.traction = traction
         self.deeper = []
         self.deform = bool(deform) and self.triangles is not None
+        self.num_vertices = len(S.points)
+        self._first_build(G)
+
+    def _first_build(self, G: StructuredGrid) -> None:
+        """The undeformed build and the bookkeeping of :meth:`update`."""
         self.threshold = 1e-12 * float(np.min(G.spacing))
         self.builds, self.build_seconds, self.skipped = 0, 0.0, 0
         self.max_displacement = 0.0
         self._u = None
         self._build(None)
-        self.reference_weights = self.interface.weights if wetted else None
+        self.reference_weights = self.interface.weights if self.wetted else None
         self.builds, self.build_seconds = 0, 0.0  # count the rebuilds only, not the initial build
 
     def _build(self, u) -> None:
@@ -190,10 +203,7 @@ class SolidOnGrid:
             try:
                 S = Mesh(np.asarray(self.S.points) + u, self.S.cells, "tetra", name="deformed solid")
             except Exception as exc:  # an inverted tetrahedron: the coupling iteration ran away
-                raise CouplerError(f"the deformed solid is not a valid mesh (largest displacement "
-                                   f"{float(np.max(np.linalg.norm(u, axis=1))):.3g} m): {exc}; the coupling "
-                                   f"iteration diverges: use [coupling] acceleration = 'iqn-ils' or 'aitken', "
-                                   f"or a smaller relaxation") from exc
+                raise invalid_deformation(float(np.max(np.linalg.norm(u, axis=1))), exc) from exc
         to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(self.G, "Q0"), "pseudo_l2")
         volumes = np.asarray(to_fluid.D.diagonal())
         self.outside = max(1.0 - float(volumes.sum()) / float(S.cell_measures().sum()), 0.0)
@@ -222,20 +232,27 @@ class SolidOnGrid:
             return None
 
     def update(self, u) -> bool:
-        """Rebuild from the displacement u (num_points, 3) if it changed; True if rebuilt."""
+        """Rebuild from the displacement u (num_vertices, 3) if it changed; True if rebuilt."""
         if not self.deform or u is None:
             return False
-        u = np.asarray(u, float).reshape(len(self.S.points), -1)
-        size = float(np.max(np.abs(u))) if u.size else 0.0
+        u = np.asarray(u, float).reshape(self.num_vertices, -1)
+        size = self._largest(u)
         self.max_displacement = max(self.max_displacement, size)
         if size <= self.threshold:
             u = None
-        if (u is None and self._u is None) or (u is not None and self._u is not None and np.array_equal(u, self._u)):
+        if (u is None and self._u is None) or (u is not None and self._u is not None and self._equal(u, self._u)):
             self.skipped += 1
             return False
         self._build(u)
         self._u = None if u is None else u.copy()
         return True
+
+    # the reductions of :meth:`update` (over the coupler's ranks in coupler.fsi.ranks.SolidOnSlabs)
+    def _largest(self, u: np.ndarray) -> float:
+        return float(np.max(np.abs(u))) if u.size else 0.0
+
+    def _equal(self, u: np.ndarray, v: np.ndarray) -> bool:
+        return bool(np.array_equal(u, v))
 
     def describe(self) -> dict:
         return {"deformed": self.deform, "rebuilds": self.builds, "rebuild_seconds": self.build_seconds,

@@ -24,7 +24,7 @@ from transfer.distributed import Part, assemble
 from transfer.rows import Rows
 
 from .held import Held
-from .interface import SolidOnGrid, WettedInterface, sampling_points
+from .interface import SolidOnGrid, WettedInterface, invalid_deformation, sampling_points
 
 
 class GridSlab:
@@ -133,24 +133,18 @@ class WettedSlabs:
     describe = WettedInterface.describe
 
 
-class SolidOnSlabs:
+class SolidOnSlabs(SolidOnGrid):
     """:class:`coupler.fsi.interface.SolidOnGrid` on several ranks (the wetted surface, pressure
     traction): ``fraction`` and ``to_fluid`` on this rank's slab, ``interface``, rebuilt from the
-    deformed solid when its displacement changes (the same rules: zero below 1e-12 of the grid
-    spacing, unchanged since the last build)."""
+    deformed solid by the same rules (:meth:`update`, its reductions over the ranks)."""
 
     def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, deform: bool = True,
                  wetted: bool = True):
         self.comm, self.solid, self.slab, self.where = comm, solid, slab, where
         self.wetted = wetted
         self.deform = bool(deform) and solid.wetted
-        self.threshold = 1e-12 * float(np.min(slab.G.spacing))
-        self.builds, self.build_seconds, self.skipped = 0, 0.0, 0
-        self.max_displacement = 0.0
-        self._u = None
-        self._build(None)
-        self.reference_weights = self.interface.weights if wetted else None
-        self.builds, self.build_seconds = 0, 0.0
+        self.num_vertices = len(solid.vertices)
+        self._first_build(slab.G)
 
     def _build(self, u) -> None:
         start = time.perf_counter()
@@ -163,9 +157,7 @@ class SolidOnSlabs:
             part, failed = None, str(exc)
         failed = next((f for f in comm.allgather(failed) if f), "")
         if failed:
-            raise CouplerError(f"the deformed solid is not a valid mesh (largest displacement "
-                               f"{self.max_displacement:.3g} m): {failed}; the coupling iteration diverges: use "
-                               f"[coupling] acceleration = 'iqn-ils' or 'aitken', or a smaller relaxation")
+            raise invalid_deformation(self.max_displacement, failed)
         to_fluid = assemble(part, self.slab.part, "pseudo_l2", comm)
         volumes = to_fluid.diagonal()
         measure = float(part.mesh.cell_measures().sum()) if part.num_cells else 0.0
@@ -176,25 +168,11 @@ class SolidOnSlabs:
         self.builds += 1
         self.build_seconds += time.perf_counter() - start
 
-    def update(self, u) -> bool:
-        """Rebuild from the displacement u at this rank's solid vertices if it changed. Collective."""
-        if not self.deform or u is None:
-            return False
-        u = np.asarray(u, float).reshape(len(self.solid.vertices), 3)
-        size = self.comm.allreduce(float(np.max(np.abs(u))) if u.size else 0.0, op=MPI.MAX)
-        self.max_displacement = max(self.max_displacement, size)
-        if size <= self.threshold:
-            u = None
-        same = (u is None and self._u is None) or (
-            u is not None and self._u is not None and self.comm.allreduce(bool(np.array_equal(u, self._u)), op=MPI.LAND))
-        if same:
-            self.skipped += 1
-            return False
-        self._build(u)
-        self._u = None if u is None else u.copy()
-        return True
+    def _largest(self, u: np.ndarray) -> float:
+        return self.comm.allreduce(super()._largest(u), op=MPI.MAX)
 
-    describe = SolidOnGrid.describe
+    def _equal(self, u: np.ndarray, v: np.ndarray) -> bool:
+        return self.comm.allreduce(super()._equal(u, v), op=MPI.LAND)
 
     def _cells_with_solid(self) -> int:
         return self.comm.allreduce(int(np.count_nonzero(self.fraction > 0)))

@@ -318,9 +318,7 @@ class ParticipantClient:
         replies = self.exchange(
             "advance", {"window": int(window), "iteration": int(iteration), "t": float(t), "dt": float(dt)},
             parts, timeout=timeout)
-        header = replies[0].header
-        self.last_solves = [SolveReport.from_dict(d) for d in header.get("solves", [])]
-        self.last_figures = {str(k): float(v) for k, v in header.get("figures", {}).items()}
+        self.last_solves, self.last_figures = step_reports(replies[0].header)
         return self.layout.join(replies) if self.layout is not None else replies[0].fields
 
     def save_state(self, window: int, timeout: float | None = None) -> None:
@@ -411,3 +409,10 @@ class CouplerSession:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def step_reports(header: Mapping) -> tuple[list[SolveReport], dict[str, float]]:
+    """How a participant's inner solves of an advance ended and its figures of the step, from
+    rank 0's reply header (the participant's ranks solve together: rank 0 speaks for them)."""
+    return ([SolveReport.from_dict(d) for d in header.get("solves", [])],
+            {str(k): float(v) for k, v in header.get("figures", {}).items()})

@@ -29,11 +29,10 @@ from coupler.fsi.context import OperatorContext
 from coupler.fsi.held import Held, assigned
 from coupler.fsi.ranks import OPERATORS_RANKS, GridSlab, RanksContext
 from coupler.output.results import REDUCTIONS, Series, reduce_figures
-from coupler.protocol.wire import Field, SolveReport
-from coupler.run.client import CouplerSession
+from coupler.protocol.wire import Field
+from coupler.run.client import CouplerSession, step_reports
 from coupler.run.launch import Launcher
 from coupler.run.runner import Run, write_series
-from coupler.run.solves import StepSolves
 from transfer import StructuredGrid
 
 
@@ -225,14 +224,8 @@ class RanksRun(Run):
         shapes = comm.bcast({k: (np.asarray(f.data).shape[1:], np.asarray(f.data).dtype)
                              for k, f in replies[0].fields.items()} if self.root else None)
         held.fields = agree(comm, _joined, name, replies, held, shapes)
-        self.inputs[name] = {k: values for k, (values, _) in inputs.items()}
-        reports = comm.bcast((replies[0].header.get("solves", []), replies[0].header.get("figures", {}))
-                             if self.root else None)
-        client.last_solves, client.last_figures = _reports(*reports)
-        if iteration == 0 and name == self.plan.participants[0].name:
-            self.solves = StepSolves(self.allow)
-        self.solves.add(name, iteration, client.last_solves)
-        self.figures[name] = client.last_figures
+        client.last_solves, client.last_figures = comm.bcast(step_reports(replies[0].header) if self.root else None)
+        self._record(name, iteration, inputs)
 
     # -- a converged step -------------------------------------------------------------
     def max_displacement(self) -> float | None:
@@ -295,10 +288,6 @@ def _joined(name: str, replies, held: Held, shapes: dict) -> dict[str, np.ndarra
             pieces.append(a)
         out[k] = np.concatenate(pieces) if pieces else np.zeros((0, *shape), dtype)
     return out
-
-
-def _reports(solves, figures):
-    return [SolveReport.from_dict(d) for d in solves], {str(k): float(v) for k, v in figures.items()}
 
 
 def _rows(per_part) -> np.ndarray:

@@ -278,6 +278,12 @@ class Run:
         fields = {k: Field(k, v, units) for k, (v, units) in inputs.items()}
         self.outputs[name] = _as_arrays(self.phases.remote(name, client, "advance", window.index, iteration,
                                                            window.t_start, window.dt, fields))
+        self._record(name, iteration, inputs)
+
+    def _record(self, name: str, iteration: int, inputs: dict) -> None:
+        """Keep the inputs `name` advanced with and how its inner solves ended (a new step's
+        record from the first participant's first iteration)."""
+        client = self.clients[name]
         self.inputs[name] = {k: v for k, (v, _) in inputs.items()}
         if iteration == 0 and name == self.plan.participants[0].name:
             self.solves = StepSolves(self.allow)
