@@ -235,7 +235,7 @@ class SolidOnGrid:
         """Rebuild from the displacement u (num_vertices, 3) if it changed; True if rebuilt."""
         if not self.deform or u is None:
             return False
-        u = np.asarray(u, float).reshape(self.num_vertices, -1)
+        u = np.asarray(u, float).reshape(self.num_vertices, 3)
         size = self._largest(u)
         self.max_displacement = max(self.max_displacement, size)
         if size <= self.threshold:
