@@ -20,15 +20,18 @@ monitors and pictures that need a whole field on one process refuse P > 1
 from __future__ import annotations
 
 import pickle
+import sys
+import time
+import traceback
 from contextlib import ExitStack, contextmanager
 
 import numpy as np
 
-from coupler.errors import CouplerError, SceneError
+from coupler.errors import EXIT_CODES, CouplerError, SceneError, one_line, run_status
 from coupler.fsi.context import OperatorContext
 from coupler.fsi.held import Held, assigned
 from coupler.fsi.ranks import OPERATORS_RANKS, GridSlab, RanksContext
-from coupler.output.results import REDUCTIONS, Series, reduce_figures
+from coupler.output.results import REDUCTIONS, Series, reduce_figures, write_summary
 from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession, step_reports
 from coupler.run.launch import Launcher
@@ -64,8 +67,25 @@ def vote(comm, failure: Exception | None) -> None:
         raise first
 
 
+def failed_together(comm, seconds: float) -> bool:
+    """Whether every rank of `comm` calls this within `seconds` (a non-blocking barrier): after a
+    failure, whether the other ranks failed with this one (a voted failure, or one every rank
+    decides alike, e.g. not converging) or went on without it into a collective call that will
+    never end. `comm` serves this alone (a duplicate: its barrier matches no other call)."""
+    request, deadline = comm.Ibarrier(), time.monotonic() + seconds
+    while not request.Test():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
 class RanksRun(Run):
     """:class:`coupler.run.runner.Run` on the ranks of `comm` (module docstring)."""
+
+    #: how long a rank whose run failed waits for the others to fail too before it aborts the
+    #: MPI job [s] (:meth:`execute`)
+    alone_seconds = 30.0
 
     @staticmethod
     def admit(scene, plan, comm) -> None:
@@ -117,6 +137,7 @@ class RanksRun(Run):
     def __init__(self, *args, comm, **kwargs):
         super().__init__(*args, **kwargs)
         self.comm, self.root = comm, comm.rank == 0
+        self.failures = comm.Dup()  # for failed_together alone
         if not self.root:
             self.log = lambda line: None
         self.held: dict[str, Held] = {}
@@ -248,7 +269,30 @@ class RanksRun(Run):
             write_series(self.series[name], mesh, name, window, fields)
 
     def execute(self, progress) -> dict:
-        return super().execute(progress and self.root)
+        """The run; a failure on this rank that the other ranks do not share within
+        :attr:`alone_seconds` (an error outside any vote: the others wait in a collective call)
+        ends the MPI job (:meth:`abort`) instead of hanging it."""
+        try:
+            return super().execute(progress and self.root)
+        except Exception as exc:
+            if not failed_together(self.failures, self.alone_seconds):
+                self.abort(exc)
+            raise
+
+    def abort(self, exc: Exception) -> None:
+        """This rank failed alone: its error on stderr (one line; the traceback too when it is no
+        CouplerError), in summary.json (rank 0 is stuck in a collective call and will not write
+        it), and the MPI job aborted (mpirun ends every rank)."""
+        r = self.comm.rank
+        line = f"coupler rank {r}: {one_line(exc)}"
+        self.summary.update(status=run_status(exc), error=f"{type(exc).__name__}: {line} (the other ranks went on)")
+        write_summary(self.out, self.summary)
+        if not isinstance(exc, CouplerError):
+            traceback.print_exception(exc, file=sys.stderr)
+        sys.stderr.write(f"varcouple: error: {line}; the other coupler ranks went on without it: the MPI job "
+                         f"is aborted\n")
+        sys.stderr.flush()
+        self.comm.Abort(EXIT_CODES["failed"])
 
     # -- control verbs: rank 0 --------------------------------------------------------
     def finish(self) -> None:
