@@ -1,6 +1,6 @@
-"""The distributed transfer on PETSc (petsc4py): ``B``, ``D`` and, for pseudo-L2, ``T = D^-1 B``
-as parallel AIJ matrices, rows owned by blocks of global dof ids as PETSc splits them; apply
-and the l2 solve (CG on the overlap mass matrix, Jacobi) run distributed (paper eq. 3-4).
+"""The distributed transfer on PETSc (petsc4py): ``B`` and ``D`` as parallel AIJ matrices, rows
+owned by blocks of global dof ids as PETSc splits them; pseudo-L2's ``T = D^-1 B`` applied as
+``B`` and the inverse diagonal (its matrix made only on request), and the l2 solve (CG on the overlap mass matrix, Jacobi) run distributed (paper eq. 3-4).
 
 Fields enter and leave as each rank's values at its local dofs (:class:`transfer.distributed.Part`);
 scatters carry them to and from the global vectors.
@@ -105,8 +105,7 @@ def _columns(u: np.ndarray) -> np.ndarray:
 class DistributedTransfer:
     """``T = D^{-1} B`` between distributed spaces (:func:`transfer.distributed.assemble`).
 
-    ``B`` (target x source dofs), ``D`` and, for pseudo-L2, ``T`` are PETSc matrices in
-    global dof ids. :meth:`apply` takes this rank's values at its source dofs and returns
+    ``B`` (target x source dofs) and ``D`` are PETSc matrices in global dof ids. :meth:`apply` takes this rank's values at its source dofs and returns
     those at its target dofs; ``covered`` marks the local target dofs the source reaches."""
 
     #: CG stops at this ratio of the Jacobi-scaled residual to that of the right-hand side
@@ -142,12 +141,10 @@ class DistributedTransfer:
         self.num_target_dofs = n_tgt
         r0 = rows_t[comm.rank]
         uncovered = _indices(r0 + np.flatnonzero(~owned_covered))
-        self.T, self._ksp, self._direct = None, None, None
-        if method == "pseudo_l2":
-            scale = y.duplicate()
-            scale.array[:] = np.where(owned_covered, 1.0 / np.where(owned_covered, diagonal, 1.0), 0.0)
-            self.T = self.B.duplicate(copy=True)
-            self.T.diagonalScale(L=scale)
+        self._inverse, self._ksp, self._direct = None, None, None
+        if method == "pseudo_l2":  # T = D^-1 B applied as B, then the inverse diagonal (no copy of B)
+            self._inverse = y.duplicate()
+            self._inverse.array[:] = np.where(owned_covered, 1.0 / np.where(owned_covered, diagonal, 1.0), 0.0)
         else:
             self._Dc = self.D.duplicate(copy=True)
             self._Dc.zeroRowsColumns(uncovered, diag=1.0)
@@ -182,10 +179,13 @@ class DistributedTransfer:
         return self._mass.array.copy()
 
     def matrix(self) -> PETSc.Mat:
-        """T = D^{-1} B (pseudo-L2 only, as in the serial :meth:`transfer.Transfer.matrix`)."""
-        if self.T is None:
+        """T = D^{-1} B (pseudo-L2 only, as in the serial :meth:`transfer.Transfer.matrix`): a new
+        matrix (:meth:`apply` does not keep one). Collective."""
+        if self._inverse is None:
             raise TransferError("T of the l2 method is dense; use apply, or method='pseudo_l2'")
-        return self.T
+        T = self.B.duplicate(copy=True)
+        T.diagonalScale(L=self._inverse)
+        return T
 
     # -- apply ----------------------------------------------------------------------------
     def _check(self, u) -> np.ndarray:
@@ -224,8 +224,9 @@ class DistributedTransfer:
         x, y = self._source.vec, self._target.vec
         for c in range(columns.shape[1]):
             self._source.put(columns[:, c])
-            if self.T is not None:
-                self.T.mult(x, y)
+            if self._inverse is not None:
+                self.B.mult(x, y)
+                y.pointwiseMult(y, self._inverse)
             else:
                 self.B.mult(x, self._b)
                 self._b.array[~self._owned_covered] = 0.0

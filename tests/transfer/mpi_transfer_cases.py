@@ -81,7 +81,7 @@ def compare(name, smesh, sfam, tmesh, tfam, ps, pt, kwargs) -> dict:
         v = gather(pt, dt.apply(u[ps.global_dofs]), comm)
         covered = gather(pt, dt.covered, comm)
         B, D = gather_matrix(dt.B, comm), gather_matrix(dt.D, comm)
-        Tm = gather_matrix(dt.T, comm) if method == "pseudo_l2" else None
+        Tm = gather_matrix(dt.matrix(), comm) if method == "pseudo_l2" else None
         conservation = dt.conservation_error(u[ps.global_dofs])
         stats = dt.stats
         if comm.rank:
