@@ -1,6 +1,8 @@
 """Memory of a coupled run on several ranks: the peak resident memory (VmHWM) of the coupler
 process and of every participant process and rank, with the solid on N and the OpenFOAM fluid
-on M MPI ranks (N, M in {1, 2}).
+on M MPI ranks (N, M in {1, 2}); beside it the peaks of its private part (RssAnon: heap, stacks)
+and of the shared memory it maps (RssShmem: zenoh's pools, whose pages count in every process
+that maps them), sampled.
 
 Each run is ``varcouple run`` in a child process, its process tree read from /proc every
 20 ms: the coupler (the ``varcouple run`` process), the solid's ranks (``python -m
@@ -107,11 +109,20 @@ def role(pid: int, root: int) -> str | None:
     return None
 
 
-def peak_rss_kb(pid: int) -> int:
+#: what is read of /proc/PID/status: the peak resident memory (the kernel's own high-water mark)
+#: and, sampled, its private part (heap, stacks) and the shared memory mapped (zenoh's pools: the
+#: same pages are counted in every process that maps them)
+MEMORY = {"VmHWM": "peak_rss_mb", "RssAnon": "peak_private_mb", "RssShmem": "peak_shared_mb"}
+
+
+def memory_kb(pid: int) -> dict[str, int]:
+    """The :data:`MEMORY` figures of process `pid` now [kB] (empty once it is gone)."""
+    out = {}
     for line in _read(pid, "status").splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1])
-    return 0
+        key = line.split(":", 1)[0]
+        if key in MEMORY:
+            out[MEMORY[key]] = int(line.split()[1])
+    return out
 
 
 def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, fluid: str = "openfoam",
@@ -125,7 +136,7 @@ def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, flu
             (case / f.name).symlink_to(f)
     (case / "scene.toml").write_text(scene_text(scene, solid_ranks, fluid_ranks, fluid, coupler_ranks))
     out = case / "results"
-    peaks: dict[str, int] = {}
+    peaks: dict[str, dict[str, int]] = {}
     t0 = time.perf_counter()
     proc = subprocess.Popen([str(ROOT / ".venv" / "bin" / "varcouple"), "run", str(case), "--output", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -136,7 +147,9 @@ def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, flu
             for pid in [proc.pid, *descendants(proc.pid)]:
                 name = role(pid, proc.pid)
                 if name is not None and not (name == "coupler" and coupler_ranks > 1):
-                    peaks[name] = max(peaks.get(name, 0), peak_rss_kb(pid))
+                    peak = peaks.setdefault(name, {})
+                    for figure, kb in memory_kb(pid).items():
+                        peak[figure] = max(peak.get(figure, 0), kb)
             time.sleep(0.02)
 
     thread = threading.Thread(target=poll, daemon=True)
@@ -152,7 +165,8 @@ def measured_run(scene: str, solid_ranks: int, fluid_ranks: int, work: Path, flu
             "error": err.decode(errors="replace").strip().splitlines()[-1:] if proc.returncode else [],
             "status": summary.get("status"), "wall_seconds": round(wall, 2), "sizes": summary.get("sizes"),
             "iterations": summary.get("iterations"),
-            "peak_rss_mb": {k: round(v / 1024, 1) for k, v in sorted(peaks.items())}}
+            **{figure: {k: round(v.get(figure, 0) / 1024, 1) for k, v in sorted(peaks.items())}
+               for figure in MEMORY.values()}}
 
 
 def main(argv=None) -> int:
@@ -178,7 +192,8 @@ def main(argv=None) -> int:
                 run = measured_run(scene, n, m, Path(tmp), args.fluid, p)
                 runs.append(run)
                 print(f"{scene:6s} solid {n} fluid {m} coupler {p}: exit {run['exit']}, {run['wall_seconds']:6.1f} s, "
-                      + ", ".join(f"{k} {v:.0f} MB" for k, v in run["peak_rss_mb"].items()), flush=True)
+                      + ", ".join(f"{k} {v:.0f} MB (private {run['peak_private_mb'][k]:.0f})"
+                                  for k, v in run["peak_rss_mb"].items()), flush=True)
     result = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                           "load_average_after": os.getloadavg()},
               "runs": runs}
