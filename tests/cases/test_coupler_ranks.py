@@ -71,6 +71,20 @@ def test_a_coupler_rank_without_participant_ranks(tmp_path):
     assert all(h["grid_cells"] > 0 for h in held)
 
 
+@pytest.mark.slow
+@needs_mpi
+@pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM not installed")
+def test_the_openfoam_fluid_on_two_coupler_ranks(tmp_path):
+    """The OpenFOAM fluid (one participant process per processor of its decomposed case) and the
+    solid on 2 ranks each: coupler ranks 0 and 1 each talk to one processor's process; the fields
+    and the summary equal the one-rank coupler's to 1e-10, with the same iterations."""
+    serial, ranks = (run(tmp_path / f"p{p}", 2, 2, steps=1, fluid="openfoam", fluid_tolerance="1e-7",
+                         coupling=f"ranks = {p}" if p > 1 else "") for p in (1, 2))
+    assert_same(serial, ranks, "OpenFOAM fluid, coupler on 2 ranks")
+    held = holdings(ranks)
+    assert all(0 < h["fluid_rows"] < 21 * 11 * 11 for h in held)
+
+
 # -- refusals: what needs a whole field on one process ------------------------------------
 def refusal(tmp_path, case: str, replace: dict | None = None, append: str = "") -> str:
     scene_dir = copy_case(CASES / case, tmp_path / case, replace)
