@@ -204,6 +204,7 @@ class SolidOnGrid:
                 S = Mesh(np.asarray(self.S.points) + u, self.S.cells, "tetra", name="deformed solid")
             except Exception as exc:  # an inverted tetrahedron: the coupling iteration ran away
                 raise invalid_deformation(float(np.max(np.linalg.norm(u, axis=1))), exc) from exc
+        self.to_fluid = None  # the previous shape's operator goes before the new one is made (peak memory)
         to_fluid = Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(self.G, "Q0"), "pseudo_l2")
         volumes = np.asarray(to_fluid.D.diagonal())
         self.outside = max(1.0 - float(volumes.sum()) / float(S.cell_measures().sum()), 0.0)

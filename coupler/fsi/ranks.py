@@ -158,6 +158,7 @@ class SolidOnSlabs(SolidOnGrid):
         failed = next((f for f in comm.allgather(failed) if f), "")
         if failed:
             raise invalid_deformation(self.max_displacement, failed)
+        self.to_fluid = None  # the previous shape's operator goes before the new one is made (peak memory)
         to_fluid = assemble(part, self.slab.part, "pseudo_l2", comm)
         volumes = to_fluid.diagonal()
         measure = float(part.mesh.cell_measures().sum()) if part.num_cells else 0.0
