@@ -12,7 +12,9 @@ SOLID_VELOCITIES = ("bodies", "none")
 
 PARTICIPANT = ParticipantSpec(
     kind="openfoam", module="fluid_openfoam", role="fluid", needs=("flow",),
-    memory=(150 * 2**20, 1400),  # blockMesh and simpleFoam: 64k cells 188 MB, 512k cells 735 MB
+    # per rank: this participant's process and simpleFoam's (bench/ranks.py: 90 + 108 MB on 2,541
+    # cells, 112 + 132 MB on 20,328; simpleFoam alone 188 MB on 64k cells, 735 MB on 512k)
+    memory=(220 * 2**20, 1400),
     description="incompressible flow on the structured grid by stock OpenFOAM v1912 (simpleFoam, pimpleFoam with "
                 "dynamics), the solid immersed by volume penalization",
     settings=Settings(

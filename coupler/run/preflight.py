@@ -4,8 +4,9 @@ first step).
 
 Sizes come from the scene (box and grid shapes) or from reading the mesh files; memory is
 estimated per participant from the per-rank and per-cell costs it declares
-(:attr:`coupler.protocol.settings.ParticipantSpec.memory`, measured peak resident memory), and
-for the coupler (operators, fields) about 2 kB per solid tet + 0.3 kB per fluid cell.
+(:attr:`coupler.protocol.settings.ParticipantSpec.memory`, measured peak resident memory, times
+its ranks), and for the coupler (operators, fields) a fixed part per coupler rank and about 2 kB
+per solid tet + 0.3 kB per fluid cell over all of them.
 
 A scene whose estimate exceeds the memory available (the smallest of the machine's
 MemAvailable, the cgroup's memory.max, the address-space limit and ``[resources]
@@ -25,8 +26,9 @@ from pathlib import Path
 from coupler.errors import SceneError
 
 MB = 2**20
-#: (fixed bytes, bytes per cell) of the coupler's part for the solid and for the fluid
-COSTS = {"coupler_solid": (100 * MB, 2000), "coupler_fluid": (0, 300)}
+#: (fixed bytes per coupler rank, bytes per cell) of the coupler's part for the solid and for the
+#: fluid (bench/ranks.py: 159-207 MB per rank on the small scene, of it 130 MB before any mesh)
+COSTS = {"coupler_solid": (150 * MB, 2000), "coupler_fluid": (0, 300)}
 
 
 @dataclass
@@ -90,12 +92,14 @@ def _solid_cells(scene) -> tuple[int, str]:
     return _mesh_cells(solid.mesh, key), key
 
 
-def estimate(scene) -> list[Estimate]:
+def estimate(scene, coupler_ranks: int | None = None) -> list[Estimate]:
     """Cells and memory of every part of the coupled `scene` (participants and coupler; parts
-    served in the coupler's process count as the coupler's)."""
+    served in the coupler's process count as the coupler's), the coupler on `coupler_ranks`
+    ranks (default: ``[coupling] ranks``)."""
     from coupler.plan.effects import RULES
 
-    out, coupler = [], COSTS["coupler_solid"][0]
+    ranks = coupler_ranks or scene.coupling["ranks"]
+    out, coupler = [], COSTS["coupler_solid"][0] * ranks
     if scene.solid is not None:
         tets, key = _solid_cells(scene)
         solid_cfg = scene.solvers.get("solid")

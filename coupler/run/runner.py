@@ -113,7 +113,7 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     root = comm is None or comm.rank == 0
     plan = make_plan(scene)
     run_class.admit(scene, plan, comm)
-    log(f"memory: {check_memory(scene, estimate(scene))}")
+    log(f"memory: {check_memory(scene, estimate(scene, comm.size if comm is not None else 1))}")
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     check_inputs_kept(scene, plan, out)

@@ -175,10 +175,15 @@ def test_a_new_participant_is_its_declaration(tmp_path, monkeypatch):
     assert (fluid.kind, fluid.module, fluid.arguments) == ("lbm", "lbm_fluid", ["--lattice-boltzmann"])
     assert (fluid.config["relaxation_time"], fluid.config["lattice"]) == (0.6, "D3Q19")
     assert "python -m lbm_fluid --lattice-boltzmann" in fluid.describe()
-    from coupler.run.preflight import estimate
+    from coupler.run.preflight import COSTS, estimate
 
     fluid_estimate = [e for e in estimate(load(tmp_path)) if e.name == "fluid"][0]
     assert fluid_estimate.bytes == 10 * 2**20 + 500 * 64  # its declared memory, 4^3 cells
+    coupler = {p: [e for e in estimate(load(tmp_path), p) if e.name == "coupler"][0].bytes for p in (1, 3)}
+    assert coupler[3] - coupler[1] == 2 * COSTS["coupler_solid"][0]  # the fixed part once per coupler rank
+    scene(tmp_path, '[solvers.fluid]\nparticipant = "lbm"\nrelaxation_time = 0.6\nranks = 3\n')
+    fluid_estimate = [e for e in estimate(load(tmp_path)) if e.name == "fluid"][0]
+    assert fluid_estimate.bytes == 3 * 10 * 2**20 + 500 * 64  # the fixed part once per rank
 
 
 def test_a_broken_entry_point_is_named(monkeypatch):
