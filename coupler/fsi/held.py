@@ -38,6 +38,7 @@ class Held:
         if comm.allreduce(int(np.count_nonzero(once != 1))):
             raise CouplerError(f"participant {name!r}: its parts do not number each of its {self.count} rows once")
         self.fields: dict[str, np.ndarray] = {}
+        self._mesh = None
 
     def fetch(self, field: str, wanted: np.ndarray) -> np.ndarray:
         """The output `field` at the rows `wanted` (any rows of the whole). Collective."""
@@ -57,7 +58,13 @@ class Held:
 
     def mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
         """(vertices, mesh): the tetrahedra of the parts held here (their `geometry`) on the global
-        `vertices` they use, with the coordinates of those owned elsewhere fetched. Collective."""
+        `vertices` they use, with the coordinates of those owned elsewhere fetched; made once (the
+        operators and the output share it). Collective the first time."""
+        if self._mesh is None:
+            self._mesh = self._made_mesh(geometry)
+        return self._mesh
+
+    def _made_mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
         points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
         cells = [np.asarray(g["cells"], np.int64).reshape(-1, 4) for g in geometry]
         cells = np.concatenate(cells) if cells else np.zeros((0, 4), np.int64)
