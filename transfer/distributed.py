@@ -293,8 +293,9 @@ def assemble(source: Part, target: Part, method: str, comm, *, quadrature_degree
              search_distance: float | None = None, max_normal_angle: float = 45.0, nthreads: int = 1):
     """Distributed ``T = D^-1 B`` from `source` to `target` (each this rank's :class:`Part`):
     a :class:`transfer.petsc.DistributedTransfer`. Collective on `comm`."""
-    from .petsc import DistributedTransfer
+    from .petsc import DistributedTransfer, destroy_dropped
 
+    destroy_dropped(comm)  # the transfers dropped before this one go before its kernel runs (peak memory)
     if method not in METHODS:
         raise TransferError(f"unknown method {method!r}; use one of {METHODS}")
     for part in (source, target):

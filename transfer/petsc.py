@@ -19,6 +19,14 @@ from .errors import FieldError, TransferError
 from .assembly import COVERED_RTOL
 
 
+def destroy_dropped(comm) -> None:
+    """Destroy the parallel PETSc objects Python has dropped on `comm`. petsc4py (PETSc >= 3.18)
+    does not destroy them when their last reference goes: it queues them until this collective
+    call; without it every transfer rebuilt (the coupler's, each time the solid deforms) would
+    keep its predecessors' matrices. Collective."""
+    PETSc.garbage_cleanup(comm)
+
+
 def ownership(n: int, size: int) -> np.ndarray:
     """First global id of every rank's block, and n (PETSc's split: sizes differ by at most one)."""
     counts = n // size + (np.arange(size) < n % size)
