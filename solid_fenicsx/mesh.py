@@ -19,19 +19,22 @@ Boundary facets get their tags from two sources, in this order:
 
 Vertex numbering: the vertices of the input, compacted to those used by a cell,
 in input order, are the "input numbering" that :mod:`solid_fenicsx.vertex_io`
-gathers fields in.
+gathers fields in. Cell tags (gmsh's physical volumes) are kept beside the facet tags.
 
 No rank hands the whole mesh to dolfinx: every rank gives ``create_mesh`` one block
 of cells and one block of points (:func:`from_blocks`). A box, or a generator that
 describes its mesh by index (:class:`transfer.generators.lattices.Lattices`), is made
 block by block, each rank only its own (:func:`lattice_mesh`); a file, or any other
-generator, is read or made on the root rank, which scatters the blocks (:func:`from_arrays`).
+generator, is read or made on the root rank, which scatters the blocks (:func:`from_arrays`);
+an XDMF file (:mod:`solid_fenicsx.xdmf_mesh`, written by ``python -m solid_fenicsx.convert``) is
+read by every rank, each its own rows (:func:`read_mesh`).
 """
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
@@ -43,6 +46,8 @@ import dolfinx.cpp
 from transfer.generators.lattices import Lattices, axes_lattice
 from transfer.grid import BOX_FACES
 from transfer.mesh import Mesh
+
+from . import xdmf_mesh
 
 Predicate = Callable[[np.ndarray], np.ndarray]
 
@@ -64,6 +69,8 @@ class SolidMesh:
     facet_tags : facet MeshTags (local facets, one integer tag each)
     boundaries : name -> integer tag (the same on every rank)
     num_points, num_cells : global counts of input vertices and tetrahedra
+    cell_tags : cell MeshTags (local cells) or None without cell tags
+    regions : name -> integer tag of the cell tags (the same on every rank)
     """
 
     mesh: dolfinx.mesh.Mesh
@@ -71,6 +78,8 @@ class SolidMesh:
     boundaries: dict[str, int]
     num_points: int
     num_cells: int
+    cell_tags: object = None
+    regions: dict[str, int] = field(default_factory=dict)
 
     @property
     def comm(self) -> MPI.Comm:
@@ -173,7 +182,8 @@ def agree(comm: MPI.Comm, error: str | None) -> None:
 
 
 def from_blocks(points, cells, triangles=None, triangle_tags=None, tag_names: Mapping[str, int] | None = None,
-                boundaries: Mapping[str, Predicate] | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
+                boundaries: Mapping[str, Predicate] | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
+                cell_tags=None, region_names: Mapping[str, int] | None = None) -> SolidMesh:
     """Distribute a tet mesh of which every rank gives one block (dolfinx's ``create_mesh``).
 
     Parameters (each rank's own, collective)
@@ -185,6 +195,8 @@ def from_blocks(points, cells, triangles=None, triangle_tags=None, tag_names: Ma
         None on every rank; only exterior facets keep their tag
     tag_names : name -> tag of the triangle tags (the same on every rank)
     boundaries : name -> predicate on facet midpoints, as in :func:`from_arrays`
+    cell_tags : (m_r,) integer tag of each of this rank's cells, or None on every rank
+    region_names : name -> tag of the cell tags (the same on every rank)
     """
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     cells = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
@@ -194,28 +206,45 @@ def from_blocks(points, cells, triangles=None, triangle_tags=None, tag_names: Ma
     mesh.topology.create_connectivity(tdim - 1, tdim)
     mesh.topology.create_connectivity(tdim - 1, 0)
 
-    indices = np.empty(0, np.int32)
-    values = np.empty(0, np.int32)
-    names: dict[str, int] = {}
+    indices, values, names = np.empty(0, np.int32), np.empty(0, np.int32), {}
     if triangles is not None:
-        tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
         vals = np.ascontiguousarray(triangle_tags, dtype=np.int32).ravel()
-        local_entities, local_values = dolfinx.cpp.io.distribute_entity_data(mesh._mesh, tdim - 1, tris, vals)
-        adj = dolfinx.cpp.graph.AdjacencyList_int32(np.asarray(local_entities, dtype=np.int32))
-        ft = dolfinx.cpp.mesh.create_meshtags(mesh._mesh, tdim - 1, adj, np.asarray(local_values, np.int32))
-        exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
-        keep = np.isin(ft.indices, exterior)
-        indices, values = np.asarray(ft.indices[keep], np.int32), np.asarray(ft.values[keep], np.int32)
-        by_tag = {int(v): k for k, v in (tag_names or {}).items()}
-        for t in sorted(set().union(*comm.allgather(set(np.unique(vals).tolist())))):
-            names[by_tag.get(int(t), str(int(t)))] = int(t)
-    return _finish(mesh, indices, values, names, boundaries, num_points, num_cells)
+        indices, values = _exterior(mesh, _entity_tags(mesh, tdim - 1, triangles, vals))
+        names = _named(vals, tag_names, comm)
+    tagged_cells, regions = None, {}
+    if cell_tags is not None:
+        vals = np.ascontiguousarray(cell_tags, dtype=np.int32).ravel()
+        tagged_cells, regions = _entity_tags(mesh, tdim, cells, vals), _named(vals, region_names, comm)
+    return _finish(mesh, indices, values, names, boundaries, num_points, num_cells, tagged_cells, regions)
+
+
+def _entity_tags(mesh, dim: int, entities, values):
+    """The MeshTags of dimension `dim` of `entities` (this rank's, rows of input vertex ids)
+    tagged `values`, sent to the ranks that hold them (collective)."""
+    entities = np.ascontiguousarray(entities, dtype=np.int64).reshape(-1, dim + 1)
+    local_entities, local_values = dolfinx.cpp.io.distribute_entity_data(mesh._mesh, dim, entities, values)
+    adj = dolfinx.cpp.graph.AdjacencyList_int32(np.asarray(local_entities, dtype=np.int32))
+    return dolfinx.cpp.mesh.create_meshtags(mesh._mesh, dim, adj, np.asarray(local_values, np.int32))
+
+
+def _exterior(mesh, facet_tags) -> tuple[np.ndarray, np.ndarray]:
+    """The (indices, values) of the exterior facets among `facet_tags`."""
+    keep = np.isin(facet_tags.indices, dolfinx.mesh.exterior_facet_indices(mesh.topology))
+    return np.asarray(facet_tags.indices[keep], np.int32), np.asarray(facet_tags.values[keep], np.int32)
+
+
+def _named(values, tag_names: Mapping[str, int] | None, comm: MPI.Comm) -> dict[str, int]:
+    """name -> tag of every tag of `values` on any rank, named by `tag_names` or ``str(tag)``."""
+    by_tag = {int(v): k for k, v in (tag_names or {}).items()}
+    return {by_tag.get(int(t), str(int(t))): int(t)
+            for t in sorted(set().union(*comm.allgather(set(np.unique(values).tolist()))))}
 
 
 def from_arrays(points=None, cells=None, triangles=None, triangle_tags=None,
                 tag_names: Mapping[str, int] | None = None,
                 boundaries: Mapping[str, Predicate] | None = None,
-                comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
+                comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0, cell_tags=None,
+                region_names: Mapping[str, int] | None = None) -> SolidMesh:
     """Distribute a tet mesh given as arrays on the ``root`` rank: ``root`` validates and
     compacts them, then scatters consecutive blocks of points, cells and triangles
     (:func:`block_rows`) to :func:`from_blocks`, so dolfinx never takes the whole mesh on one rank.
@@ -228,25 +257,31 @@ def from_arrays(points=None, cells=None, triangles=None, triangle_tags=None,
         (vertex indices into ``points``); only exterior facets keep their tag
     tag_names : name -> tag for the triangle tags (others are named ``str(tag)``); read on ``root``
     boundaries : name -> predicate on facet midpoints, ``x`` of shape (3, n)
+    cell_tags : optional (m,) integer tag of each cell, region_names : name -> tag of them; on ``root``
     """
-    arrays, payload, error = (None,) * 4, None, None
+    arrays, payload, error = (None,) * 5, None, None
     if comm.rank == root:
         try:
             points, tets, tris, vals = _prepare(points, cells, triangles, triangle_tags)
-            arrays = (points, tets, tris, vals)
+            regions = None if cell_tags is None else np.asarray(cell_tags, np.int32).ravel()
+            if regions is not None and len(regions) != len(tets):
+                raise SolidMeshError(f"{len(tets)} tetrahedra but {len(regions)} cell tags")
+            arrays = (points, tets, tris, vals, regions)
             payload = (len(points), len(tets), 0 if tris is None else len(tris), tris is not None,
-                       dict(tag_names or {}))
+                       dict(tag_names or {}), regions is not None, dict(region_names or {}))
         except SolidMeshError as exc:
             error = str(exc)
     error = comm.bcast(error, root=root)
     if error:
         raise SolidMeshError(error)
-    num_points, num_cells, num_tris, has_tris, tag_names = comm.bcast(payload, root=root)
-    points, tets, tris, vals = (_scatter(a, n, width, dtype, comm, root) for a, n, width, dtype in
-                                zip(arrays, (num_points, num_cells, num_tris, num_tris), (3, 4, 3, 1),
-                                    (np.float64, np.int64, np.int64, np.int32)))
+    num_points, num_cells, num_tris, has_tris, tag_names, has_regions, region_names = comm.bcast(payload, root=root)
+    points, tets, tris, vals, regions = (
+        _scatter(a, n, width, dtype, comm, root) for a, n, width, dtype in
+        zip(arrays, (num_points, num_cells, num_tris, num_tris, num_cells), (3, 4, 3, 1, 1),
+            (np.float64, np.int64, np.int64, np.int32, np.int32)))
     del arrays
-    return from_blocks(points, tets, tris if has_tris else None, vals, tag_names, boundaries, comm)
+    return from_blocks(points, tets, tris if has_tris else None, vals, tag_names, boundaries, comm,
+                       regions if has_regions else None, region_names)
 
 
 def _scatter(array, n: int, width: int, dtype, comm: MPI.Comm, root: int) -> np.ndarray:
@@ -269,7 +304,8 @@ def exterior_midpoints(mesh) -> tuple[np.ndarray, np.ndarray]:
     return exterior, dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim - 1, exterior).T
 
 
-def _finish(mesh, indices, values, names, boundaries, num_points, num_cells) -> SolidMesh:
+def _finish(mesh, indices, values, names, boundaries, num_points, num_cells, cell_tags=None,
+            regions=None) -> SolidMesh:
     """Add predicate boundaries to the file tags and build the MeshTags."""
     tdim = mesh.topology.dim
     tags = dict(zip(indices.tolist(), values.tolist()))
@@ -294,7 +330,7 @@ def _finish(mesh, indices, values, names, boundaries, num_points, num_cells) -> 
     for (name, _), n in zip(names.items(), counts):
         if n == 0:
             warnings.warn(f"boundary {name!r} has no facets", stacklevel=3)
-    return SolidMesh(mesh, facet_tags, names, num_points, num_cells)
+    return SolidMesh(mesh, facet_tags, names, num_points, num_cells, cell_tags, dict(regions or {}))
 
 
 # -- files --------------------------------------------------------------------
@@ -303,14 +339,61 @@ _TAG_KEYS = ("gmsh:physical", "medit:ref", "boundary", "tags", "CellEntityIds")
 
 def read_mesh(path, boundaries: Mapping[str, Predicate] | None = None, tag_key: str | None = None,
               comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
-    """Read a tet mesh with meshio (gmsh .msh, VTU, XDMF, ...) on ``root`` and distribute it.
+    """Read a tet mesh file and distribute it: an ``.xdmf`` file in dolfinx's layout
+    (:mod:`solid_fenicsx.xdmf_mesh`) by every rank, each its own rows (:func:`read_xdmf`), any
+    other file (gmsh .msh, VTU, meshio's XDMF, ...) with meshio on ``root``, which scatters blocks.
 
     Facet tags come from the triangle blocks' integer cell data ``tag_key``
     (default: the first of ``gmsh:physical``, ``medit:ref``, ``boundary``,
-    ``tags``, ``CellEntityIds`` present); gmsh physical names of dimension 2
-    name them. Second-order tetrahedra are reduced to their corner vertices.
+    ``tags``, ``CellEntityIds`` present), cell tags from the tetrahedra's; gmsh physical
+    names of dimension 2 and 3 name them. Second-order tetrahedra are reduced to their
+    corner vertices. In dolfinx's XDMF layout ``tag_key`` names the facet tags' grid.
     """
+    if Path(path).suffix.lower() == ".xdmf":
+        return read_xdmf(path, boundaries, tag_key, comm, root)
+    return _read_meshio(path, boundaries, tag_key, comm, root)
+
+
+def _read_meshio(path, boundaries, tag_key, comm, root) -> SolidMesh:
     return _from_root(lambda: _read_on_root(str(path), tag_key), str(path), boundaries, comm, root)
+
+
+def read_xdmf(path, boundaries: Mapping[str, Predicate] | None = None, facets: str | None = None,
+              comm: MPI.Comm = MPI.COMM_WORLD, root: int = 0) -> SolidMesh:
+    """Read an XDMF mesh (:mod:`solid_fenicsx.xdmf_mesh`) in parallel: ``root`` checks the XML,
+    then each rank reads its own rows of the HDF5 file (dolfinx), so no rank holds the whole
+    mesh. Input numbering: the file's rows. Facet tags (exterior facets only, named by the file's
+    ``boundaries``), cell tags and ``boundaries`` predicates as for :func:`from_blocks`; an error
+    names the file on every rank. A file in another layout (no grid ``mesh``) is read by meshio
+    on ``root`` (:func:`read_mesh`), with `facets` its tags' cell data key."""
+    found, error = None, None
+    if comm.rank == root:
+        try:
+            found = xdmf_mesh.layout(Path(path), facets)
+        except ValueError as exc:
+            error = f"{path}: {exc}"
+    agree(comm, error)
+    found = comm.bcast(found, root=root)
+    if found is None:
+        return _read_meshio(path, boundaries, facets, comm, root)
+    mesh, facet_tags, cell_tags, error = None, None, None, None
+    try:
+        mesh, facet_tags, cell_tags = xdmf_mesh.read(Path(path), found, comm)
+    except Exception as exc:  # noqa: BLE001 - dolfinx's and HDF5's errors, raised on every rank below
+        error = f"{path}: dolfinx cannot read it ({exc})"
+    agree(comm, error)
+    tdim = mesh.topology.dim
+    num_points = mesh.geometry.index_map().size_global
+    last = comm.allreduce(int(np.max(mesh.geometry.input_global_indices, initial=-1)), op=MPI.MAX)
+    if last + 1 != num_points:
+        raise SolidMeshError(f"{path}: {last + 1 - num_points} of its {last + 1} points belong to no tetrahedron")
+    indices, values, names = np.empty(0, np.int32), np.empty(0, np.int32), {}
+    if facet_tags is not None:
+        indices, values = _exterior(mesh, facet_tags)
+        names = _named(facet_tags.values, found.boundaries, comm)
+    regions = _named(cell_tags.values, found.regions, comm) if cell_tags is not None else {}
+    return _finish(mesh, indices, values, names, boundaries, num_points, mesh.topology.index_map(tdim).size_global,
+                   cell_tags, regions)
 
 
 def generated_mesh(generator: str, parameters: Mapping | None = None,
@@ -389,27 +472,36 @@ def _read_on_root(path: str, tag_key: str | None) -> dict:
     if not tets:
         raise SolidMeshError(f"no tetrahedra (cell blocks: {[b.type for b in m.cells]})")
     tri_blocks = [(i, b) for i, b in enumerate(m.cells) if b.type in ("triangle", "triangle6")]
+    tet_blocks = [(i, b) for i, b in enumerate(m.cells) if b.type in ("tetra", "tetra10")]
     out = {"points": m.points[:, :3] if m.points.shape[1] >= 3 else m.points, "cells": np.concatenate(tets)}
-    if tri_blocks:
-        key = tag_key
-        if key is None:
-            key = next((k for k in _TAG_KEYS if k in m.cell_data), None)
-        if key is None:
-            ints = [k for k, v in m.cell_data.items()
-                    if all(np.issubdtype(np.asarray(v[i]).dtype, np.integer) for i, _ in tri_blocks)]
-            key = ints[0] if ints else None
-        if key is not None:
-            if key not in m.cell_data:
-                raise SolidMeshError(f"no cell data {key!r} (have {sorted(m.cell_data)})")
-            out["triangles"] = np.concatenate([b.data[:, :3] for _, b in tri_blocks])
-            out["triangle_tags"] = np.concatenate([np.asarray(m.cell_data[key][i]).ravel() for i, _ in tri_blocks])
-            names = {}
-            for name, data in (m.field_data or {}).items():
-                data = np.atleast_1d(data)
-                if len(data) >= 2 and int(data[1]) == 2:
-                    names[name] = int(data[0])
-            out["tag_names"] = names
+    key = tag_key
+    if key is None:
+        key = next((k for k in _TAG_KEYS if k in m.cell_data), None)
+    if key is None and tri_blocks:
+        ints = [k for k, v in m.cell_data.items()
+                if all(np.issubdtype(np.asarray(v[i]).dtype, np.integer) for i, _ in tri_blocks)]
+        key = ints[0] if ints else None
+    if key is not None and tri_blocks:
+        if key not in m.cell_data:
+            raise SolidMeshError(f"no cell data {key!r} (have {sorted(m.cell_data)})")
+        out["triangles"] = np.concatenate([b.data[:, :3] for _, b in tri_blocks])
+        out["triangle_tags"] = np.concatenate([np.asarray(m.cell_data[key][i]).ravel() for i, _ in tri_blocks])
+        out["tag_names"] = _physical_names(m.field_data, 2)
+    if key in m.cell_data and all(np.issubdtype(np.asarray(m.cell_data[key][i]).dtype, np.integer)
+                                  for i, _ in tet_blocks):
+        out["cell_tags"] = np.concatenate([np.asarray(m.cell_data[key][i]).ravel() for i, _ in tet_blocks])
+        out["region_names"] = _physical_names(m.field_data, 3)
     return out
+
+
+def _physical_names(field_data, dim: int) -> dict[str, int]:
+    """gmsh's physical names of dimension `dim` (meshio's ``field_data``: name -> [tag, dim])."""
+    names = {}
+    for name, data in (field_data or {}).items():
+        data = np.atleast_1d(data)
+        if len(data) >= 2 and int(data[1]) == dim:
+            names[name] = int(data[0])
+    return names
 
 
 # -- boxes --------------------------------------------------------------------

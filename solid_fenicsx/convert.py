@@ -1,0 +1,81 @@
+"""``python -m solid_fenicsx.convert IN OUT.xdmf``: a tet mesh file as the XDMF + HDF5 the solid
+reads in parallel (:mod:`solid_fenicsx.xdmf_mesh`), its facet and cell tags and their physical
+names kept. Under ``mpirun -n N`` dolfinx writes each rank's part (IN itself is read as the solid
+reads it: meshio on rank 0 for a gmsh file). Prints the counts and every tag with its name and
+size; exit 0, or 2 with one line ``...: error: <file>: <reason>`` for bad input.
+
+It lives in the solid participant, not in ``varcouple``'s command line: the coupler imports no
+participant's solver modules (tests/test_layers.py), and the conversion is dolfinx's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from . import xdmf_mesh
+from .mesh import SolidMesh, SolidMeshError, read_mesh
+
+PROG = "python -m solid_fenicsx.convert"
+
+
+def tag_sizes(solid: SolidMesh) -> dict[str, dict[str, int]]:
+    """name -> the number of facets (``boundaries``) or tetrahedra (``regions``) with its tag."""
+    tdim = solid.mesh.topology.dim
+    out = {}
+    for kind, dim, tags, names in (("boundaries", tdim - 1, solid.facet_tags, solid.boundaries),
+                                   ("regions", tdim, solid.cell_tags, solid.regions)):
+        owned = solid.mesh.topology.index_map(dim).size_local
+        values = np.empty(0, np.int32) if tags is None else tags.values[tags.indices < owned]
+        counts = solid.comm.allreduce(np.array([np.count_nonzero(values == t) for t in names.values()], np.int64))
+        out[kind] = dict(zip(names, (int(n) for n in counts)))
+    return out
+
+
+def convert(source: Path, target: Path, tag_key: str | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:
+    """Read `source` as the solid does and write it to `target` (collective)."""
+    if target.suffix.lower() != ".xdmf":
+        raise SolidMeshError(f"{target}: the output must be an .xdmf file")
+    if not target.parent.is_dir():
+        raise SolidMeshError(f"{target}: no directory {target.parent}")
+    solid = read_mesh(source, tag_key=tag_key, comm=comm)
+    xdmf_mesh.write(target, solid)
+    return solid
+
+
+def report(target: Path, solid: SolidMesh) -> str:
+    sizes = tag_sizes(solid)
+    lines = [f"wrote {target} and {target.with_suffix('.h5').name}: {solid.num_points} points, "
+             f"{solid.num_cells} tetrahedra, written by {solid.comm.size} rank(s)"]
+    for kind, what in (("boundaries", "facets"), ("regions", "tetrahedra")):
+        names = getattr(solid, kind)
+        tags = ", ".join(f"{name} = {tag} ({sizes[kind][name]} {what})" for name, tag in names.items())
+        lines.append(f"{kind} ({'facet' if kind == 'boundaries' else 'cell'} tags): {tags or 'none'}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> int:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    parser.add_argument("source", metavar="IN", type=Path, help="tet mesh file (gmsh .msh, or any format meshio reads)")
+    parser.add_argument("target", metavar="OUT", type=Path, help="the .xdmf file to write (its .h5 beside it)")
+    parser.add_argument("--tag-key", default=None, metavar="KEY",
+                        help="the cell data holding the tags (default: gmsh:physical, or the first integer one)")
+    args = parser.parse_args(argv)
+    try:
+        solid = convert(args.source, args.target, args.tag_key, comm)
+    except SolidMeshError as exc:
+        if comm.rank == 0:
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    text = report(args.target, solid)
+    if comm.rank == 0:
+        print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
