@@ -64,8 +64,9 @@ def old_path(points, cells, triangles=None, tags=None, tag_names=None, boundarie
 
 
 def joined(solid) -> dict:
-    """The mesh in input numbering on every rank: points and cells by input id, the tagged
-    facets as sorted input vertex ids with their tag, the boundary names and the counts."""
+    """The mesh in input numbering on every rank of its communicator: points and cells by input
+    id, the tagged facets as sorted input vertex ids with their tag, the boundary names and the
+    counts."""
     m = solid.mesh
     tdim = m.topology.dim
     ids = np.asarray(m.geometry.input_global_indices, np.int64)
@@ -81,7 +82,7 @@ def joined(solid) -> dict:
     keep = facets < m.topology.index_map(tdim - 1).size_local
     tris = [np.sort(ids[node[f2v.links(f)]]).tolist() + [int(t)]
             for f, t in zip(facets[keep], solid.facet_tags.values[keep])]
-    parts = COMM.allgather((ids[:owned], m.geometry.x[:owned], cells, tris))
+    parts = m.comm.allgather((ids[:owned], m.geometry.x[:owned], cells, tris))
     points = np.empty((solid.num_points, 3))
     tets = np.empty((solid.num_cells, 4), np.int64)
     for i, x, (c, v), _ in parts:
