@@ -46,6 +46,7 @@ import dolfinx.cpp
 from transfer.generators.lattices import Lattices, axes_lattice
 from transfer.grid import BOX_FACES
 from transfer.mesh import Mesh
+from transfer.xdmf import layout
 
 from . import xdmf_mesh
 
@@ -97,6 +98,14 @@ class SolidMesh:
             else:
                 tags.append(int(item))
         return tuple(tags)
+
+    def require_tags(self, tags: Mapping[str, int], source: str) -> None:
+        """Raise :class:`SolidMeshError` naming `source` (the mesh's file) if a boundary of `tags`
+        (name -> tag, e.g. a scene's ``boundaries``) has a tag the mesh does not have."""
+        for name, tag in tags.items():
+            if tag not in self.boundaries.values():
+                raise SolidMeshError(f"{source}: boundary {name!r}: no facet tag {tag} "
+                                     f"(tags: {sorted(self.boundaries.values())})")
 
     def facets(self, boundary) -> np.ndarray:
         """Local indices of the facets of a boundary (name, tag or list of them)."""
@@ -369,7 +378,7 @@ def read_xdmf(path, boundaries: Mapping[str, Predicate] | None = None, facets: s
     found, error = None, None
     if comm.rank == root:
         try:
-            found = xdmf_mesh.layout(Path(path), facets)
+            found = layout(Path(path), facets)
         except ValueError as exc:
             error = f"{path}: {exc}"
     agree(comm, error)

@@ -126,11 +126,8 @@ class SolidParticipant(Participant):
             solid = generated_mesh(g["name"], g.get("parameters"), boundaries, comm)
         else:
             solid = read_mesh(config["mesh"], boundaries=boundaries, comm=comm)
-        for name, tag in tags.items():
-            if tag not in solid.boundaries.values():
-                source = config.get("mesh") or f"the mesh of generator {config['generator']['name']!r}"
-                raise ValueError(f"boundary {name!r}: tag {tag} is not in {source} "
-                                 f"(tags: {sorted(solid.boundaries.values())})")
+        solid.require_tags(tags, config.get("mesh") or (f"the mesh of generator {config['generator']['name']!r}"
+                                                        if "generator" in config else "[geometry.solid] box"))
         for key, name in _boundary_uses(config):  # a load on no facet: a singular system or a lost load
             if solid.comm.allreduce(len(solid.facets(tags.get(name, name)))) == 0:
                 why = _why_empty(solid, name, config.get("boundaries", {}).get(name), boundaries.get(name))

@@ -66,10 +66,14 @@ def available_memory(limit: float | None = None) -> tuple[int, str]:
 
 
 def _mesh_cells(path: Path, where: str) -> int:
+    """The cells of a mesh file: an XDMF file in dolfinx's layout from its XML (the solid reads
+    it in parallel: nothing here reads its HDF5 data), any other file read with meshio."""
     from transfer.meshfile import MeshFile
+    from transfer.xdmf import layout
 
     try:
-        return MeshFile.read(path).mesh.num_cells
+        found = layout(Path(path)) if Path(path).suffix.lower() == ".xdmf" else None
+        return found.num_cells if found is not None else MeshFile.read(path).mesh.num_cells
     except Exception as exc:  # noqa: BLE001 - any reader error is a bad input file
         raise SceneError(f"{where}: {exc}") from None
 

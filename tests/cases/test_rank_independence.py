@@ -27,8 +27,11 @@ are left out, as is the plan (``participants``: it restates the ranks).
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
+import subprocess
+import sys
 
 import meshio
 import numpy as np
@@ -39,6 +42,7 @@ from coupler.cli import main
 from vc_helpers import CASES, copy_case
 
 CASE = CASES / "small_fracture"
+MPI_ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
 TOLERANCE = 1e-10
 
 needs_mpi_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil.which("mpirun") is None
@@ -65,9 +69,15 @@ def run(tmp_path, solid_ranks: int, fluid_ranks: int, steps: int = 2, fluid: str
 
 def joined(pvtu, like: meshio.Mesh) -> meshio.Mesh:
     """The pieces a .pvtu names (a coupler on several ranks) as one mesh in the numbering of
-    `like` (the serial file), points and cells matched by coordinates (a vertex on a cut is in
-    several pieces); every point and cell of `like` must be in a piece."""
-    pieces = [meshio.read(pvtu.parent / p) for p in re.findall(r'Source="([^"]+)"', pvtu.read_text())]
+    `like` (the serial file) (:func:`matched`)."""
+    return matched([meshio.read(pvtu.parent / p) for p in re.findall(r'Source="([^"]+)"', pvtu.read_text())],
+                   pvtu, like)
+
+
+def matched(pieces: list[meshio.Mesh], name, like: meshio.Mesh) -> meshio.Mesh:
+    """The meshes `pieces` as one mesh in the numbering of `like`, points and cells matched by
+    coordinates (a vertex on a cut is in several pieces); every point and cell of `like` must be
+    in a piece."""
     scale = np.max(np.abs(like.points))
 
     def keys(x):
@@ -88,14 +98,15 @@ def joined(pvtu, like: meshio.Mesh) -> meshio.Mesh:
                 data[kind][k][rows] = v
     for kind, fields in data.items():
         for k, v in fields.items():
-            assert not np.isnan(v).any(), f"{pvtu.name}: {kind} field {k}: not every row is in a piece"
+            assert not np.isnan(v).any(), f"{name}: {kind} field {k}: not every row is in a piece"
     return meshio.Mesh(like.points, like.cells, point_data=data["point"],
                        cell_data={k: [v] for k, v in data["cell"].items()})
 
 
-def differences(reference, other) -> dict:
+def differences(reference, other, by_coordinates: bool = False) -> dict:
     """max |a - b| / max |a| of every field of every VTU file (the points included; a .pvtu's
-    pieces joined), and of every number of summary.json outside the solver reports (coupling
+    pieces joined; `by_coordinates`: every file's points and cells matched to the reference's
+    by coordinates), and of every number of summary.json outside the solver reports (coupling
     residuals: |a - b|)."""
     files = sorted(f.name for f in reference.glob("*.vtu"))
     written = sorted(f.name.replace(".pvtu", ".vtu") for f in [*other.glob("*.vtu"), *other.glob("*.pvtu")]
@@ -105,6 +116,8 @@ def differences(reference, other) -> dict:
     for name in files:
         a = meshio.read(reference / name)
         b = meshio.read(other / name) if (other / name).exists() else joined(other / name.replace(".vtu", ".pvtu"), a)
+        if by_coordinates:
+            b = matched([b], name, a)
         pairs = {"points": (a.points, b.points),
                  **{f"point:{k}": (v, b.point_data[k]) for k, v in a.point_data.items()},
                  **{f"cell:{k}": (v[0], b.cell_data[k][0]) for k, v in a.cell_data.items()}}
@@ -121,8 +134,8 @@ def differences(reference, other) -> dict:
     return out
 
 
-def assert_same(reference, other, label: str):
-    found = differences(reference, other)
+def assert_same(reference, other, label: str, by_coordinates: bool = False):
+    found = differences(reference, other, by_coordinates)
     worst = max(found, key=found.get)
     assert found[worst] < TOLERANCE, f"{label}: {worst} differs by {found[worst]:.2e}"
     steps = [json.loads((d / "summary.json").read_text())["iterations"] for d in (reference, other)]
@@ -151,6 +164,21 @@ def test_generated_solid_on_two_ranks_is_the_mesh_file_on_one(tmp_path):
     found = assert_same(run(tmp_path, 1, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7"),
                         run(tmp_path, 2, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7", scene=GENERATED,
                             label="generated"), "generated solid on 2 ranks")
+    assert "solid_0000.vtu point:displacement" in found
+
+
+def test_solid_xdmf_on_two_ranks_is_the_mesh_file_on_one(tmp_path):
+    """small_fracture's solid.msh converted to XDMF on 2 ranks (``mpirun -n 2 python -m
+    solid_fenicsx.convert``) and read in parallel by 2 solid ranks gives the run of solid.msh on
+    one rank (Chorin fluid, one step), its fields matched by coordinates (the XDMF numbers the
+    vertices in its file's rows)."""
+    xdmf = tmp_path / "solid.xdmf"
+    subprocess.run(["mpirun", "-n", "2", "--oversubscribe", sys.executable, "-m", "solid_fenicsx.convert",
+                    str(CASE / "solid.msh"), str(xdmf)], check=True, env=MPI_ENV)
+    found = assert_same(run(tmp_path, 1, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7"),
+                        run(tmp_path, 2, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7",
+                            scene={'mesh = "solid.msh"': f'mesh = "{xdmf}"'}, label="xdmf"),
+                        "solid.xdmf on 2 ranks", by_coordinates=True)
     assert "solid_0000.vtu point:displacement" in found
 
 

@@ -108,7 +108,8 @@ def bad_files(directory: Path, good: Path) -> dict[str, str]:
             "no HDF5": error_of(lambda: read_mesh(directory / "alone.xdmf", comm=COMM)),
             "no dataset": error_of(lambda: read_mesh(directory / "dataset.xdmf", comm=COMM)),
             "hexahedra": error_of(lambda: read_mesh(directory / "hexahedra.xdmf", comm=COMM)),
-            "facet grid": error_of(lambda: read_mesh(good, tag_key="walls", comm=COMM))}
+            "facet grid": error_of(lambda: read_mesh(good, tag_key="walls", comm=COMM)),
+            "tag": error_of(lambda: read_mesh(good, comm=COMM).require_tags({"bottom": 1, "top": 9}, str(good)))}
 
 
 def refuse(*args):

@@ -49,7 +49,8 @@ def test_the_xdmf_read_in_parallel_is_the_msh_mesh(ranks, tmp_path):
                    f"same name)",
         "no dataset": f"{tmp_path}/dataset.xdmf: dolfinx cannot read it (Failed to open HDF5 dataset by name)",
         "hexahedra": f"{tmp_path}/hexahedra.xdmf: cells are Hexahedron, not linear tetrahedra",
-        "facet grid": f"{tmp_path}/solid.xdmf: no facet tags 'walls' (grids: ['cell_tags', 'facet_tags', 'mesh'])"}
+        "facet grid": f"{tmp_path}/solid.xdmf: no facet tags 'walls' (grids: ['cell_tags', 'facet_tags', 'mesh'])",
+        "tag": f"{tmp_path}/solid.xdmf: boundary 'top': no facet tag 9 (tags: [1, 2, 3, 4, 5, 6, 7, 8])"}
 
 
 def test_convert_reports_the_names_and_refuses_bad_input(tmp_path, capsys):
@@ -73,3 +74,27 @@ def test_convert_reports_the_names_and_refuses_bad_input(tmp_path, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert err == f"python -m solid_fenicsx.convert: error: {message}\n"
+
+
+def test_the_coupler_counts_the_cells_of_an_xdmf_from_its_xml(tmp_path, monkeypatch):
+    """varcouple's memory estimate of a scene with a solid.xdmf reads the XML only (no meshio,
+    which cannot read dolfinx's layout); a bad file is a scene error naming the key."""
+    from coupler.errors import SceneError
+    from coupler.run.preflight import estimate
+    from coupler.scene import load
+    from solid_fenicsx.convert import main
+    from transfer.meshfile import MeshFile
+    from vc_helpers import copy_case
+
+    case = copy_case(MSH.parent, tmp_path, {'mesh = "solid.msh"': 'mesh = "solid.xdmf"'})
+    assert main([str(MSH), str(case / "solid.xdmf")]) == 0
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("meshio read the mesh")
+
+    monkeypatch.setattr(MeshFile, "read", refuse)
+    assert [(e.name, e.cells) for e in estimate(load(case)) if e.name == "solid"] == [("solid", 4800)]
+    (case / "solid.h5").write_text("no data\n")
+    with pytest.raises(SceneError) as error:
+        estimate(load(case))
+    assert str(error.value) == f"{case}/scene.toml: [geometry.solid] mesh: solid.h5 is not an HDF5 file"
