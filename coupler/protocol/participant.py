@@ -260,14 +260,19 @@ class _MpiRoot:
         self._send(("__stop__", ()))
 
 
-def idle_barrier(comm, poll: float = 1e-3) -> None:
+def idle_barrier(comm, poll: float = 1e-3, seconds: float | None = None) -> bool:
     """Wait until every rank of ``comm`` has come here (rank 0 with its next call to broadcast),
     sleeping between tests of a nonblocking barrier: Open MPI's blocking collectives poll without
     yielding, so a rank waiting in ``bcast`` for the next verb (or for rank 0's solver) would take
-    a core for the whole of the other participants' solves."""
+    a core for the whole of the other participants' solves. With `seconds`, give up after that
+    long: False when some rank did not come."""
     request = comm.Ibarrier()
+    deadline = None if seconds is None else time.monotonic() + seconds
     while not request.Test():
+        if deadline is not None and time.monotonic() > deadline:
+            return False
         time.sleep(poll)
+    return True
 
 
 def _mpi_worker(handler: Participant, comm, parts) -> None:

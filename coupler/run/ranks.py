@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import pickle
 import sys
-import time
 import traceback
 from contextlib import ExitStack, contextmanager
 
@@ -32,6 +31,7 @@ from coupler.fsi.context import OperatorContext
 from coupler.fsi.held import Held, assigned
 from coupler.fsi.ranks import OPERATORS_RANKS, GridSlab, RanksContext
 from coupler.output.results import REDUCTIONS, Series, reduce_figures, write_summary
+from coupler.protocol.participant import idle_barrier
 from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession, step_reports
 from coupler.run.launch import Launcher
@@ -68,16 +68,11 @@ def vote(comm, failure: Exception | None) -> None:
 
 
 def failed_together(comm, seconds: float) -> bool:
-    """Whether every rank of `comm` calls this within `seconds` (a non-blocking barrier): after a
-    failure, whether the other ranks failed with this one (a voted failure, or one every rank
-    decides alike, e.g. not converging) or went on without it into a collective call that will
-    never end. `comm` serves this alone (a duplicate: its barrier matches no other call)."""
-    request, deadline = comm.Ibarrier(), time.monotonic() + seconds
-    while not request.Test():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.005)
-    return True
+    """Whether every rank of `comm` calls this within `seconds`: after a failure, whether the
+    other ranks failed with this one (a voted failure, or one every rank decides alike, e.g. not
+    converging) or went on without it into a collective call that will never end. `comm` serves
+    this alone (a duplicate: its barrier matches no other call)."""
+    return idle_barrier(comm, poll=0.005, seconds=seconds)
 
 
 class RanksRun(Run):
