@@ -1,6 +1,7 @@
 """The distributed transfer on PETSc (petsc4py): ``B`` and ``D`` as parallel AIJ matrices, rows
 owned by blocks of global dof ids as PETSc splits them; pseudo-L2's ``T = D^-1 B`` applied as
-``B`` and the inverse diagonal (its matrix made only on request), and the l2 solve (CG on the overlap mass matrix, Jacobi) run distributed (paper eq. 3-4).
+``B`` and the inverse diagonal (its matrix made only on request), and the l2 solve (CG on the
+overlap mass matrix, Jacobi) run distributed (paper eq. 3-4).
 
 Fields enter and leave as each rank's values at its local dofs (:class:`transfer.distributed.Part`);
 scatters carry them to and from the global vectors.
@@ -113,8 +114,8 @@ def _columns(u: np.ndarray) -> np.ndarray:
 class DistributedTransfer:
     """``T = D^{-1} B`` between distributed spaces (:func:`transfer.distributed.assemble`).
 
-    ``B`` (target x source dofs) and ``D`` are PETSc matrices in global dof ids. :meth:`apply` takes this rank's values at its source dofs and returns
-    those at its target dofs; ``covered`` marks the local target dofs the source reaches."""
+    ``B`` (target x source dofs) and ``D`` are PETSc matrices in global dof ids. :meth:`apply`
+    takes this rank's values at its source dofs and returns those at its target dofs; ``covered`` marks the local target dofs the source reaches."""
 
     #: CG stops at this ratio of the Jacobi-scaled residual to that of the right-hand side
     #: (the serial solver's criterion); where it stalls, a direct solve on one rank takes over

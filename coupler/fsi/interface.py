@@ -37,15 +37,12 @@ class WettedInterface:
         self.triangles = local.reshape(-1, 3)
         # the solid's points (the deformed ones, points + displacement, when given)
         points = np.asarray(S.points if points is None else points)[self.vertices]
-        a, b, c = (points[self.triangles[:, i]] for i in range(3))
-        area_normals = 0.5 * np.cross(b - a, c - a)  # outward (boundary_triangles orientation), |.| = area
-        normals = np.zeros_like(points)
+        normals, per_triangle = np.zeros_like(points), area_normals(points, self.triangles)
         for i in range(3):
-            np.add.at(normals, self.triangles[:, i], area_normals)
+            np.add.at(normals, self.triangles[:, i], per_triangle)
         length = np.linalg.norm(normals, axis=1)
         if np.any(length <= 0):
-            raise CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel "
-                               f"(a folded surface)")
+            raise folded_surface(where)
         self.normals = normals / length[:, None]
         self.points = points  # the wall: the interface vertices where the solid is now
         moved, self.offsets = sampling_points(points, self.normals, np.asarray(S.points)[self.vertices], G, depth)
@@ -93,6 +90,17 @@ class WettedInterface:
         return {"method": self.method, "vertices": int(self.size), "triangles": int(self.num_triangles),
                 "offset": self.offset, "sampled_area": self.area,
                 "pairs_intersected": int(self.transfer.stats["pairs_intersected"])}
+
+
+def area_normals(points, triangles) -> np.ndarray:
+    """Each triangle's normal times its area (outward in boundary_triangles' orientation)."""
+    a, b, c = (points[triangles[:, i]] for i in range(3))
+    return 0.5 * np.cross(b - a, c - a)
+
+
+def folded_surface(where: str) -> CouplerError:
+    """The error of an interface vertex whose triangles' normals sum to zero."""
+    return CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel (a folded surface)")
 
 
 def sampling_points(points, normals, reference, G: StructuredGrid, depth: float = 1.0):

@@ -24,7 +24,8 @@ from transfer.distributed import Part, assemble
 from transfer.rows import Rows
 
 from .held import Held
-from .interface import SolidOnGrid, WettedInterface, invalid_deformation, sampling_points
+from .interface import (SolidOnGrid, WettedInterface, area_normals, folded_surface, invalid_deformation,
+                        sampling_points)
 
 
 class GridSlab:
@@ -97,12 +98,11 @@ class WettedSlabs:
         at = np.searchsorted(solid.vertices, vertices)
         here = (solid.reference if points is None else points)[at]
         triangles = np.searchsorted(vertices, solid.triangles)
-        a, b, c = (here[triangles[:, i]] for i in range(3))
-        area_normals = 0.5 * np.cross(b - a, c - a)
-        normals = self.rows.move(ids[triangles].ravel(), np.repeat(area_normals, 3, axis=0), ids, add=True)
+        normals = self.rows.move(ids[triangles].ravel(), np.repeat(area_normals(here, triangles), 3, axis=0), ids,
+                                 add=True)
         length = np.linalg.norm(normals.reshape(-1, 3), axis=1)
         if comm.allreduce(bool(np.any(length <= 0)), op=MPI.LOR):
-            raise CouplerError(f"{where}: the interface has a vertex whose triangle normals cancel (a folded surface)")
+            raise folded_surface(where)
         normals = normals.reshape(-1, 3) / length[:, None]
         moved, offsets = sampling_points(here, normals, solid.reference[at], slab.G)
         self.offset = comm.allreduce(float(offsets.max()) if len(offsets) else 0.0, op=MPI.MAX)
