@@ -130,3 +130,16 @@ def test_soft_rock_needs_acceleration(tmp_path, capsys):
         iterations[acc] = s["steps"][0]["iterations"]
     assert iterations["iqn-ils"] <= 12
     assert iterations["constant"] >= iterations["iqn-ils"] + 4, iterations
+
+
+def test_a_folded_interface_is_named():
+    """Two triangles on the same three vertices, opposite orientations: the vertex normals sum to
+    zero, and the interface refuses to move its vertices into the fluid (one line, the key)."""
+    from coupler.errors import CouplerError
+
+    S = Mesh(np.array([[0.2, 0.2, 0.5], [0.8, 0.2, 0.5], [0.2, 0.8, 0.5], [0.2, 0.2, 0.8]]), np.array([[0, 1, 2, 3]]),
+             "tetra")
+    G = StructuredGrid((0, 0, 0), (0.1, 0.1, 0.1), (10, 10, 10))
+    with pytest.raises(CouplerError, match=r"^\[geometry.fluid\]: the interface has a vertex whose triangle normals "
+                                           r"cancel \(a folded surface\)$"):
+        WettedInterface(S, [[0, 1, 2], [0, 2, 1]], G)
