@@ -18,7 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from . import xdmf_mesh
-from .mesh import SolidMesh, SolidMeshError, read_mesh
+from .mesh import SolidMesh, SolidMeshError, agree, read_mesh
 
 PROG = "python -m solid_fenicsx.convert"
 
@@ -43,7 +43,12 @@ def convert(source: Path, target: Path, tag_key: str | None = None, comm: MPI.Co
     if not target.parent.is_dir():
         raise SolidMeshError(f"{target}: no directory {target.parent}")
     solid = read_mesh(source, tag_key=tag_key, comm=comm)
-    xdmf_mesh.write(target, solid)
+    error = None
+    try:
+        xdmf_mesh.write(target, solid)
+    except Exception as exc:  # noqa: BLE001 - HDF5, permissions, disk: one line on every rank
+        error = f"{target}: cannot write it ({type(exc).__name__}: {exc})"
+    agree(comm, error)
     return solid
 
 

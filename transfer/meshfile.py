@@ -111,8 +111,9 @@ def _meshio_read(path: Path, name: str):
     captured = io.StringIO()
     failure = None
     try:
+        vtu = str(path).lower().endswith(".vtu")  # only meshio's VTU reader inflates through the shim
         with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured), \
-                vtu_zlib_level(VTU_ZLIB_LEVEL):
+                (vtu_zlib_level(VTU_ZLIB_LEVEL) if vtu else contextlib.nullcontext()):
             raw = meshio.read(path)
     except SystemExit:
         failure = ""

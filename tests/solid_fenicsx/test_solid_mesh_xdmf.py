@@ -74,6 +74,11 @@ def test_convert_reports_the_names_and_refuses_bad_input(tmp_path, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert err == f"python -m solid_fenicsx.convert: error: {message}\n"
+    (tmp_path / "blocked.h5").mkdir()  # the HDF5 file cannot be made: one line, no traceback
+    assert main([str(MSH), str(tmp_path / "blocked.xdmf")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"python -m solid_fenicsx.convert: error: {tmp_path}/blocked.xdmf: cannot write it (")
+    assert err.count("\n") == 1 and "Traceback" not in err
 
 
 def test_the_coupler_counts_the_cells_of_an_xdmf_from_its_xml(tmp_path, monkeypatch):

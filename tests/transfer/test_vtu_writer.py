@@ -13,7 +13,7 @@ import transfer.meshfile as meshfile
 from transfer.generate import box_tetrahedra
 from transfer.meshfile import MeshFile
 
-isal_zlib = pytest.importorskip("isal.isal_zlib")
+from isal import isal_zlib  # a dependency (pyproject.toml): the zlib cases below run beside it
 
 
 def written(tmp_path, level, monkeypatch):
