@@ -28,7 +28,6 @@ any rank is every rank's :class:`~coupler.protocol.errors.RanksError` naming it.
 from __future__ import annotations
 
 import logging
-import os
 import re
 import shutil
 import subprocess
@@ -77,11 +76,9 @@ def final_residual(log_text: str, transient: bool) -> float:
 
 def openfoam_env() -> dict:
     """This environment with OpenFOAM's data directory and the Open MPI settings of
-    :func:`coupler.mpi_env.mpi_environment` (the solver's ranks), without the variables of the
-    MPI job this process may be a rank of (``OMPI_*``, ``PMIX_*``: mpirun refuses to start from
-    within a job, "mpirun does not support recursive calls")."""
-    env = mpi_environment(env={k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
-                          if "OMPI_COMM_WORLD_SIZE" in os.environ else None)
+    :func:`coupler.protocol.mpi.mpi_environment` (the solver's ranks; without the variables of
+    the MPI job this process may be a rank of: mpirun refuses to start from within a job)."""
+    env = mpi_environment()
     env.setdefault("WM_PROJECT_DIR", OPENFOAM_DIR)
     return env
 
@@ -130,7 +127,8 @@ class OpenFOAMSolver:
         """Run an OpenFOAM binary in the case; returns wall seconds. Interrupted (the
         participant's SIGTERM or SIGINT), it stops the binary with SIGTERM, so that mpirun ends
         its ranks and removes its session directory, and with SIGKILL after 5 s."""
-        exe = shutil.which(app, path=openfoam_env().get("PATH"))
+        env = openfoam_env()
+        exe = shutil.which(app, path=env.get("PATH"))
         if exe is None:
             raise OpenFOAMError(f"{app} not found on PATH (Debian package openfoam)")
         logf = self.case / f"log.{log_name or app}"
@@ -141,7 +139,7 @@ class OpenFOAMSolver:
             if self.parallel is not None and app == self.application:
                 cmd = self.parallel.mpi_command(cmd)
             proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                    env=openfoam_env())
+                                    env=env)
             try:
                 rc = proc.wait()
             except BaseException:

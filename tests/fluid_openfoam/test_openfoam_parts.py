@@ -109,6 +109,7 @@ def test_each_rank_publishes_its_processor_and_the_join_is_the_whole_arrays(flui
     whole = OpenFOAMSolver(tmp_path / "whole", CaseSpec.from_config(config(""), ranks=2))
     whole.setup()
     U, p = whole.solve(fraction)
+    assert whole.last_run["converged"], whole.last_run  # equal arrays of converged solves, not of two stalled ones
     assert np.array_equal(out["velocity"].data, U) and np.array_equal(out["pressure"].data, p * 1000.0)
     assert np.abs(U).max() > 1e-3 and np.ptp(p) > 0
     # rigid bodies need every cell's velocity: a steady fluid's ranks refuse it before solving
@@ -137,6 +138,7 @@ def test_rigid_bodies_take_every_cells_inputs_and_give_the_whole_arrays(fluid, t
     whole = OpenFOAMSolver(tmp_path / "whole", CaseSpec.from_config(cfg, ranks=2))
     whole.setup()
     U, p = whole.solve(fraction, velocity, 0.0, 0.01)
+    assert whole.last_run["converged"], whole.last_run
     assert len(whole.sources) == 1 and np.mean(U[fraction > 0.99, 2]) > 1e-3  # the body moves the fluid
     assert np.array_equal(out["velocity"].data, U) and np.array_equal(out["pressure"].data, p * 1000.0)
 
