@@ -316,8 +316,10 @@ class OpenFOAMSolver:
             bad = ~np.isfinite(arr)
             if bad.any():
                 cell = int(self.cell_ids[np.argmax(bad.reshape(len(arr), -1).any(axis=1))])
+                logf = self.case / f"log.{self.application}"  # one log for every rank: rank 0 quotes it
                 raise OpenFOAMError(f"{self.application} produced non-finite {name} (first at cell {cell}) in "
-                                    f"{self.time_root / end}; log tail:\n{_tail(self.case / f'log.{self.application}')}")
+                                    f"{self.time_root / end}; " + (f"log tail:\n{_tail(logf)}" if self.rank == 0
+                                                                   else f"log {logf}"))
         return U, p
 
     def report(self) -> dict:

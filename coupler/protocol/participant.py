@@ -176,21 +176,15 @@ def _problems(comm, problem: str | None) -> str | None:
     return "; ".join(f"rank {r}: {p}" for r, p in problems) or None
 
 
-def _agree(comm, problem: str | None) -> None:
-    """Every rank learns whether each has its request (collective): ProtocolError on all ranks,
-    naming each rank that has none, so none enters the solver's collective code without it."""
-    if (text := _problems(comm, problem)) is not None:
-        raise ProtocolError(text)
-
-
-def agree(comm, problem: str | None) -> None:
+def agree(comm, problem: str | None, error: type[Exception] = RanksError) -> None:
     """Every rank of ``comm`` learns each rank's ``problem`` (None: it has none; collective, the
     ranks that come first sleep in :func:`idle_barrier`) and, when any rank has one, raises
-    :class:`RanksError` naming each such rank: so no rank goes on alone into collective code, and
-    every rank answers the verb with that error instead of aborting the MPI job."""
+    `error` naming each such rank: so no rank goes on alone into collective code, and every rank
+    answers the verb with that error instead of aborting the MPI job (a :class:`ProtocolError`
+    when a rank lacks its request, a :class:`RanksError` when the work failed on a rank)."""
     idle_barrier(comm)
     if (text := _problems(comm, problem)) is not None:
-        raise RanksError(text)
+        raise error(text)
 
 
 def on_root(comm, work, *args):
@@ -247,7 +241,7 @@ class _MpiRoot:
         def call(*args):
             self._send((verb, args[:4] if verb == "advance" else args))  # rank 0's inputs stay here
             if verb in PART_VERBS:
-                _agree(self.comm, self.handler.input_problem(args[4]) if verb == "advance" else None)
+                agree(self.comm, self.handler.input_problem(args[4]) if verb == "advance" else None, ProtocolError)
             return method(*args)
 
         return call
@@ -295,7 +289,7 @@ def _mpi_worker(handler: Participant, comm, parts) -> None:
             except ProtocolError as exc:
                 problem = str(exc)
             try:
-                _agree(comm, problem)
+                agree(comm, problem, ProtocolError)
             except ProtocolError as exc:
                 if request is not None:
                     parts.reply(*request[:3], error=exc)

@@ -8,6 +8,7 @@ the rank and the file or key."""
 
 from __future__ import annotations
 
+import re
 import shutil
 
 import numpy as np
@@ -33,7 +34,7 @@ from fluid_openfoam.participant import FluidParticipant
 class Recording(FluidParticipant):
     """The OpenFOAM fluid saving, per rank, the ids it declared and the input rows it received; its
     argument breaks processor1 ("malformed", "missing": after decomposePar; "result": its U after the
-    solve) or kills rank 1 in advance ("die")."""
+    solve), gives every rank a NaN in its result ("nan") or kills rank 1 in advance ("die")."""
     def geometry(self):
         header, fields = super().geometry()
         self.declared = fields
@@ -61,9 +62,18 @@ def broken_result(self, t0, wall):
     (self.case / "processor1" / end / "U").write_bytes(b"FoamFile { format binary; }\\ninternalField nonsense;")
     return end, run
 
+read_cells = solver.OpenFOAMSolver.read_cells
+
+def diverged(self, time, name):
+    values = read_cells(self, time, name).copy()
+    values[2] = np.nan
+    return values
+
 parallel.Decomposition.decompose = broken_decompose
 if os.environ["FAULT"] == "result":
     solver.OpenFOAMSolver._ended = broken_result
+if os.environ["FAULT"] == "nan":
+    solver.OpenFOAMSolver.read_cells = diverged
 main(Recording)
 '''
 
@@ -163,6 +173,22 @@ def test_a_malformed_result_names_the_rank_and_the_file(fluid, tmp_path):
     with pytest.raises(ParticipantError, match=r"^participant 'fluid' failed: RanksError: rank 1: FieldFormatError: "
                                                + f"{tmp_path}/case/processor1/" + r"\d+/U: "):
         client.advance(0, 0, 0.0, 1.0, {"solid_fraction": step_fraction()})
+
+
+def test_a_result_with_nan_on_every_rank_quotes_the_shared_log_once(fluid, tmp_path):
+    """Both ranks find a NaN in their processor's result: each is named with its processor's time
+    directory; the log both share is quoted by rank 0 and only named by rank 1."""
+    client = fluid("nan")
+    client.configure(config(tmp_path / "case"))
+    client.geometry()
+    with pytest.raises(ParticipantError) as info:
+        client.advance(0, 0, 0.0, 1.0, {"solid_fraction": step_fraction()})
+    text, case = str(info.value), tmp_path / "case"
+    for rank in (0, 1):
+        assert re.search(rf"rank {rank}: OpenFOAMError: simpleFoam produced non-finite U \(first at cell \d+\) in "
+                         rf"{case}/processor{rank}/\d+; ", text), text
+    assert text.count("log tail:") == 1 and f"rank 1: " in text.split("log tail:")[1]
+    assert text.endswith(f"log {case}/log.simpleFoam"), text
 
 
 def test_a_rank_that_dies_is_named_with_its_key(fluid, tmp_path):
