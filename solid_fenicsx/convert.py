@@ -14,11 +14,10 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
 from mpi4py import MPI
 
 from . import xdmf_mesh
-from .mesh import SolidMesh, SolidMeshError, agree, read_mesh
+from .mesh import SolidMesh, SolidMeshError, agree, read_mesh, tag_counts
 
 PROG = "python -m solid_fenicsx.convert"
 
@@ -26,14 +25,8 @@ PROG = "python -m solid_fenicsx.convert"
 def tag_sizes(solid: SolidMesh) -> dict[str, dict[str, int]]:
     """name -> the number of facets (``boundaries``) or tetrahedra (``regions``) with its tag."""
     tdim = solid.mesh.topology.dim
-    out = {}
-    for kind, dim, tags, names in (("boundaries", tdim - 1, solid.facet_tags, solid.boundaries),
-                                   ("regions", tdim, solid.cell_tags, solid.regions)):
-        owned = solid.mesh.topology.index_map(dim).size_local
-        values = np.empty(0, np.int32) if tags is None else tags.values[tags.indices < owned]
-        counts = solid.comm.allreduce(np.array([np.count_nonzero(values == t) for t in names.values()], np.int64))
-        out[kind] = dict(zip(names, (int(n) for n in counts)))
-    return out
+    return {"boundaries": tag_counts(solid.mesh, tdim - 1, solid.facet_tags, solid.boundaries),
+            "regions": tag_counts(solid.mesh, tdim, solid.cell_tags, solid.regions)}
 
 
 def convert(source: Path, target: Path, tag_key: str | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> SolidMesh:

@@ -334,12 +334,19 @@ def _finish(mesh, indices, values, names, boundaries, num_points, num_cells, cel
     facet_tags = dolfinx.mesh.meshtags(mesh, tdim - 1, order, vals)
     facet_tags.name = "boundaries"
     # warn about named boundaries without any facet (typo in a predicate, overridden tag)
-    counts = mesh.comm.allreduce(np.array([np.count_nonzero(vals == t) for t in names.values()], np.int64)
-                                 if names else np.zeros(0, np.int64), op=MPI.SUM)
-    for (name, _), n in zip(names.items(), counts):
+    for name, n in tag_counts(mesh, tdim - 1, facet_tags, names).items():
         if n == 0:
             warnings.warn(f"boundary {name!r} has no facets", stacklevel=3)
     return SolidMesh(mesh, facet_tags, names, num_points, num_cells, cell_tags, dict(regions or {}))
+
+
+def tag_counts(mesh, dim: int, tags, names: Mapping[str, int]) -> dict[str, int]:
+    """name -> the number of entities of dimension `dim` tagged with its tag in the MeshTags
+    `tags` (None: none), each counted once over the ranks (owned, not ghost). Collective."""
+    owned = mesh.topology.index_map(dim).size_local
+    values = np.empty(0, np.int32) if tags is None else tags.values[tags.indices < owned]
+    counts = mesh.comm.allreduce(np.array([np.count_nonzero(values == t) for t in names.values()], np.int64))
+    return dict(zip(names, (int(n) for n in counts)))
 
 
 # -- files --------------------------------------------------------------------
