@@ -10,7 +10,7 @@ pytest.importorskip("dolfinx")
 
 from mpi4py import MPI  # noqa: E402
 
-from solid_fenicsx.mesh import BOX_FACES, SolidMeshError, box_mesh, from_arrays, read_mesh  # noqa: E402
+from solid_fenicsx.mesh import BOX_FACES, SolidMeshError, box_mesh, from_arrays, read_mesh, tag_counts  # noqa: E402
 from transfer.generators.lattice import box_arrays, graded_nodes  # noqa: E402
 
 
@@ -73,6 +73,16 @@ def test_from_arrays_with_tags_and_predicates():
     assert solid.num_points == 64  # the unused point 0 is dropped: input id i is point i + 1
     ids = np.asarray(solid.mesh.geometry.input_global_indices)
     assert np.array_equal(solid.mesh.geometry.x, points[ids + 1])
+
+
+def test_a_predicate_that_selects_no_facet_is_warned_of_and_tag_counts_count_each_facet_once():
+    points, cells, tris, tags = _tagged_cube()
+    with pytest.warns(UserWarning, match="boundary 'nowhere' has no facets"):
+        solid = from_arrays(points, cells, tris, tags, tag_names={"top": 7},
+                            boundaries={"nowhere": lambda x: x[0] > 2.0})
+    tdim = solid.mesh.topology.dim
+    assert tag_counts(solid.mesh, tdim - 1, solid.facet_tags, solid.boundaries) == {"3": 18, "top": 18, "nowhere": 0}
+    assert tag_counts(solid.mesh, tdim, None, {"rock": 1}) == {"rock": 0}
 
 
 @pytest.mark.parametrize("fmt", ["gmsh22", "vtu", "xdmf"])
