@@ -11,13 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from coupler.errors import CouplerError
+from coupler.protocol.transport import coupler_rank_of
 from transfer import Mesh
 from transfer.rows import Rows
 
 
 def assigned(rank: int, coupler_ranks: int, parts: int) -> list[int]:
-    """The participant ranks (of `parts`) coupler rank `rank` talks to: round-robin."""
-    return list(range(rank, parts, coupler_ranks))
+    """The participant ranks (of `parts`) coupler rank `rank` talks to: round-robin
+    (:func:`coupler.protocol.transport.coupler_rank_of`, the rule the participants link by)."""
+    return [r for r in range(parts) if coupler_rank_of(r, coupler_ranks) == rank]
 
 
 class Held:

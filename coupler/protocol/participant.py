@@ -332,6 +332,10 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--name", required=True, help="this participant's name in the run")
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    p.add_argument("--coupler-rank", action="append", default=[], metavar="ENDPOINT",
+                   help="the endpoint of each rank of a coupler on several ranks, in rank order (repeatable): "
+                        "rank 0 connects to every one, rank r to coupler rank 0's and rank r mod P's, "
+                        "besides --connect")
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="zenoh endpoint to listen on (repeatable; rarely needed)")
     p.add_argument("--mode", default="peer", choices=["peer", "client"], help="zenoh mode (default: peer)")
@@ -355,7 +359,7 @@ def run(participant_factory: Callable[[], Participant], argv=None, prog: str | N
     exit code: 0 after ``finish``, 1 on an error, 128 + signal number on SIGTERM/SIGINT."""
     args, extra = build_parser(prog).parse_known_args(argv)
     from coupler.protocol.server import CouplerGone, ParticipantServer, PartServer
-    from coupler.protocol.transport import check_name, open_session
+    from coupler.protocol.transport import check_name, open_session, part_links
 
     size = _mpi_world_size()
     comm = None
@@ -372,16 +376,17 @@ def run(participant_factory: Callable[[], Participant], argv=None, prog: str | N
     try:
         check_name("run id", args.run_id)
         check_name("participant name", args.name)
-        if not args.connect and not args.listen:
+        connect = list(dict.fromkeys(args.connect + part_links(args.coupler_rank, rank)))
+        if not connect and not args.listen:
             raise CouplerError("give at least one --connect ENDPOINT (where the coupler listens)")
         handler = participant_factory()
         handler.bind(args.run_id, args.name, comm, extra)
         t0 = time.perf_counter()
         # every rank has its own session (its parts travel from it); only rank 0 listens where asked
-        session = open_session(args.mode, args.connect, args.listen if rank == 0 else (), not args.no_shm,
+        session = open_session(args.mode, connect, args.listen if rank == 0 else (), not args.no_shm,
                                connect_timeout=args.connect_timeout)
         log.info("%s: zenoh session open (%s) in %.2f s, pid %d, rank %d of %d",
-                 who, ", ".join(args.connect + args.listen), time.perf_counter() - t0, os.getpid(), rank, size)
+                 who, ", ".join(connect + args.listen), time.perf_counter() - t0, os.getpid(), rank, size)
         if rank != 0:
             server = PartServer(session, args.run_id, args.name, rank, shared_memory=not args.no_shm)
             comm.Barrier()  # every rank's queryables before rank 0's liveliness token

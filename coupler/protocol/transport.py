@@ -106,6 +106,23 @@ def rank_alive_key(run_id: str, name: str, rank: int) -> str:
     return f"{alive_key(run_id, name)}/{int(rank)}"
 
 
+def coupler_rank_of(part: int, coupler_ranks: int) -> int:
+    """The coupler rank that exchanges participant rank `part`'s parts when the coupler runs on
+    `coupler_ranks` ranks: round-robin (docs/protocol.md, "Parts")."""
+    return int(part) % int(coupler_ranks)
+
+
+def part_links(coupler_endpoints: list[str], part: int) -> list[str]:
+    """The coupler ranks' endpoints (in rank order) that participant rank `part` connects to:
+    rank 0 every one (its verbs and liveliness token reach each coupler rank), any other rank
+    coupler rank 0's (whose token it watches) and that of the coupler rank exchanging its parts
+    (:func:`coupler_rank_of`). Every link is direct: no session routes another's messages."""
+    if not coupler_endpoints or part == 0:
+        return list(coupler_endpoints)
+    mine = coupler_endpoints[coupler_rank_of(part, len(coupler_endpoints))]
+    return list(dict.fromkeys([coupler_endpoints[0], mine]))
+
+
 def new_run_id() -> str:
     """A fresh run id: time, pid and random bits (unique across parallel runs)."""
     return f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{secrets.token_hex(3)}"

@@ -133,7 +133,9 @@ class Launcher:
     """Start and stop the participant processes of run ``run_id``.
 
     ``connect``: the zenoh endpoints every participant connects to (the coupler's,
-    :attr:`coupler.messaging.CouplerSession.endpoints`). ``python``: the interpreter
+    :attr:`coupler.messaging.CouplerSession.endpoints`); ``coupler_ranks``: those of each rank
+    of a coupler on several ranks (``--coupler-rank``: each participant rank links to the
+    coupler ranks it talks to, :func:`coupler.protocol.transport.part_links`). ``python``: the interpreter
     (default: this one). ``mpirun``: the MPI launcher for ``ranks > 1``. ``env``: the
     participants' environment (default: this one's), with Open MPI's settings for
     ``mpi_interfaces`` added (:func:`coupler.mpi_env.mpi_environment`: None reads
@@ -142,12 +144,13 @@ class Launcher:
     """
 
     def __init__(self, run_id: str, results_dir, connect: Iterable[str] = (), *,
-                 python: str | None = None, mpirun: str = "mpirun", env: dict | None = None,
+                 coupler_ranks: Iterable[str] = (), python: str | None = None, mpirun: str = "mpirun", env: dict | None = None,
                  mpi_interfaces: list[str] | None = None):
         self.run_id = check_name("run id", run_id)
         self.results_dir = Path(results_dir)
         self.log_dir = self.results_dir / "logs"
         self.connect = list(connect)
+        self.coupler_ranks = list(coupler_ranks)
         self.python = python or sys.executable
         self.mpirun = mpirun
         self.env = env
@@ -158,6 +161,8 @@ class Launcher:
         argv = [self.python, "-m", module, "--run-id", self.run_id, "--name", name]
         for ep in self.connect:
             argv += ["--connect", ep]
+        for ep in self.coupler_ranks:
+            argv += ["--coupler-rank", ep]
         argv += [str(a) for a in extra_args]
         if ranks > 1:
             mpirun = shutil.which(self.mpirun) or self.mpirun

@@ -2,11 +2,12 @@
 or ``[coupling] ranks = P`` (``varcouple run`` then starts itself under ``mpirun -n P``:
 :func:`coupler.run.execute.relaunch`).
 
-Every rank runs the same plan and loop (:class:`RanksRun`). Rank 0 starts the participants,
-keeps the zenoh router (its listening session) and their control verbs (announce, configure,
-save/restore, finish); every other rank opens its own session to it. Each coupler rank talks to
-the participant ranks assigned to it (round-robin, :func:`coupler.fsi.held.assigned`): it sends
-their requests and receives their parts directly, and holds their rows
+Every rank runs the same plan and loop (:class:`RanksRun`). Rank 0 starts the participants and
+keeps their control verbs (announce, configure, save/restore, finish); every rank listens on its
+own zenoh session, a peer, to which the participant ranks it talks to link directly
+(:meth:`RanksRun.processes`). Each coupler rank talks to the participant ranks assigned to it
+(round-robin, :func:`coupler.fsi.held.assigned`): it sends their requests and receives their
+parts directly, no other process routing them, and holds their rows
 (:class:`coupler.fsi.held.Held`). The operators are the distributed ones of
 :mod:`coupler.fsi.ranks`. Whatever fails on one rank is raised on every rank (:func:`agree`).
 
@@ -112,20 +113,31 @@ class RanksRun(Run):
     @staticmethod
     @contextmanager
     def processes(scene, plan, run_id: str, logs, comm=None):
-        """Rank 0: the listening session, a zenoh router in peer mode (a peer routes nothing
-        between the others), and the launcher; every other rank: its own session, a client of
-        rank 0's, with no liveliness token of its own (the participants watch rank 0's)."""
+        """Every rank its own listening session, a peer: each participant rank links directly to
+        the coupler ranks it talks to (:func:`coupler.protocol.transport.part_links`: rank 0 of a
+        participant to every coupler rank, rank r to coupler rank 0 and rank r mod P), so no
+        session routes another's messages; rank 0 declares the coupler's liveliness token and
+        keeps the launcher. With zenoh routers of the scene's own (``[messaging] connect``, or
+        mode ``client``) rank 0 listens as before and every other rank is a client of the same
+        routers."""
         with ExitStack() as stack:
             m = scene.messaging
-            if comm.rank == 0:
-                session = agree(comm, CouplerSession, run_id, mode="router" if m["mode"] == "peer" else m["mode"],
-                                connect=m["connect"], connect_timeout=min(10.0, m["timeout"]))
+            direct = m["mode"] == "peer" and not m["connect"]
+            if direct or comm.rank == 0:  # through the scene's routers: rank 0's session routes for the others
+                session = agree(comm, CouplerSession, run_id, mode=m["mode"] if direct or m["mode"] != "peer"
+                                else "router", connect=m["connect"], connect_timeout=min(10.0, m["timeout"]),
+                                token=comm.rank == 0)
                 stack.callback(session.close)
-                comm.bcast(session.endpoints)
-                yield session, stack.enter_context(Launcher(run_id, logs, session.endpoints))
             else:
                 agree(comm, lambda: None)
-                endpoints = comm.bcast(None)
+            endpoints = comm.allgather(session.endpoints[0]) if direct else comm.bcast(
+                session.endpoints if comm.rank == 0 else None)
+            if comm.rank == 0:
+                yield session, stack.enter_context(Launcher(run_id, logs, session.endpoints,
+                                                            coupler_ranks=endpoints if direct else ()))
+            elif direct:
+                yield session, None
+            else:
                 yield stack.enter_context(CouplerSession(run_id, mode="client", listen_host=None, connect=endpoints,
                                                          token=False)), None
 
