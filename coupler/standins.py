@@ -62,7 +62,11 @@ Participants that solve nothing, which the runner serves in its own process
     finite (a transfer reached them), 0 elsewhere. Config: ``{"file": "path", "field": "name"}``.
     ``report_figures``: ``reoriented_cells``, cells the file numbers with negative orientation
     (reordered on reading). Its ``geometry`` names the mesh after the file and describes it
-    (``note``: cells, points, reordered cells, the field).
+    (``note``: cells, points, reordered cells, the field). Bound to rank r of P > 1 (a coupler
+    on P ranks serves one on each), it reads the whole file and serves its part
+    (docs/protocol.md, "Parts"): its cells as ``mpirun -n P varcouple transfer`` cuts the file
+    and the points it owns (:func:`transfer.partition.part_rows`), with point fields at those
+    points.
 """
 
 from __future__ import annotations
@@ -364,16 +368,18 @@ class MeshFileParticipant(Participant):
     kind = "mesh_file"
 
     def __init__(self):
-        self.file = self.field = None
+        self.file = self.field = self.part = None
 
     def announce(self) -> dict:
         return {"kind": self.kind, "provides": [self.field.name] if self.field else ["covered"], "accepts": ["*"]}
 
     def configure(self, config: dict) -> None:
         from transfer.meshfile import MeshFile
+        from transfer.partition import part_rows
 
         self.file = MeshFile.read(config["file"])
         self.field = self.file.field(config["field"]) if config.get("field") else None
+        self.part = part_rows(self.file.mesh, self.rank, self.size) if self.size > 1 else None
         log.info("mesh_file %s: %s", self.file.path, self.file.describe())
 
     def geometry(self):
@@ -381,8 +387,12 @@ class MeshFileParticipant(Participant):
             raise RuntimeError("geometry before configure")
         m = self.file.mesh
         note = f"{self.file.path}: {self.file.describe()}" + (f"; {self.field.describe()}" if self.field else "")
-        return ({"cell_type": m.cell_type, "boundaries": {}, "name": self.file.path, "note": note},
-                {"points": Field("points", m.points, "m"), "cells": Field("cells", m.cells)})
+        header = {"cell_type": m.cell_type, "boundaries": {}, "name": self.file.path, "note": note}
+        if self.part is None:
+            return header, {"points": Field("points", m.points, "m"), "cells": Field("cells", m.cells)}
+        cells, points = self.part
+        return header, {"point_ids": points, "points": Field("points", m.points[points], "m"), "cell_ids": cells,
+                        "cells": Field("cells", m.cells[cells])}
 
     def advance(self, window, iteration, t, dt, inputs):
         if self.file is None:
@@ -390,7 +400,8 @@ class MeshFileParticipant(Participant):
         self.report_figures(reoriented_cells=self.file.mesh.reoriented)
         out = {}
         if self.field is not None:
-            out[self.field.name] = Field(self.field.name, self.field.values)
+            values = self.field.values if self.part is None else self.field.values[self.part[1]]
+            out[self.field.name] = Field(self.field.name, values)
         if inputs:
             arrays = [np.asarray(f.data).reshape(len(f.data), -1) for f in inputs.values()]
             out["covered"] = Field("covered", np.all([np.isfinite(a).all(axis=1) for a in arrays], axis=0)

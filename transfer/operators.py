@@ -142,6 +142,14 @@ class Transfer:
         return float(self.covered.mean())
 
     @property
+    def num_covered(self) -> int:
+        return int(np.count_nonzero(self.covered))
+
+    @property
+    def num_target_dofs(self) -> int:
+        return self.target.num_dofs
+
+    @property
     def uncovered(self) -> np.ndarray:
         """Indices of target dofs the source does not reach."""
         return np.flatnonzero(~self.covered)

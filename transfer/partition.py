@@ -1,7 +1,7 @@
 """Partitions of cells among ranks, for meshes that every rank holds whole (files the CLI
 reads, tests): slabs along an axis and recursive coordinate bisection of the cell centres.
 Each gives the owner rank of every cell; :meth:`transfer.distributed.Part.of_cells` makes a
-rank's part of them."""
+rank's part of them, :func:`part_rows` its cells and the vertices it owns (a participant's part)."""
 
 from __future__ import annotations
 
@@ -52,3 +52,15 @@ def grid_slab(shape, parts: int, rank: int, axis: int) -> tuple[np.ndarray, np.n
     n = int(shape[axis])
     lower[axis], upper[axis] = rank * n // parts, (rank + 1) * n // parts
     return lower, upper
+
+
+def part_rows(mesh, rank: int, parts: int) -> tuple[np.ndarray, np.ndarray]:
+    """(cells, vertices) of `rank`'s part of `mesh` (held whole on every rank): its cells by
+    :func:`bisection`, as ``mpirun -n N varcouple transfer`` cuts a file, and the vertices it
+    owns, each vertex owned once, by the lowest rank whose cells use it (a vertex of no cell by
+    rank 0)."""
+    owner = bisection(mesh, parts)
+    vertex_owner = np.full(mesh.num_points, parts, np.int64)
+    np.minimum.at(vertex_owner, mesh.cells.ravel(), np.repeat(owner, mesh.cells.shape[1]))
+    vertex_owner[vertex_owner == parts] = 0
+    return np.flatnonzero(owner == rank), np.flatnonzero(vertex_owner == rank)

@@ -12,7 +12,10 @@ Each kind is one module of this package (``[check] kind = "NAME"``, default
 - ``evaluate(settings, scene, result) -> dict``: the comparison with at least ``error`` (the
   figure compared with the tolerance), ``tolerance`` and ``passed``, plus its own figures;
   ``result`` is a :class:`Result`;
-- ``describe(report) -> str``: the comparison as one line for the log.
+- ``describe(report) -> str``: the comparison as one line for the log;
+- optionally ``RANKS = True``: ``evaluate`` also compares the pieces of a coupler on P ranks
+  (``result.comm``: each rank's meshes and fields, sums and extrema reduced over the ranks); a
+  kind without it refuses P > 1 (:meth:`coupler.run.ranks.RanksRun.admit`).
 
 summary.json's ``check`` is ``{"kind": KIND, **evaluate(...)}``; a run whose check did not
 pass exits 1.
@@ -43,11 +46,13 @@ KINDS = _discover()
 class Result:
     """What a check compares: per participant its mesh (or grid), its final fields (outputs and
     the inputs it got, at the vertices of a mesh or the cells of a grid) and its figures of the
-    last step."""
+    last step. With ``comm`` (a coupler on P ranks) the meshes and fields are this rank's pieces
+    (each cell in one piece, a vertex on a cut in several); None: the whole."""
 
     meshes: dict
     fields: dict
     figures: dict = field(default_factory=dict)
+    comm: object = None
 
 
 def parse(path, data, scene) -> dict:

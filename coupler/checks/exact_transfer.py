@@ -5,6 +5,11 @@ error ``||u_h - f|| / ||f||`` by quadrature over the target cells whose dofs are
 ``||u_h - I_h f||_M / ||I_h f||_M`` with the mass matrix M over the covered dofs (zero when the
 transfer returns the interpolant, whose own L2 error is not zero), and the largest error at the
 covered dofs. The check passes when every method's L2 error is within the tolerance.
+
+On a coupler of P ranks (``RANKS``) each rank has its pieces of the meshes: the squared norms are
+sums over its own cells (the mass matrix of its cells), the largest errors its own; one allreduce
+of each makes the whole's, then the roots and ratios (:class:`coupler.coupling.row_sums.RowSums`:
+on one process the plain sums).
 """
 
 from __future__ import annotations
@@ -13,12 +18,14 @@ import math
 
 import numpy as np
 
+from coupler.coupling.row_sums import RowSums
 from coupler.errors import CouplerError
 from coupler.protocol.expressions import check_expression, evaluate_expression
 from transfer import FunctionSpace
 from transfer.meshfile import family
 
 KIND = "exact_transfer"
+RANKS = True
 DESCRIPTION = "a transferred field against its known expression: L2 error and distance to the interpolant"
 KEYS = {"exact": "the source field as an expression in x, y, z (numpy; scalar fields)",
         "tolerance": "largest accepted relative L2 error of a method"}
@@ -46,24 +53,28 @@ def parse(table, scene) -> dict:
     return {"exact": exact, "tolerance": table.number("tolerance", positive=True)}
 
 
-def _relative(a: float, b: float) -> float:
-    return a / b if b > 0 else float("nan")
+def _relative(squares: float, of: float) -> float:
+    """sqrt(squares / of): the ratio of two norms from their squares."""
+    return math.sqrt(max(squares, 0.0)) / math.sqrt(of) if of > 0 else float("nan")
 
 
-def errors(space: FunctionSpace, values: np.ndarray, f) -> dict:
-    """The errors of the transferred dof `values` (NaN where not covered) against `f`."""
+def _largest(sums: RowSums, values: np.ndarray) -> float:
+    """max |values| over every rank's (NaN when no rank has any)."""
+    largest = sums.extremum(float(np.max(np.abs(values))) if values.size else -math.inf, "max")
+    return largest if math.isfinite(largest) else float("nan")
+
+
+def errors(space: FunctionSpace, values: np.ndarray, f, sums: RowSums) -> dict:
+    """The errors of the transferred dof `values` (NaN where not covered) against `f`, over the
+    cells of `space` and every other rank's of `sums`. Collective."""
     covered = np.isfinite(values)
     interpolant = f(space.dof_coordinates)
-    e = (values - interpolant)[covered]
-    mass = space.mass_matrix()[covered][:, covered]
-
-    def mass_norm(v):
-        return math.sqrt(max(float(v @ (mass @ v)), 0.0))
-
-    l2, norm = space.l2_error(np.where(covered, values, 0.0), f, cells=covered[space.cell_dofs].all(axis=1))
-    return {"max_error": float(np.max(np.abs(e))) if e.size else float("nan"),
-            "relative_l2_error": _relative(l2, norm),
-            "relative_interpolant_distance": _relative(mass_norm(e), mass_norm(interpolant[covered]))}
+    e, at_dofs = np.where(covered, values - interpolant, 0.0), np.where(covered, interpolant, 0.0)
+    mass = space.mass_matrix()
+    l2 = space.l2_squares(np.where(covered, values, 0.0), f, cells=covered[space.cell_dofs].all(axis=1))
+    error, norm, distance, scale = sums.sum(np.array([*l2, e @ (mass @ e), at_dofs @ (mass @ at_dofs)]))
+    return {"max_error": _largest(sums, e[covered]), "relative_l2_error": _relative(error, norm),
+            "relative_interpolant_distance": _relative(distance, scale)}
 
 
 def evaluate(settings, scene, result) -> dict:
@@ -72,20 +83,21 @@ def evaluate(settings, scene, result) -> dict:
     def f(points):
         return evaluate_expression(settings["exact"], points)
 
+    sums = RowSums(result.comm)
     source = result.meshes["source"]
-    source_values = result.fields["source"][s["field"]]
+    source_values = np.asarray(result.fields["source"][s["field"]], float)
     at_source = f(FunctionSpace(source, family(source, s["kind"])).dof_coordinates)
     methods = {}
     for method in s["methods"]:
         mesh = result.meshes[f"target_{method}"]
         values = np.asarray(result.fields[f"target_{method}"][s["field"]], float)
-        methods[method] = errors(FunctionSpace(mesh, family(mesh, s["kind"])), values, f)
+        methods[method] = errors(FunctionSpace(mesh, family(mesh, s["kind"])), values, f, sums)
     worst = max(m["relative_l2_error"] for m in methods.values())
     if not math.isfinite(worst):
         raise CouplerError(f"{scene.path}: [check] exact: no target cell is covered: no L2 error to compare")
-    scale = max(float(np.max(np.abs(source_values))), np.finfo(float).tiny)
+    scale = max(_largest(sums, source_values), np.finfo(float).tiny)
     return {"error": worst, "tolerance": settings["tolerance"], "passed": bool(worst <= settings["tolerance"]),
-            "exact": settings["exact"], "source_max_difference": float(np.max(np.abs(at_source - source_values))),
+            "exact": settings["exact"], "source_max_difference": _largest(sums, at_source - source_values),
             "source_scale": scale, "methods": methods}
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from coupler.errors import CouplerError
 from coupler.protocol.transport import coupler_rank_of
 from transfer import Mesh
+from transfer.mesh import CELL_TYPES
 from transfer.rows import Rows
 
 
@@ -25,10 +26,12 @@ def assigned(rank: int, coupler_ranks: int, parts: int) -> list[int]:
 class Held:
     """Coupler rank's share of participant `name`: its parts' row ids (``ids``, concatenated in
     part order: ``out_ids``), their input rows (``in_ids``) and the latest output fields at
-    ``out_ids`` (:attr:`fields`). ``count``: the rows of the whole participant."""
+    ``out_ids`` (:attr:`fields`). ``count``: the rows of the whole participant; ``cell_type``: that
+    of the cells of its geometry (:meth:`mesh`)."""
 
-    def __init__(self, comm, name: str, ranks: list[int], ids: list[np.ndarray], inputs: list[np.ndarray]):
-        self.comm, self.name, self.ranks = comm, name, ranks
+    def __init__(self, comm, name: str, ranks: list[int], ids: list[np.ndarray], inputs: list[np.ndarray],
+                 cell_type: str = "tetra"):
+        self.comm, self.name, self.ranks, self.cell_type = comm, name, ranks, cell_type
         self.ids, self.input_rows = ids, inputs
         self.out_ids = np.concatenate(ids).astype(np.int64) if ids else np.zeros(0, np.int64)
         self.in_ids = np.concatenate(inputs).astype(np.int64) if inputs else np.zeros(0, np.int64)
@@ -59,7 +62,7 @@ class Held:
         return float(np.max(np.linalg.norm(a.reshape(len(a), -1), axis=1))) if a is not None and len(a) else 0.0
 
     def mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
-        """(vertices, mesh): the tetrahedra of the parts held here (their `geometry`) on the global
+        """(vertices, mesh): the cells of the parts held here (their `geometry`) on the global
         `vertices` they use, with the coordinates of those owned elsewhere fetched; made once (the
         operators and the output share it). Collective the first time."""
         if self._mesh is None:
@@ -67,12 +70,14 @@ class Held:
         return self._mesh
 
     def _made_mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
+        k = CELL_TYPES[self.cell_type][1]
         points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
-        cells = [np.asarray(g["cells"], np.int64).reshape(-1, 4) for g in geometry]
-        cells = np.concatenate(cells) if cells else np.zeros((0, 4), np.int64)
+        cells = [np.asarray(g["cells"], np.int64).reshape(-1, k) for g in geometry]
+        cells = np.concatenate(cells) if cells else np.zeros((0, k), np.int64)
         vertices, local = np.unique(cells, return_inverse=True)
         reference = self.rows.move(self.out_ids, np.concatenate(points) if points else np.zeros((0, 3)),
                                    vertices).reshape(-1, 3)
-        return vertices, (Mesh(reference, local.reshape(-1, 4), "tetra", name=f"{self.name} part", reorient=True)
-                          if len(cells) else Mesh.empty("tetra", f"{self.name} part"))
+        name = f"{self.name} part"
+        return vertices, (Mesh(reference, local.reshape(-1, k), self.cell_type, name=name, reorient=True)
+                          if len(cells) else Mesh.empty(self.cell_type, name))
 

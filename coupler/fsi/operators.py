@@ -15,16 +15,12 @@ per new displacement.
 
 from __future__ import annotations
 
-import time
-import warnings
-
 import numpy as np
-
-from transfer import FunctionSpace, OverlapWarning, StructuredGrid, Transfer
 
 from .centres import centres_inside
 from .context import OperatorContext, fluid_solid
 from .open_gap import contact_share
+from .projection import Projection
 from .rate_control import FlowRateControl
 from .viscous import FluidTraction, traction_figures
 
@@ -138,70 +134,6 @@ class SolidVelocity:
 
     def deliver(self, value) -> np.ndarray:
         return value
-
-
-class Projection:
-    """A field of one participant carried to another's mesh by the variational transfer of
-    paper 2.1 (``T = D^-1 B``, eq. 3-4): P1/Q1 at a mesh's points or P0/Q0 in its cells on the
-    source side (option ``kind``, else by the field's length), the same family on a target
-    mesh and Q0 in the cells of a grid. Where the source does not reach, the target gets zero,
-    or NaN with option ``fill = "nan"`` (a mesh file that records the transfer). Options
-    ``quadrature_degree`` and ``threads`` go to the assembly; a ``kind`` given is assembled
-    with the operators, before the first step. Figures of a step: the covered fraction, the
-    uncovered dofs and the conservation error over the overlap (``projections``)."""
-
-    def __init__(self, ctx: OperatorContext, exchange, method: str):
-        (source,) = exchange.sources
-        self.participant, self.field = source.split(".", 1)
-        self.ctx, self.method, self.name = ctx, method, exchange.target
-        self.source, self.target = ctx.meshes[self.participant], ctx.meshes[exchange.target_participant]
-        options = exchange.options
-        self.fill = np.nan if options.get("fill") == "nan" else 0.0
-        self.assembly = {"quadrature_degree": options.get("quadrature_degree"), "nthreads": options.get("threads", 1)}
-        self.units = ""
-        self._transfers: dict = {}
-        self._last = None  # (transfer, source values) of the last evaluation
-        if "kind" in options:
-            self._transfer(options["kind"])
-
-    def _transfer(self, kind: str) -> Transfer:
-        if kind not in self._transfers:
-            S, G = self.source, self.target
-            start = time.perf_counter()
-            with warnings.catch_warnings(action="ignore", category=OverlapWarning):  # reported once, below
-                T = Transfer.assemble(FunctionSpace(S, _family(S, kind)), FunctionSpace(G, _family(G, kind, grid="Q0")),
-                                      self.method, **self.assembly)
-            self.ctx.phases.add("transfer", time.perf_counter() - start)
-            self.ctx.warn(T.warnings)
-            self._transfers[kind] = T
-        return self._transfers[kind]
-
-    def evaluate(self, outputs) -> np.ndarray:
-        values = np.asarray(outputs[self.participant][self.field])
-        T = self._transfer("point" if len(values) == self.source.num_points else "cell")
-        flat = values.reshape(len(values), -1) if values.ndim > 1 else values
-        self._last = T, flat
-        out = T.apply(flat, fill=self.fill)
-        return out.reshape((len(out),) + values.shape[1:])
-
-    def deliver(self, value) -> np.ndarray:
-        return value
-
-    def figures(self) -> dict:
-        if self._last is None:
-            return {}
-        T, u = self._last
-        return {"projections": {self.name: {"method": self.method, "covered_fraction": T.covered_fraction,
-                                            "uncovered_dofs": int(T.uncovered.size),
-                                            "conservation_error": T.conservation_error(u)}}}
-
-
-def _family(mesh, kind: str, grid: str | None = None) -> str:
-    """The Lagrange family of a point (degree 1) or cell (degree 0) field on `mesh`; on a grid
-    `grid` when given (the fluid's cells)."""
-    if isinstance(mesh, StructuredGrid):
-        return grid or ("Q1" if kind == "point" else "Q0")
-    return ("P" if mesh.is_simplex else "Q") + ("1" if kind == "point" else "0")
 
 
 #: operator name (as plans write it) -> class, built as ``cls(context, exchange)``

@@ -3,7 +3,8 @@ holds a slab of the fluid grid (:class:`GridSlab`: every rank knows the grid by 
 and shape) and the solid parts assigned to it (:class:`SolidPart`), and the operators are the
 distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the deformed solid
 (:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3), the
-solid fraction and the solid velocity on the grid (Step 6, before Step 1).
+solid fraction and the solid velocity on the grid (Step 6, before Step 1); and the projections
+between two participants' meshes (``l2``, ``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`).
 
 The interface vector of the fixed point (one pressure per interface vertex, numbered as the
 serial run numbers them: by increasing solid vertex id) is split by rows over the ranks
@@ -24,6 +25,7 @@ from transfer.distributed import Part, assemble
 from transfer.rows import Rows
 
 from .held import Held
+from .projection import ProjectionRanks
 from .interface import (SolidOnGrid, WettedInterface, area_normals, folded_surface, invalid_deformation,
                         sampling_points)
 
@@ -191,6 +193,9 @@ class RanksContext:
     def shared(self, key: str, build):
         return self.context.shared(key, lambda _: build(self))
 
+    def warn(self, texts) -> None:
+        self.context.warn(texts)
+
     def summary(self) -> dict:
         return self.context.summary()
 
@@ -289,4 +294,6 @@ class SolidVelocityRanks(SolidFractionRanks):
 
 #: the operators a coupler on several ranks has (the others refuse P > 1: coupler.run.ranks)
 OPERATORS_RANKS = {"pressure_trace": PressureTraceRanks, "solid_fraction": SolidFractionRanks,
-                   "solid_velocity": SolidVelocityRanks}
+                   "solid_velocity": SolidVelocityRanks,
+                   "l2": lambda ctx, exchange: ProjectionRanks(ctx, exchange, "l2"),
+                   "pseudo_l2": lambda ctx, exchange: ProjectionRanks(ctx, exchange, "pseudo_l2")}

@@ -8,14 +8,18 @@ own zenoh session, a peer, to which the participant ranks it talks to link direc
 (:meth:`RanksRun.processes`). Each coupler rank talks to the participant ranks assigned to it
 (round-robin, :func:`coupler.fsi.held.assigned`): it sends their requests and receives their
 parts directly, no other process routing them, and holds their rows
-(:class:`coupler.fsi.held.Held`). The operators are the distributed ones of
-:mod:`coupler.fsi.ranks`. Whatever fails on one rank is raised on every rank (:func:`agree`).
+(:class:`coupler.fsi.held.Held`). A participant served in the coupler's process (a ``mesh_file``)
+is served on every coupler rank, each its own part of it (:meth:`coupler.run.local.LocalClient.exchange`):
+to the run, a participant of P parts, coupler rank r holding part r. The operators are the
+distributed ones of :mod:`coupler.fsi.ranks`. Whatever fails on one rank is raised on every
+rank (:func:`agree`).
 
 Nothing is gathered: each rank gives the accelerator and the loop its own rows of the interface
 vector and their weights (``comm``: docs/scaling.md, step 4), writes the piece of each
 participant it works on (:meth:`RanksRun.pieces`: a ``.pvtu`` of per-rank ``.vtu`` files, step
-5), and the summary's figures are reduced over the ranks (rank 0 writes it). Operators, checks,
-monitors and pictures that need a whole field on one process refuse P > 1
+5), and the summary's figures are reduced over the ranks (rank 0 writes it); a ``[check]`` whose
+kind compares pieces (``RANKS``) gets each rank's pieces (:meth:`RanksRun.result`). Operators,
+checks, monitors and pictures that need a whole field on one process refuse P > 1
 (:meth:`RanksRun.admit`)."""
 
 from __future__ import annotations
@@ -24,9 +28,11 @@ import pickle
 import sys
 import traceback
 from contextlib import ExitStack, contextmanager
+from functools import partial
 
 import numpy as np
 
+from coupler import checks
 from coupler.errors import EXIT_CODES, CouplerError, SceneError, one_line, run_status
 from coupler.fsi.context import OperatorContext
 from coupler.fsi.held import Held, assigned
@@ -36,8 +42,13 @@ from coupler.protocol.participant import idle_barrier
 from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession, step_reports
 from coupler.run.launch import Launcher
-from coupler.run.runner import Run, write_series
+from coupler.run.local import LocalClient
+from coupler.run.runner import Run, served_in_process, write_series
 from transfer import StructuredGrid
+
+
+#: participants served in the coupler's process that a coupler on P ranks serves in P parts
+SERVED_IN_PARTS = ("mesh_file",)
 
 
 def agree(comm, fn, *args, **kwargs):
@@ -88,7 +99,7 @@ class RanksRun(Run):
         """SceneError (every rank) for what needs a whole field on one process."""
         P = comm.size
         ranks = f"with {P} coupler ranks ([coupling] ranks or mpirun -n {P})"
-        if scene.check:
+        if scene.check and not getattr(checks.KINDS[scene.check["kind"]], "RANKS", False):
             raise SceneError(f"{scene.path}: [check] kind: {scene.check['kind']!r} compares whole fields on one "
                              f"process: not {ranks}")
         if scene.output["pictures"]:
@@ -98,9 +109,13 @@ class RanksRun(Run):
             raise SceneError(f"{scene.path}: [physics] effects: the figures {', '.join(plan.monitors)} need whole "
                              f"fields on one process: not {ranks}")
         for p in plan.participants:
-            if p.in_process:
+            if p.in_process and p.kind not in SERVED_IN_PARTS:
                 raise SceneError(f"{scene.path}: [solvers.{p.name}]: {p.kind!r} is served whole in the coupler's "
                                  f"process: not {ranks}")
+        transfer = scene.effect_settings.get("transfer")
+        if transfer and transfer["kind"] != "point":
+            raise SceneError(f"{scene.path}: [transfer] field: {transfer['field']!r} is cell data: the projections "
+                             f"of P0/Q0 fields run on one process: not {ranks}")
         for e in plan.exchanges:
             if e.operator not in OPERATORS_RANKS:
                 raise SceneError(f"{scene.path}: [physics] effects: the exchange to {e.target} uses the operator "
@@ -120,6 +135,9 @@ class RanksRun(Run):
         keeps the launcher. With zenoh routers of the scene's own (``[messaging] connect``, or
         mode ``client``) rank 0 listens as before and every other rank is a client of the same
         routers."""
+        if all(p.in_process for p in plan.participants):  # no process to start, no session
+            yield None, None
+            return
         with ExitStack() as stack:
             m = scene.messaging
             direct = m["mode"] == "peer" and not m["connect"]
@@ -158,6 +176,10 @@ class RanksRun(Run):
         comm, timeout = self.comm, self.scene.messaging["timeout"]
         for p in self.plan.participants:
             check = None
+            if p.in_process:
+                self.clients[p.name] = LocalClient(p.name, served_in_process(p, self.run_id, comm))
+                self.log(f"serving {p.name}: {p.kind} in this process, part r of it on coupler rank r")
+                continue
             if self.root:
                 self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=p.arguments)
                 check = (lambda name=p.name: self.launcher.check(name))
@@ -167,7 +189,8 @@ class RanksRun(Run):
         announced, parts, meshes = {}, {}, {}
         for p in self.plan.participants:
             client = self.clients[p.name]
-            announced[p.name] = self._on_root(self._configure, client, p.config, timeout)
+            configure = partial(agree, comm) if p.in_process else self._on_root  # each rank its own part
+            announced[p.name] = configure(self._configure, client, p.config, timeout)
             client.parts = int(announced[p.name].get("parts", 1))
             client.mine = assigned(comm.rank, comm.size, client.parts)
             replies = agree(comm, self._exchange, client, "geometry", None, [None] * client.parts, timeout)
@@ -237,7 +260,8 @@ class RanksRun(Run):
                 raise part.fail(name, f"its geometry part has no {location!r}: the rows of its fields have no owners")
         ids = [g[location].astype(np.int64) for g in geometry]
         inputs = [g.get("input_ids", g[location]).astype(np.int64) for g in geometry]
-        return agree(self.comm, Held, self.comm, name, self.clients[name].mine, ids, inputs), geometry
+        return agree(self.comm, Held, self.comm, name, self.clients[name].mine, ids, inputs,
+                     header.get("cell_type", "tetra")), geometry
 
     # -- one coupling iteration -------------------------------------------------------
     def _advance(self, name: str, window, iteration: int, inputs: dict) -> None:
@@ -268,12 +292,25 @@ class RanksRun(Run):
         of the step moved from the rows held here to the piece's rows. Collective."""
         accepted = {(e.target_participant, e.target_field): op.deliver(value)
                     for (e, op), value in zip(self._accelerated(), self._split(x))}
-        for name, held in self.held.items():
-            mesh, ids = self.pieces[name]
-            inputs = {**self.inputs.get(name, {}), **{f: v for (n, f), v in accepted.items() if n == name}}
-            fields = {k: held.rows.move(held.out_ids, v, ids) for k, v in held.fields.items()}
-            fields.update({k: held.rows.move(held.in_ids, _rows(v), ids) for k, v in inputs.items()})
-            write_series(self.series[name], mesh, name, window, fields)
+        for name in self.held:
+            fields = self.piece_fields(name, {f: v for (n, f), v in accepted.items() if n == name})
+            write_series(self.series[name], self.pieces[name][0], name, window, fields)
+
+    def piece_fields(self, name: str, accepted: dict | None = None) -> dict[str, np.ndarray]:
+        """Participant `name`'s latest outputs and inputs (and `accepted`, inputs per part) at the
+        rows of this rank's piece (:meth:`piece`), each in its own dtype. Collective."""
+        held, (_, ids) = self.held[name], self.pieces[name]
+        inputs = {**self.inputs.get(name, {}), **(accepted or {})}
+        fields = {k: held.rows.move(held.out_ids, v, ids).astype(v.dtype) for k, v in held.fields.items()}
+        fields.update({k: held.rows.move(held.in_ids, _rows(v), ids) for k, v in inputs.items()})
+        return fields
+
+    def result(self) -> checks.Result:
+        """Each participant's piece of this rank (:meth:`piece`) with its final fields, the last
+        figures and `comm`: what a check kind that compares pieces (``RANKS``) sums over. Collective."""
+        return checks.Result(meshes={name: mesh for name, (mesh, _) in self.pieces.items()},
+                             fields={name: self.piece_fields(name) for name in self.held},
+                             figures=dict(self.figures), comm=self.comm)
 
     def execute(self, progress) -> dict:
         """The run; a failure on this rank that the other ranks do not share within
@@ -305,13 +342,27 @@ class RanksRun(Run):
     def finish(self) -> None:
         for client in self.clients.values():
             client.finished = True  # the participants' tokens go: no warning on this rank
-        self._on_root(super().finish)
+        served, started = self._served()
+        agree(self.comm, self._finish, served)
+        self._on_root(self._finish, started)
 
     def save(self, window) -> None:
-        self._on_root(super().save, window)
+        self._on_ranks("save_state", window)
 
     def restore(self, window) -> None:
-        self._on_root(super().restore, window)
+        self._on_ranks("restore_state", window)
+
+    def _on_ranks(self, verb: str, window) -> None:
+        """A checkpoint verb: every rank its own part of each participant served here, rank 0 the
+        started participants."""
+        served, started = self._served()
+        agree(self.comm, self._checkpoint, verb, window, served)
+        self._on_root(self._checkpoint, verb, window, started)
+
+    def _served(self) -> tuple[list, list]:
+        """(participants served on every coupler rank, participants started as processes)."""
+        return ([p for p in self.plan.participants if p.in_process],
+                [p for p in self.plan.participants if not p.in_process])
 
 
 class _Caller:

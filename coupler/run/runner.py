@@ -192,13 +192,14 @@ def processes(scene, plan: Plan, run_id: str, logs):
         yield session, stack.enter_context(Launcher(run_id, logs, session.endpoints))
 
 
-def served_in_process(p, run_id: str):
+def served_in_process(p, run_id: str, comm=None):
     """The participant object of the in-process participant `p` (a stand-in of
-    :mod:`coupler.standins`), bound to the run."""
+    :mod:`coupler.standins`), bound to the run (and to this rank of the coupler's ranks `comm`:
+    it serves that rank's part)."""
     from coupler.standins import STANDINS
 
     handler = STANDINS[p.kind]()
-    handler.bind(run_id, p.name)
+    handler.bind(run_id, p.name, comm)
     return handler
 
 
@@ -401,19 +402,24 @@ class Run:
 
     def finish(self) -> None:
         """Finish every participant (and wait for the processes to exit)."""
-        for p in self.plan.participants:
+        self._finish(self.plan.participants)
+
+    def _finish(self, participants) -> None:
+        for p in participants:
             self.clients[p.name].finish()
             if not p.in_process:
                 self.launcher.wait(p.name, timeout=30)
 
     # -- checkpoints of an implicit step (coupler.coupling.loop.Checkpoint) ------------
     def save(self, window) -> None:
-        for client in self.clients.values():
-            self.phases.remote("checkpoint", client, "save_state", window.index)
+        self._checkpoint("save_state", window, self.plan.participants)
 
     def restore(self, window) -> None:
-        for client in self.clients.values():
-            self.phases.remote("checkpoint", client, "restore_state", window.index)
+        self._checkpoint("restore_state", window, self.plan.participants)
+
+    def _checkpoint(self, verb: str, window, participants) -> None:
+        for p in participants:
+            self.phases.remote("checkpoint", self.clients[p.name], verb, window.index)
 
 
 def write_series(series: Series, mesh, name: str, window, fields: dict) -> None:

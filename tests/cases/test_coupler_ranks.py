@@ -1,8 +1,10 @@
 """The coupler on P MPI ranks (docs/scaling.md, step 3; coupler/run/ranks.py): small_fracture with
 the Chorin fluid gives the one-rank coupler's fields and summary to 1e-10 with the coupler on 2
 ranks, each coupler rank holding a slab of the grid and the solid parts of its solid ranks (never
-the whole solid); what still needs a whole field on one process refuses P > 1 with one line naming
-the scene file, the key and the reason."""
+the whole solid); the transfer effect (mesh files served in parts, the l2 and pseudo_l2
+projections distributed, the exact_transfer check from sums over the ranks' pieces) gives the
+one-rank run's fields, figures and check to 1e-10; what still needs a whole field on one process
+refuses P > 1 with one line naming the scene file, the key and the reason."""
 
 from __future__ import annotations
 
@@ -10,14 +12,19 @@ import json
 import shutil
 from types import SimpleNamespace
 
+import meshio
+import numpy as np
 import pytest
 
+from cli_helpers import CHECK, transfer_case
 from coupler import scene as scenes
+from coupler.cli import main
 from coupler.errors import SceneError
 from coupler.plan.plan import make_plan
 from coupler.run.execute import coupler_ranks
 from coupler.run.ranks import RanksRun
-from test_rank_independence import assert_same, run
+from test_rank_independence import TOLERANCE, assert_same, differences, run
+from transfer.generate import box_tetrahedra
 from vc_helpers import CASES, copy_case
 
 needs_mpi = pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not installed")
@@ -85,6 +92,91 @@ def test_the_openfoam_fluid_on_two_coupler_ranks(tmp_path):
     assert all(0 < h["fluid_rows"] < 21 * 11 * 11 for h in held)
 
 
+# -- the transfer effect: mesh files served in parts, the projections distributed ----------
+PICTURES_OFF = "[output]\npictures = false\n"
+
+
+def on_ranks(case, ranks: int):
+    """The transfer scene `case` (a copy) run on `ranks` coupler ranks (``[coupling] ranks``) into
+    case/out: the output directory."""
+    with open(case / "scene.toml", "a") as f:
+        f.write(f"\n[coupling]\nranks = {ranks}\n")
+    out = case / "out"
+    assert main(["run", str(case), "--output", str(out)]) == 0
+    return out
+
+
+def summary(out) -> dict:
+    return json.loads((out / "summary.json").read_text())
+
+
+@needs_mpi
+def test_transfer_demo_on_two_coupler_ranks(tmp_path):
+    """transfer_demo's mesh files served in two parts (coupler rank r serves part r of each file) and
+    its l2 and pseudo_l2 projections distributed: every VTU field (joined from the pieces), every
+    summary figure and the check's report equal the one-rank run's to 1e-10; the conservation
+    errors (relative differences of two integrals, at rounding level) are below 1e-14 on both."""
+    serial, ranks = (on_ranks(copy_case(CASES / "transfer_demo", tmp_path / f"p{p}",
+                                        {'directory = "results"': 'directory = "results"\npictures = false'}), p)
+                     for p in (1, 2))
+    found = differences(serial, ranks)
+    conservation = [k for k in found if k.endswith("/conservation_error")]
+    assert len(conservation) == 2
+    worst = max((k for k in found if k not in conservation), key=found.get)
+    assert found[worst] < TOLERANCE, f"{worst} differs by {found[worst]:.2e}"
+    assert "summary /check/methods/pseudo_l2/relative_interpolant_distance" in found
+    assert "target_l2_0000.vtu point:pressure" in found and "target_pseudo_l2_0000.vtu point:covered" in found
+    for s in map(summary, (serial, ranks)):
+        assert s["check"]["passed"] and s["iterations"] == [1]
+        for p in s["steps"][0]["projections"].values():
+            assert p["conservation_error"] < 1e-14 and p["covered_fraction"] == 1 and p["uncovered_dofs"] == 0
+    assert sorted(f.name for f in ranks.glob("target_l2_0000*")) == [
+        "target_l2_0000.pvtu", "target_l2_0000_p0.vtu", "target_l2_0000_p1.vtu"]
+
+
+@needs_mpi
+def test_projections_on_two_ranks_reproduce_a_linear_field_and_conserve(tmp_path):
+    """A linear field from jittered tetrahedra to hexahedra (a field both spaces contain) on 2
+    coupler ranks: both projections give it at every target vertex (each piece) and conserve its
+    integral; the check, from sums over the ranks' pieces, finds no error."""
+    out = on_ranks(transfer_case(tmp_path, check=CHECK.format(exact="1 + x - 2*y + 3*z", tolerance=1e-12)
+                                 + PICTURES_OFF), 2)
+    s = summary(out)
+    for m in s["check"]["methods"].values():
+        assert m["relative_l2_error"] < 1e-13 and m["max_error"] < 1e-12
+    for p in s["steps"][0]["projections"].values():
+        assert p["conservation_error"] < 1e-13 and p["covered_fraction"] == 1
+    for method in ("l2", "pseudo_l2"):
+        pieces = sorted(out.glob(f"target_{method}_0000_p*.vtu"))
+        assert len(pieces) == 2
+        for piece in map(meshio.read, pieces):
+            assert piece.cells[0].type == "hexahedron"
+            np.testing.assert_allclose(piece.point_data["T"], 1 + piece.points @ [1.0, -2.0, 3.0], atol=1e-12)
+
+
+@needs_mpi
+def test_a_partly_covered_target_on_two_ranks(tmp_path):
+    """A target twice as long as the source on 2 coupler ranks: the covered fraction and the
+    uncovered dofs are the whole target's (not a rank's), as on one rank; each piece is NaN and not
+    covered exactly where the source does not reach."""
+    target = box_tetrahedra((4, 2, 2), upper=(2, 1, 1))
+    runs = []
+    for p in (1, 2):
+        (tmp_path / f"p{p}").mkdir()
+        check = CHECK.format(exact="1 + x - 2*y + 3*z", tolerance=1e-12) + PICTURES_OFF
+        runs.append(summary(on_ranks(transfer_case(tmp_path / f"p{p}", check=check, target=target), p)))
+    serial, ranks = (r["steps"][0]["projections"] for r in runs)
+    for name, p in serial.items():
+        assert 0 < p["uncovered_dofs"] == ranks[name]["uncovered_dofs"]
+        assert 0 < p["covered_fraction"] == ranks[name]["covered_fraction"] < 1
+        assert p["conservation_error"] < 1e-13 and ranks[name]["conservation_error"] < 1e-13
+    assert runs[1]["check"]["passed"]
+    for piece in map(meshio.read, sorted((tmp_path / "p2" / "out").glob("target_l2_0000_p*.vtu"))):
+        covered = piece.point_data["covered"] == 1
+        np.testing.assert_array_equal(covered, piece.points[:, 0] <= 1 + 1e-12)
+        assert np.isnan(piece.point_data["T"][~covered]).all() and np.isfinite(piece.point_data["T"][covered]).all()
+
+
 # -- refusals: what needs a whole field on one process ------------------------------------
 def refusal(tmp_path, case: str, replace: dict | None = None, append: str = "") -> str:
     scene_dir = copy_case(CASES / case, tmp_path / case, replace)
@@ -109,11 +201,19 @@ def test_a_check_is_refused(tmp_path):
                                                                          append="\n[output]\npictures = false\n")
 
 
-def test_in_process_participants_are_refused(tmp_path):
-    scene = (CASES / "transfer_demo" / "scene.toml").read_text()
-    text = refusal(tmp_path, "transfer_demo", {scene[scene.index("[check]"):scene.index("[output]")]: ""},
-                   append="pictures = false\n")
-    assert "[solvers.source]: 'mesh_file' is served whole in the coupler's process" in text
+def test_a_rigid_solid_is_refused(tmp_path):
+    scene = (CASES / "parallel_plates" / "scene.toml").read_text()
+    text = refusal(tmp_path, "parallel_plates", {scene[scene.index("[check]"):]: ""},
+                   append="\n[output]\npictures = false\n")
+    assert "[solvers.solid]: 'rigid_solid' is served whole in the coupler's process" in text
+
+
+def test_a_cell_field_transfer_is_refused(tmp_path):
+    scene = scenes.load(transfer_case(tmp_path, field="k"))
+    with pytest.raises(SceneError) as err:
+        RanksRun.admit(scene, make_plan(scene), SimpleNamespace(size=2))
+    assert str(err.value) == (f"{scene.path}: [transfer] field: 'k' is cell data: the projections of P0/Q0 fields "
+                              f"run on one process: not with 2 coupler ranks ([coupling] ranks or mpirun -n 2)")
 
 
 def test_an_operator_without_ranks_is_refused(tmp_path):

@@ -10,38 +10,13 @@ import meshio
 import numpy as np
 import pytest
 
-from cli_helpers import assert_clean_error, run_cli, write_mesh
+from cli_helpers import CHECK, TRANSFER_SCENE, assert_clean_error, run_cli, transfer_case as case, write_mesh
 from coupler.errors import SceneError
 from coupler.plan.plan import make_plan
 from coupler.run import runner
 from coupler.scene import load
-from transfer.generate import box_hexahedra, box_tetrahedra
+from transfer.generate import box_tetrahedra
 from vc_helpers import CASES
-
-SCENE = """[physics]
-effects = ["transfer"]
-[transfer]
-source = "src.vtu"
-target = "dst.vtu"
-field = "{field}"
-methods = ["l2", "pseudo_l2"]
-"""
-CHECK = """[check]
-kind = "exact_transfer"
-exact = "{exact}"
-tolerance = {tolerance}
-"""
-
-
-def case(tmp_path, field="T", check="", target=None):
-    """src.vtu: a jittered tet box with T = 1 + x - 2 y + 3 z (points) and k = 7 (cells); dst.vtu: a
-    hexahedral box (`target`: another mesh)."""
-    src = box_tetrahedra((3, 3, 3), jitter=0.2, seed=4)
-    write_mesh(tmp_path / "src.vtu", src, {"T": 1 + src.points @ [1.0, -2.0, 3.0]}, {"k": np.full(src.num_cells, 7.0)})
-    write_mesh(tmp_path / "dst.vtu", target if target is not None else box_hexahedra((4, 4, 4)))
-    (tmp_path / "scene.toml").write_text(SCENE.format(field=field) + check)
-    return tmp_path
-
 
 def test_the_plan_serves_the_files_in_process():
     plan = make_plan(load(CASES / "transfer_demo"))
@@ -116,7 +91,7 @@ def test_exact_transfer_needs_a_transfer_and_a_scalar_field(tmp_path):
     src = box_tetrahedra((2, 2, 2))
     write_mesh(tmp_path / "src.vtu", src, {"u": src.points})
     write_mesh(tmp_path / "dst.vtu", box_tetrahedra((3, 3, 3)))
-    (tmp_path / "scene.toml").write_text(SCENE.format(field="u") + CHECK.format(exact="x", tolerance=0.1))
+    (tmp_path / "scene.toml").write_text(TRANSFER_SCENE.format(field="u") + CHECK.format(exact="x", tolerance=0.1))
     with pytest.raises(SceneError, match=r"\[check\] exact: is a scalar expression but field 'u' has shape \(3,\)"):
         load(tmp_path)
     text = (CASES / "block_compression" / "scene.toml").read_text().split("[check]")[0]
