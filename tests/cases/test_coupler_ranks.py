@@ -132,6 +132,7 @@ def test_transfer_demo_on_two_coupler_ranks(tmp_path):
             assert p["conservation_error"] < 1e-14 and p["covered_fraction"] == 1 and p["uncovered_dofs"] == 0
     assert sorted(f.name for f in ranks.glob("target_l2_0000*")) == [
         "target_l2_0000.pvtu", "target_l2_0000_p0.vtu", "target_l2_0000_p1.vtu"]
+    assert meshio.read(ranks / "target_l2_0000_p1.vtu").point_data["covered"].dtype == np.uint8  # as serially
 
 
 @needs_mpi
