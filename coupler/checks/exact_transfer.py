@@ -1,7 +1,7 @@
 """``[check] kind = "exact_transfer"``: the fields a ``transfer`` scene carried (one target per
 method) against the source field's known expression f (paper 2.1): per method the true L2
 error ``||u_h - f|| / ||f||`` by quadrature over the target cells whose dofs are all covered
-(:meth:`transfer.FunctionSpace.l2_error`), the distance to the interpolant of f,
+(:meth:`transfer.FunctionSpace.l2_squares`), the distance to the interpolant of f,
 ``||u_h - I_h f||_M / ||I_h f||_M`` with the mass matrix M over the covered dofs (zero when the
 transfer returns the interpolant, whose own L2 error is not zero), and the largest error at the
 covered dofs. The check passes when every method's L2 error is within the tolerance.
