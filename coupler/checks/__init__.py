@@ -13,9 +13,11 @@ Each kind is one module of this package (``[check] kind = "NAME"``, default
   figure compared with the tolerance), ``tolerance`` and ``passed``, plus its own figures;
   ``result`` is a :class:`Result`;
 - ``describe(report) -> str``: the comparison as one line for the log;
-- optionally ``RANKS = True``: ``evaluate`` also compares the pieces of a coupler on P ranks
-  (``result.comm``: each rank's meshes and fields, sums and extrema reduced over the ranks); a
-  kind without it refuses P > 1 (:meth:`coupler.run.ranks.RanksRun.admit`).
+- ``DISTRIBUTED = True`` when ``evaluate`` makes every figure of local sums, maxima and minima
+  combined by ``Result.sums`` (:class:`coupler.coupling.row_sums.RowSums`) over the rows a rank
+  counts (``Result.rows``) or the cells of its pieces (``Result.meshes``, ``Result.fields``):
+  such a kind also runs on a coupler of several ranks (docs/scaling.md, step 3); the others
+  compare whole meshes on one process and are refused there.
 
 summary.json's ``check`` is ``{"kind": KIND, **evaluate(...)}``; a run whose check did not
 pass exits 1.
@@ -27,6 +29,7 @@ import importlib
 import pkgutil
 from dataclasses import dataclass, field
 
+from coupler.coupling.row_sums import RowSums
 from coupler.errors import SceneError
 from coupler.scene.tables import Table
 
@@ -46,13 +49,28 @@ KINDS = _discover()
 class Result:
     """What a check compares: per participant its mesh (or grid), its final fields (outputs and
     the inputs it got, at the vertices of a mesh or the cells of a grid) and its figures of the
-    last step. With ``comm`` (a coupler on P ranks) the meshes and fields are this rank's pieces
-    (each cell in one piece, a vertex on a cut in several); None: the whole."""
+    last step.
+
+    On a coupler of several ranks (`comm`) ``meshes`` and ``fields`` are this rank's pieces (each
+    cell in one piece, a vertex on a cut in several: sums over cells add up) and ``held`` the rows
+    each rank counts once (a participant's vertices or cells held here, disjoint over the ranks:
+    their coordinates and fields), which :meth:`rows` gives; on one process (`comm` None) both
+    are the whole mesh."""
 
     meshes: dict
     fields: dict
     figures: dict = field(default_factory=dict)
     comm: object = None
+    held: dict = field(default_factory=dict)
+
+    def rows(self, name: str) -> tuple:
+        """(points, fields) of the rows of participant `name` that this rank counts (module doc)."""
+        return self.held[name] if name in self.held else (self.meshes[name].points, self.fields[name])
+
+    @property
+    def sums(self) -> RowSums:
+        """Sums, maxima and minima over the ranks' rows (this process's own on one process)."""
+        return RowSums(self.comm)
 
 
 def parse(path, data, scene) -> dict:

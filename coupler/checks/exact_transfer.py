@@ -6,7 +6,7 @@ error ``||u_h - f|| / ||f||`` by quadrature over the target cells whose dofs are
 transfer returns the interpolant, whose own L2 error is not zero), and the largest error at the
 covered dofs. The check passes when every method's L2 error is within the tolerance.
 
-On a coupler of P ranks (``RANKS``) each rank has its pieces of the meshes: the squared norms are
+On a coupler of P ranks (``DISTRIBUTED``) each rank has its pieces of the meshes: the squared norms are
 sums over its own cells (the mass matrix of its cells), the largest errors its own; one allreduce
 of each makes the whole's, then the roots and ratios (:class:`coupler.coupling.row_sums.RowSums`:
 on one process the plain sums).
@@ -25,7 +25,7 @@ from transfer import FunctionSpace
 from transfer.meshfile import family
 
 KIND = "exact_transfer"
-RANKS = True
+DISTRIBUTED = True
 DESCRIPTION = "a transferred field against its known expression: L2 error and distance to the interpolant"
 KEYS = {"exact": "the source field as an expression in x, y, z (numpy; scalar fields)",
         "tolerance": "largest accepted relative L2 error of a method"}

@@ -6,15 +6,18 @@ face (``contact_pressure``, ``mortar_weight``, ``slave``, ``in_contact``): F = s
 dual basis of eq. 9 makes the weights the face's lumped areas), and a, p0 from the elliptic
 fit p^2 = p0^2 (1 - r^2/a^2) of the nodal pressures above :data:`FIT_ABOVE` of the largest,
 r the distance from the contact's axis (through the pressure's centroid, normal to the
-contact patch). E and nu come from the scene; R from ``[check] radius``."""
+contact patch). Every figure is a sum or a maximum over the slave vertices, so a coupler on
+several ranks evaluates it from each rank's own vertices. E and nu come from the scene; R from ``[check] radius``."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from coupler.coupling.row_sums import RowSums
 from coupler.errors import CouplerError
 
 KIND = "hertz"
+DISTRIBUTED = True
 DESCRIPTION = "a sphere pressed onto a block: contact radius and peak pressure against Hertz theory"
 KEYS = {"radius": "the sphere's radius R [m]",
         "tolerance": "largest relative error accepted, of the contact radius a and of the peak pressure p0"}
@@ -36,37 +39,49 @@ def theory(force: float, radius: float, E: float, nu: float) -> tuple[float, flo
     return a, 3.0 * force / (2.0 * np.pi * a * a)
 
 
-def fit(points: np.ndarray, pressure: np.ndarray, weight: np.ndarray, where: str) -> dict:
-    """The contact force and the elliptic fit of the pressure at the slave face's vertices."""
-    force = float(np.sum(pressure * weight))
+def fit(points: np.ndarray, pressure: np.ndarray, weight: np.ndarray, where: str, sums=None) -> dict:
+    """The contact force and the elliptic fit of the pressure at the slave face's vertices held
+    here, every figure made of sums and maxima over them that `sums` (a
+    :class:`coupler.coupling.row_sums.RowSums`; None: these vertices are all) combines over the
+    ranks: the force and centroid, the patch's normal as the weighted covariance's flattest
+    direction, and the least squares line p^2 = p0^2 + slope r^2 from its centred normal
+    equations."""
+    sums = sums or RowSums()
     touching = pressure > 0
-    if force <= 0 or touching.sum() < 3:
-        raise CouplerError(f"{where}: {int(touching.sum())} slave vertices carry pressure (force {force:.3g} N): "
+    force, touching_count = sums.sum(np.array([np.sum(pressure * weight), np.count_nonzero(touching)]))
+    if force <= 0 or touching_count < 3:
+        raise CouplerError(f"{where}: {int(touching_count)} slave vertices carry pressure (force {force:.3g} N): "
                            f"no contact area to compare with Hertz")
-    centre = np.sum((pressure * weight)[:, None] * points, axis=0) / force
+    centre = sums.sum(np.sum((pressure * weight)[:, None] * points, axis=0)) / force
     x = points[touching] - centre
-    _, _, axes = np.linalg.svd(x * np.sqrt(weight[touching])[:, None], full_matrices=False)
-    normal = axes[-1]  # the flattest direction of the contact patch
+    covariance = sums.sum((weight[touching][:, None] * x).T @ x)
+    normal = np.linalg.eigh(covariance)[1][:, 0]  # the flattest direction of the contact patch
     r2 = np.sum(x**2, axis=1) - (x @ normal) ** 2
-    above = pressure[touching] > FIT_ABOVE * pressure.max()
-    slope, intercept = np.polyfit(r2[above], pressure[touching][above] ** 2, 1)
+    p_max = sums.extremum(float(np.max(pressure, initial=0.0)), "max")
+    above = pressure[touching] > FIT_ABOVE * p_max
+    r2, p2 = r2[above], pressure[touching][above] ** 2
+    count, r2_sum, p2_sum = sums.sum(np.array([len(r2), np.sum(r2), np.sum(p2)]))
+    r2_mean, p2_mean = r2_sum / count, p2_sum / count
+    Srr, Srp = sums.sum(np.array([np.sum((r2 - r2_mean) ** 2), np.sum((r2 - r2_mean) * (p2 - p2_mean))]))
+    slope = Srp / Srr if Srr > 0 else np.nan
+    intercept = p2_mean - slope * r2_mean
     if not (slope < 0 < intercept):
         raise CouplerError(f"{where}: the contact pressure does not fall off from the centre (fit p^2 = "
                            f"{intercept:.3g} + {slope:.3g} r^2): no Hertz contact to compare")
-    return {"force": force, "a": float(np.sqrt(-intercept / slope)), "p0": float(np.sqrt(intercept)),
-            "p_max": float(pressure.max()), "centre": centre.tolist(), "normal": normal.tolist(),
-            "fitted_vertices": int(above.sum())}
+    return {"force": float(force), "a": float(np.sqrt(-intercept / slope)), "p0": float(np.sqrt(intercept)),
+            "p_max": float(p_max), "centre": centre.tolist(), "normal": normal.tolist(),
+            "fitted_vertices": int(count)}
 
 
 def evaluate(settings, scene, result) -> dict:
-    fields = result.fields["solid"]
+    points, fields = result.rows("solid")
     slave = fields["slave"] > 0.5
-    points = result.meshes["solid"].points[slave]
+    points = points[slave]
     measured = fit(points, fields["contact_pressure"][slave], fields["mortar_weight"][slave],
-                   f"{scene.path}: [check] kind 'hertz'")
+                   f"{scene.path}: [check] kind 'hertz'", result.sums)
     a, p0 = theory(measured["force"], settings["radius"], scene.material["E"], scene.material["nu"])
     in_contact = fields["in_contact"][slave] > 0.5
-    a_area = float(np.sqrt(fields["mortar_weight"][slave][in_contact].sum() / np.pi))
+    a_area = float(np.sqrt(result.sums.sum(float(fields["mortar_weight"][slave][in_contact].sum())) / np.pi))
     error_a, error_p0 = abs(measured["a"] / a - 1), abs(measured["p0"] / p0 - 1)
     return {"error": max(error_a, error_p0), "tolerance": settings["tolerance"],
             "passed": bool(max(error_a, error_p0) <= settings["tolerance"]), "radius": settings["radius"],

@@ -12,6 +12,7 @@ from coupler.checks.expression import compare
 
 KIND = "sneddon"
 DESCRIPTION = "a penny crack under pressure: the opening against Sneddon's solution"
+DISTRIBUTED = True
 KEYS = {"radius": "the crack's radius a [m]", "centre": "the crack's centre (default [0, 0, 0]); the crack "
                                                         "lies in the plane z = centre's z",
         "compared": "the vertices of the crack plane within this fraction of a are compared (default 0.8)",
@@ -32,7 +33,7 @@ def parse(table, scene) -> dict:
 
 def evaluate(settings, scene, result) -> dict:
     E, nu, p, a = scene.material["E"], scene.material["nu"], settings["pressure"], settings["radius"]
-    points = result.meshes["solid"].points
+    points, fields = result.rows("solid")
     d = points - np.asarray(settings["centre"])
     r2 = d[:, 0] ** 2 + d[:, 1] ** 2
     selected = (np.abs(d[:, 2]) < 1e-8 * a) & (r2 <= (settings["compared"] * a) ** 2)
@@ -42,9 +43,9 @@ def evaluate(settings, scene, result) -> dict:
         s = (x[:, 0] - settings["centre"][0]) ** 2 + (x[:, 1] - settings["centre"][1]) ** 2
         return 0.5 * opening * np.sqrt(np.clip(1 - s / a**2, 0, 1))
 
-    report = compare(points, result.fields["solid"]["displacement"], {2: half_opening}, selected,
+    report = compare(points, fields["displacement"], {2: half_opening}, selected,
                      settings["tolerance"], f"{scene.path}: [check] radius {a:g}, centre {settings['centre']}: "
-                                            f"the crack plane within {settings['compared']:g} a")
+                                            f"the crack plane within {settings['compared']:g} a", result.sums)
     return {**report, "opening_centre": opening}
 
 

@@ -12,6 +12,7 @@ from transfer.grid import BOX_FACES
 
 KIND = "uniaxial"
 DESCRIPTION = "a box on rollers under a pressure on one face: the uniaxial-stress displacement"
+DISTRIBUTED = True
 KEYS = {"tolerance": "largest relative error accepted (of the displacement, over all vertices)"}
 
 
@@ -55,9 +56,9 @@ def evaluate(settings, scene, result) -> dict:
     strain[settings["axis"]] = -p
     exact = {axis: (lambda x, axis=axis: strain[axis] * (x[:, axis] - settings["planes"][axis]) / E)
              for axis in range(3)}
-    points = result.meshes["solid"].points
-    report = compare(points, result.fields["solid"]["displacement"], exact, np.ones(len(points), bool),
-                     settings["tolerance"], f"{scene.path}: [check]")
+    points, fields = result.rows("solid")
+    report = compare(points, fields["displacement"], exact, np.ones(len(points), bool),
+                     settings["tolerance"], f"{scene.path}: [check]", result.sums)
     return {**report, "stress": -p, "axis": "xyz"[settings["axis"]]}
 
 

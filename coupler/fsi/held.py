@@ -26,7 +26,8 @@ def assigned(rank: int, coupler_ranks: int, parts: int) -> list[int]:
 class Held:
     """Coupler rank's share of participant `name`: its parts' row ids (``ids``, concatenated in
     part order: ``out_ids``), their input rows (``in_ids``) and the latest output fields at
-    ``out_ids`` (:attr:`fields`). ``count``: the rows of the whole participant; ``cell_type``: that
+    ``out_ids`` (:attr:`fields`), and for a mesh the coordinates of those rows (:attr:`points`,
+    once :meth:`mesh` made it). ``count``: the rows of the whole participant; ``cell_type``: that
     of the cells of its geometry (:meth:`mesh`)."""
 
     def __init__(self, comm, name: str, ranks: list[int], ids: list[np.ndarray], inputs: list[np.ndarray],
@@ -43,6 +44,7 @@ class Held:
         if comm.allreduce(int(np.count_nonzero(once != 1))):
             raise CouplerError(f"participant {name!r}: its parts do not number each of its {self.count} rows once")
         self.fields: dict[str, np.ndarray] = {}
+        self.points: np.ndarray | None = None
         self._mesh = None
 
     def fetch(self, field: str, wanted: np.ndarray) -> np.ndarray:
@@ -75,8 +77,8 @@ class Held:
         cells = [np.asarray(g["cells"], np.int64).reshape(-1, k) for g in geometry]
         cells = np.concatenate(cells) if cells else np.zeros((0, k), np.int64)
         vertices, local = np.unique(cells, return_inverse=True)
-        reference = self.rows.move(self.out_ids, np.concatenate(points) if points else np.zeros((0, 3)),
-                                   vertices).reshape(-1, 3)
+        self.points = np.concatenate(points) if points else np.zeros((0, 3))
+        reference = self.rows.move(self.out_ids, self.points, vertices).reshape(-1, 3)
         name = f"{self.name} part"
         return vertices, (Mesh(reference, local.reshape(-1, k), self.cell_type, name=name, reorient=True)
                           if len(cells) else Mesh.empty(self.cell_type, name))

@@ -17,8 +17,8 @@ rank (:func:`agree`).
 Nothing is gathered: each rank gives the accelerator and the loop its own rows of the interface
 vector and their weights (``comm``: docs/scaling.md, step 4), writes the piece of each
 participant it works on (:meth:`RanksRun.pieces`: a ``.pvtu`` of per-rank ``.vtu`` files, step
-5), and the summary's figures are reduced over the ranks (rank 0 writes it); a ``[check]`` whose
-kind compares pieces (``RANKS``) gets each rank's pieces (:meth:`RanksRun.result`). Operators,
+5), and the summary's figures are reduced over the ranks (rank 0 writes it); a ``[check]`` of a
+distributed kind (``DISTRIBUTED``) gets each rank's pieces and rows (:meth:`RanksRun.result`). Operators,
 checks, monitors and pictures that need a whole field on one process refuse P > 1
 (:meth:`RanksRun.admit`)."""
 
@@ -99,12 +99,10 @@ class RanksRun(Run):
         """SceneError (every rank) for what needs a whole field on one process."""
         P = comm.size
         ranks = f"with {P} coupler ranks ([coupling] ranks or mpirun -n {P})"
-        if scene.check and not getattr(checks.KINDS[scene.check["kind"]], "RANKS", False):
+        if scene.check and not getattr(checks.KINDS[scene.check["kind"]], "DISTRIBUTED", False):
+            kinds = ", ".join(k for k, m in checks.KINDS.items() if getattr(m, "DISTRIBUTED", False))
             raise SceneError(f"{scene.path}: [check] kind: {scene.check['kind']!r} compares whole fields on one "
-                             f"process: not {ranks}")
-        if scene.output["pictures"]:
-            raise SceneError(f"{scene.path}: [output] pictures: the pictures are rendered from whole fields on "
-                             f"one process: set it false {ranks}")
+                             f"process: not {ranks}; on several ranks: {kinds}")
         if plan.monitors:
             raise SceneError(f"{scene.path}: [physics] effects: the figures {', '.join(plan.monitors)} need whole "
                              f"fields on one process: not {ranks}")
@@ -306,11 +304,17 @@ class RanksRun(Run):
         return fields
 
     def result(self) -> checks.Result:
-        """Each participant's piece of this rank (:meth:`piece`) with its final fields, the last
-        figures and `comm`: what a check kind that compares pieces (``RANKS``) sums over. Collective."""
+        """Each participant's piece of this rank (:meth:`piece`) with its final fields, the rows
+        held here (their coordinates, outputs and inputs moved to them), the last figures and
+        `comm`: what a distributed check kind sums over (:class:`coupler.checks.Result`). Collective."""
+        held = {}
+        for name, h in self.held.items():
+            if h.points is not None:
+                inputs = {k: h.rows.move(h.in_ids, _rows(v), h.out_ids) for k, v in self.inputs.get(name, {}).items()}
+                held[name] = (h.points, {**inputs, **h.fields})
         return checks.Result(meshes={name: mesh for name, (mesh, _) in self.pieces.items()},
                              fields={name: self.piece_fields(name) for name in self.held},
-                             figures=dict(self.figures), comm=self.comm)
+                             figures=dict(self.figures), comm=self.comm, held=held)
 
     def execute(self, progress) -> dict:
         """The run; a failure on this rank that the other ranks do not share within

@@ -178,6 +178,43 @@ def test_a_partly_covered_target_on_two_ranks(tmp_path):
         assert np.isnan(piece.point_data["T"][~covered]).all() and np.isfinite(piece.point_data["T"][covered]).all()
 
 
+def solid_case(tmp_path, case: str, coupler: int, replace: dict) -> object:
+    """`case` (a solid alone, its [check] evaluated) with the text replacements `replace`, the
+    coupler on `coupler` ranks; its output directory."""
+    scene_dir = copy_case(CASES / case, tmp_path / f"{case}{coupler}", replace)
+    if coupler > 1:
+        with open(scene_dir / "scene.toml", "a") as f:
+            f.write(f"\n[coupling]\nranks = {coupler}\n")
+    out = tmp_path / f"{case}{coupler}" / "out"
+    assert main(["run", str(scene_dir), "--output", str(out)]) == 0, (case, coupler)
+    return out
+
+
+@needs_mpi
+def test_uniaxial_check_on_two_coupler_ranks(tmp_path):
+    """block_compression (solid on 2 ranks, LU): its uniaxial check on 2 coupler ranks, each with
+    one solid rank's vertices, reports the one-rank coupler's error, vertices and figures, like its
+    fields, to 1e-10."""
+    serial, ranks = (solid_case(tmp_path, "block_compression", p,
+                                {'linear_solver = "lu"': 'linear_solver = "lu"\nranks = 2'}) for p in (1, 2))
+    assert_same(serial, ranks, "block_compression, coupler on 2 ranks")
+    reports = [json.loads((d / "summary.json").read_text())["check"] for d in (serial, ranks)]
+    assert reports[1]["kind"] == "uniaxial" and reports[1]["vertices"] == reports[0]["vertices"] == 125
+    assert reports[1]["passed"] and reports[1]["error"] == pytest.approx(reports[0]["error"], rel=1e-10, abs=0)
+
+
+@pytest.mark.slow
+@needs_mpi
+def test_sneddon_check_on_two_coupler_ranks(tmp_path):
+    """pressurized_fracture (solid on one rank: its CG on 2 ranks stops where its partition lets
+    it, 6e-9 apart from run to run): its Sneddon check on 2 coupler ranks, rank 1 holding no
+    vertex, reports the one-rank coupler's figures to 1e-10."""
+    serial, ranks = (solid_case(tmp_path, "pressurized_fracture", p, {}) for p in (1, 2))
+    assert_same(serial, ranks, "pressurized_fracture, coupler on 2 ranks")
+    reports = [json.loads((d / "summary.json").read_text())["check"] for d in (serial, ranks)]
+    assert reports[1]["kind"] == "sneddon" and reports[1]["vertices"] == reports[0]["vertices"] == 25
+
+
 # -- refusals: what needs a whole field on one process ------------------------------------
 def refusal(tmp_path, case: str, replace: dict | None = None, append: str = "") -> str:
     scene_dir = copy_case(CASES / case, tmp_path / case, replace)
@@ -192,14 +229,24 @@ def refusal(tmp_path, case: str, replace: dict | None = None, append: str = "") 
     return text
 
 
-def test_pictures_are_refused(tmp_path):
-    assert "[output] pictures: the pictures are rendered from whole fields" in refusal(tmp_path, "small_fracture",
-                                                                                append="\n[output]\npictures = true\n")
+def test_pictures_and_distributed_checks_are_admitted(tmp_path):
+    """Pictures are drawn from the written files after the run; hertz, sneddon, uniaxial and
+    expression evaluate from each rank's rows."""
+    pictures = {"block_compression": {'directory = "results"': 'directory = "results"\npictures = true'}}
+    for case in ("small_fracture", "pressurized_fracture", "hertz", "block_compression"):
+        scene_dir = copy_case(CASES / case, tmp_path / case, pictures.get(case))
+        if case not in pictures:
+            with open(scene_dir / "scene.toml", "a") as f:
+                f.write("\n[output]\npictures = true\n")
+        scene = scenes.load(scene_dir)
+        assert scene.output["pictures"] and (scene.check or case == "small_fracture")
+        RanksRun.admit(scene, make_plan(scene), SimpleNamespace(size=2))
 
 
 def test_a_check_is_refused(tmp_path):
-    assert "[check] kind: 'cubic_law' compares whole fields" in refusal(tmp_path, "parallel_plates",
-                                                                         append="\n[output]\npictures = false\n")
+    text = refusal(tmp_path, "parallel_plates", append="\n[output]\npictures = false\n")
+    assert "[check] kind: 'cubic_law' compares whole fields on one process" in text
+    assert text.endswith("; on several ranks: expression, hertz, sneddon, uniaxial")
 
 
 def test_a_rigid_solid_is_refused(tmp_path):
