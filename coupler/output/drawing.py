@@ -1,12 +1,12 @@
-"""Drawing helpers the pictures of a run share (pyvista offscreen): the series' VTU files,
-a white plotter, colour bars naming quantity and unit, a camera framing a box along a
+"""Drawing helpers the pictures of a run share (pyvista offscreen): the series' VTU files
+(read as one mesh, the pieces of a coupler on several ranks joined), a white plotter, colour bars naming quantity and unit, a camera framing a box along a
 normal, the faces of a solid that carry a field, and the plane a face fits."""
 
 from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +18,13 @@ WINDOW = (1200, 800)
 
 @dataclass
 class Picture:
-    """A rendered picture: its file (in the output directory) and what it shows."""
+    """A rendered picture: its file (in the output directory), what it shows and the figures its
+    caption prints, unrounded (summary.json ``picture_figures``)."""
 
     file: str
     title: str
     caption: str
+    figures: dict = field(default_factory=dict)
 
 
 def step_files(out: Path, series: str) -> list[Path]:
@@ -35,6 +37,17 @@ def last_step(out: Path, series: str) -> Path | None:
     """The last VTU file of ``<series>.pvd`` in `out` (None when the series was not written)."""
     files = step_files(out, series)
     return files[-1] if files else None
+
+
+def read(path: Path):
+    """A step's file as one mesh: a ``.vtu`` as it is; the pieces a ``.pvtu`` names (a coupler on
+    several ranks, docs/scaling.md step 5) joined, the points a cut puts in several pieces merged
+    into one (their coordinates and values are the same row's), so that slices, surfaces, outlines,
+    point averages and streamlines see one connected mesh."""
+    import pyvista as pv
+
+    mesh = pv.read(path)
+    return mesh.clean(tolerance=0.0, average_point_data=False) if Path(path).suffix == ".pvtu" else mesh
 
 
 def plotter():

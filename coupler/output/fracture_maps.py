@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .drawing import Picture, colour_bar, plane_normal, step_files, surface_where, view
+from .drawing import Picture, colour_bar, plane_normal, read, step_files, surface_where, view
 
 MICRO = 1e6
 
@@ -116,11 +116,13 @@ def fracture_map(solid, fluid, out: Path, name: str, label: str) -> Picture | No
     p.screenshot(str(out / name))
     p.close()
     aperture, speed = face.point_data["aperture [um]"], plane.cell_data["speed"]
+    figures = {"mean_aperture_um": float(np.mean(aperture)), "largest_aperture_um": float(np.max(aperture)),
+               "largest_speed": float(np.max(speed))}
     return Picture(name, f"Fracture, {label}",
-                   f"{label}: the aperture on the fracture plane (mean {float(np.mean(aperture)):.3g} um over the "
-                   f"face's vertices, largest {float(np.max(aperture)):.3g} um; contacts outlined black) and the "
-                   f"fluid speed in the mid-surface between the faces (largest {float(np.max(speed)):.3g} m/s): the "
-                   f"flow channels.")
+                   f"{label}: the aperture on the fracture plane (mean {figures['mean_aperture_um']:.3g} um over the "
+                   f"face's vertices, largest {figures['largest_aperture_um']:.3g} um; contacts outlined black) and "
+                   f"the fluid speed in the mid-surface between the faces (largest {figures['largest_speed']:.3g} "
+                   f"m/s): the flow channels.", figures)
 
 
 def _stress_labels(out: Path) -> dict[int, str]:
@@ -137,15 +139,13 @@ def _stress_labels(out: Path) -> dict[int, str]:
 def fracture_maps(out: Path) -> list[Picture]:
     """One :func:`fracture_map` per written step of the solid and fluid series in `out`
     (``fracture_step_NNNN.png``), when the solid carries the contact faces' gap."""
-    import pyvista as pv
-
     labels = _stress_labels(out)
     pictures = []
     for solid_file, fluid_file in zip(step_files(out, "solid"), step_files(out, "fluid")):
-        solid = pv.read(solid_file)
+        solid = read(solid_file)
         if not {"gap", "slave", "in_contact"} <= set(solid.point_data):
             return []
         step = int(solid_file.stem.rsplit("_", 1)[1])
-        pictures.append(fracture_map(solid, pv.read(fluid_file), out, f"fracture_step_{step:04d}.png",
+        pictures.append(fracture_map(solid, read(fluid_file), out, f"fracture_step_{step:04d}.png",
                                      labels.get(step, f"step {step}")))
     return [p for p in pictures if p is not None]

@@ -1,5 +1,7 @@
 """Pictures of what a run simulated, and only that, rendered offscreen (pyvista over VTK's
-EGL render window: no X server) from the run's last VTU files.
+EGL render window: no X server) from the run's last VTU files (on a coupler of several ranks
+the ``.pvtu`` of its ranks' pieces, joined: :func:`coupler.output.drawing.read`). Each picture
+also gives the figures its caption prints, unrounded (summary.json ``picture_figures``).
 
 - elasticity: the deformed solid coloured by the displacement magnitude (the warp factor
   printed on the image), and the von Mises stress on a cut through the solid;
@@ -22,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .drawing import Picture, colour_bar, last_step, magnitude, plane_normal, plotter, save, surface_where, view
+from .drawing import (Picture, colour_bar, last_step, magnitude, plane_normal, plotter, read, save, surface_where,
+                      view)
 from .fracture_maps import fracture_maps
 
 
@@ -45,7 +48,8 @@ def deformed_solid(solid, out: Path) -> Picture:
     p.reset_camera()
     save(p, out, "solid_displacement.png", f"deformed solid, displacement scaled x {factor:g}; largest {largest:.3g} m")
     return Picture("solid_displacement.png", "Deformed solid",
-                   f"Displacement magnitude on the solid warped by {factor:g} (largest {largest:.3g} m).")
+                   f"Displacement magnitude on the solid warped by {factor:g} (largest {largest:.3g} m).",
+                   {"largest_displacement": largest, "warp_factor": factor})
 
 
 def _cut_normal(bounds) -> int:
@@ -70,9 +74,10 @@ def von_mises_cut(solid, out: Path) -> Picture | None:
     view(p, cut.bounds, normal)
     where = f"{'xyz'[axis]} = {solid.center[axis]:.3g} m"
     save(p, out, "solid_von_mises.png", f"von Mises stress on the cut {where}")
+    largest = float(np.max(cut.point_data["von_mises"]))
     return Picture("solid_von_mises.png", "Von Mises stress",
-                   f"Von Mises stress on the cut {where} through the solid (largest "
-                   f"{float(np.max(cut.point_data['von_mises'])):.3g} Pa).")
+                   f"Von Mises stress on the cut {where} through the solid (largest {largest:.3g} Pa).",
+                   {"largest_von_mises": largest, "cut": float(solid.center[axis])})
 
 
 def flow_slice(fluid, solid, out: Path) -> Picture:
@@ -111,9 +116,10 @@ def flow_slice(fluid, solid, out: Path) -> Picture:
     view(p, plane.bounds, normal)
     where = f"{'xyz'[axis]} = {grid.center[axis]:.3g} m"
     save(p, out, "flow_speed.png", f"fluid speed on the grid's mid-plane {where}, solid outline, streamlines")
-    return Picture("flow_speed.png", "Flow", f"Fluid speed on the plane {where} (largest "
-                   f"{float(np.max(plane.point_data['speed'])):.3g} m/s), the solid's outline (black) and "
-                   f"streamlines from the inlet (white).")
+    largest = float(np.max(plane.point_data["speed"]))
+    return Picture("flow_speed.png", "Flow", f"Fluid speed on the plane {where} (largest {largest:.3g} m/s), the "
+                   f"solid's outline (black) and streamlines from the inlet (white).",
+                   {"largest_speed": largest, "plane": float(grid.center[axis])})
 
 
 def wetted_pressure(solid, out: Path) -> Picture | None:
@@ -131,8 +137,10 @@ def wetted_pressure(solid, out: Path) -> Picture | None:
     view(p, faces.bounds, plane_normal(faces.points))
     save(p, out, "fluid_pressure_on_faces.png", f"{title.split(' [')[0]} on the wetted faces of the solid")
     values = faces.point_data[title]
+    smallest, largest = float(values.min()), float(values.max())
     return Picture("fluid_pressure_on_faces.png", "Fluid load on the rock",
-                   f"The {title} on the wetted faces, from {float(values.min()):.3g} to {float(values.max()):.3g} Pa.")
+                   f"The {title} on the wetted faces, from {smallest:.3g} to {largest:.3g} Pa.",
+                   {"smallest": smallest, "largest": largest, "wetted_vertices": int(faces.n_points)})
 
 
 def contact_face(solid, out: Path) -> list[Picture]:
@@ -150,7 +158,8 @@ def contact_face(solid, out: Path) -> list[Picture]:
     save(p, out, "contact_pressure.png", "contact pressure on the slave face")
     largest = float(np.max(face.point_data["contact_pressure"]))
     pictures.append(Picture("contact_pressure.png", "Contact pressure",
-                            f"Contact pressure on the slave face (largest {largest:.3g} Pa)."))
+                            f"Contact pressure on the slave face (largest {largest:.3g} Pa).",
+                            {"largest_contact_pressure": largest}))
     p = plotter()
     in_contact = np.asarray(face.point_data["in_contact"], float)
     p.add_mesh(face, scalars=in_contact, cmap=["#d9d9d9", "#b2182b"], clim=(0, 1), n_colors=2,
@@ -159,7 +168,8 @@ def contact_face(solid, out: Path) -> list[Picture]:
     fraction = float(np.mean(in_contact))
     save(p, out, "contact_map.png", f"slave face in contact (red): {100 * fraction:.1f} % of its vertices")
     pictures.append(Picture("contact_map.png", "In contact", f"Slave face vertices in contact (red): "
-                            f"{100 * fraction:.1f} % of them."))
+                            f"{100 * fraction:.1f} % of them.", {"fraction_in_contact": fraction,
+                                                                 "slave_vertices": int(face.n_points)}))
     return pictures
 
 
@@ -169,7 +179,7 @@ def transferred_fields(out: Path, files: list[Path]) -> Picture | None:
     white where a transfer did not reach (NaN)."""
     import pyvista as pv
 
-    meshes = [pv.read(f) for f in files]
+    meshes = [read(f) for f in files]
     source = meshes[0]
     names = [n for n in (*source.point_data, *source.cell_data) if n != "covered"]
     if not names:
@@ -196,7 +206,8 @@ def transferred_fields(out: Path, files: list[Path]) -> Picture | None:
     p.screenshot(str(path))
     p.close()
     return Picture(path.name, "Transfer", f"'{field}' on the source and on each target (" +
-                   ", ".join(f.stem.rsplit("_", 1)[0] for f in files[1:]) + f") on the plane {where}.")
+                   ", ".join(f.stem.rsplit("_", 1)[0] for f in files[1:]) + f") on the plane {where}.",
+                   {"smallest": clim[0], "largest": clim[1]})
 
 
 def render(out: Path, effects: list[str], timeout: float = 600.0) -> list[Picture]:
@@ -218,16 +229,14 @@ def render(out: Path, effects: list[str], timeout: float = 600.0) -> list[Pictur
 
 def render_here(out: Path, effects: list[str]) -> list[Picture]:
     """:func:`render` in this process (the child's work)."""
-    import pyvista as pv
-
     pictures: list[Picture] = []
     solid_file, fluid_file = last_step(out, "solid"), last_step(out, "fluid")
-    solid = pv.read(solid_file) if solid_file else None
+    solid = read(solid_file) if solid_file else None
     if "elasticity" in effects and solid is not None and "displacement" in solid.point_data:
         pictures.append(deformed_solid(solid, out))
         pictures.append(von_mises_cut(solid, out))
     if "flow" in effects and fluid_file is not None:
-        pictures.append(flow_slice(pv.read(fluid_file), solid, out))
+        pictures.append(flow_slice(read(fluid_file), solid, out))
         if solid is not None:
             pictures.append(wetted_pressure(solid, out))
     if "contact" in effects and solid is not None:

@@ -25,6 +25,7 @@ def publish(out: Path, summary: dict, pictures: bool, log=print) -> Path:
             log(f"warning: pictures not rendered: {summary['pictures_error']}")
         summary.setdefault("phases_seconds", {})["pictures"] = time.perf_counter() - start
         summary["pictures"] = [p.file for p in rendered]
+        summary["picture_figures"] = {p.file: p.figures for p in rendered if p.figures}
         write_summary(out, summary)
     if pictures:
         solver_convergence(out / "convergence.png", summary.get("steps", []))

@@ -30,11 +30,12 @@ from vc_helpers import CASES, copy_case
 needs_mpi = pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not installed")
 
 
-def coupled(tmp_path, coupler: int, solid: int, fluid: int):
+def coupled(tmp_path, coupler: int, solid: int, fluid: int, pictures: bool = False):
     """small_fracture's first step, Chorin fluid, with the coupler on `coupler` ranks (the key
-    ``[coupling] ranks``: varcouple run starts itself under mpirun)."""
+    ``[coupling] ranks``: varcouple run starts itself under mpirun), its pictures rendered when
+    `pictures`."""
     out = run(tmp_path / f"p{coupler}", solid, fluid, steps=1, fluid="chorin", fluid_tolerance="1e-7",
-              coupling=f"ranks = {coupler}" if coupler > 1 else "")
+              coupling=f"ranks = {coupler}" if coupler > 1 else "", pictures=pictures)
     return out
 
 
@@ -47,9 +48,19 @@ def test_two_coupler_ranks_give_the_serial_run(tmp_path):
     """Solid and fluid on 2 ranks each: coupler ranks 0 and 1 each talk to one rank of each; the
     fields of every VTU file (joined from each rank's piece) and every summary figure equal the
     one-rank coupler's to 1e-10, with the same iterations; each rank holds half the grid, its
-    solid rank's cells and a part of the interface vector only, and writes its pieces."""
-    serial, ranks = coupled(tmp_path, 1, 2, 2), coupled(tmp_path, 2, 2, 2)
+    solid rank's cells and a part of the interface vector only, and writes its pieces. The pictures,
+    drawn after the run from the pieces, are the same files, and the figures they print (summary.json
+    ``picture_figures``: largest displacement, largest von Mises on the cut, largest speed, the
+    wetted faces' pressures and vertices) equal the one-rank coupler's to 1e-10 (with the rest of
+    the summary)."""
+    serial, ranks = coupled(tmp_path, 1, 2, 2, pictures=True), coupled(tmp_path, 2, 2, 2, pictures=True)
     assert_same(serial, ranks, "coupler on 2 ranks")
+    drawn = [json.loads((d / "summary.json").read_text()) for d in (serial, ranks)]
+    assert drawn[1]["pictures"] == drawn[0]["pictures"] == ["solid_displacement.png", "solid_von_mises.png",
+                                                            "flow_speed.png", "fluid_pressure_on_faces.png"]
+    assert drawn[1]["picture_figures"].keys() == drawn[0]["picture_figures"].keys() == set(drawn[0]["pictures"])
+    assert drawn[1]["picture_figures"]["fluid_pressure_on_faces.png"]["wetted_vertices"] == 462
+    assert all((ranks / name).stat().st_size > 0 for name in drawn[1]["pictures"])
     assert sorted(f.name for f in ranks.glob("*_0000*")) == [
         "fluid_0000.pvtu", "fluid_0000_p0.vtu", "fluid_0000_p1.vtu",
         "solid_0000.pvtu", "solid_0000_p0.vtu", "solid_0000_p1.vtu"]

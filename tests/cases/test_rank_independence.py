@@ -50,10 +50,11 @@ needs_mpi_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil
                                     reason="OpenFOAM (simpleFoam, decomposePar) or mpirun not installed")
 
 def run(tmp_path, solid_ranks: int, fluid_ranks: int, steps: int = 2, fluid: str = "openfoam",
-        fluid_tolerance: str = "1e-12", scene: dict | None = None, label: str = "", coupling: str = ""):
+        fluid_tolerance: str = "1e-12", scene: dict | None = None, label: str = "", coupling: str = "",
+        pictures: bool = False):
     """small_fracture on these ranks, its solid solved by LU and simpleFoam stopped at
-    `fluid_tolerance` (module docstring), with `scene`'s text replacements and `coupling` a line
-    added to [coupling]; its output directory."""
+    `fluid_tolerance` (module docstring), with `scene`'s text replacements, `coupling` a line
+    added to [coupling] and its pictures rendered when `pictures`; its output directory."""
     name = f"n{solid_ranks}m{fluid_ranks}{fluid}{fluid_tolerance}{label}"
     fluid_line = f'participant = "{fluid}"' + (f"\nranks = {fluid_ranks}" if fluid_ranks > 1 else "")
     case = copy_case(CASE, tmp_path / name, {**(scene or {}),
@@ -61,7 +62,7 @@ def run(tmp_path, solid_ranks: int, fluid_ranks: int, steps: int = 2, fluid: str
         'participant = "openfoam"': fluid_line, "tolerance = 1e-7 ": f"tolerance = {fluid_tolerance} ",
         "steps = 2": f"steps = {steps}", 'acceleration = "iqn-ils"': f'acceleration = "iqn-ils"\n{coupling}'})
     with open(case / "scene.toml", "a") as scene:
-        scene.write("\n[output]\npictures = false\n")
+        scene.write(f"\n[output]\npictures = {str(pictures).lower()}\n")
     out = tmp_path / name / "out"
     assert main(["run", str(case), "--output", str(out)]) == 0, name
     return out

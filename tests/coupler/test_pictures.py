@@ -101,6 +101,48 @@ def test_every_effect_has_its_pictures_and_none_is_blank(tmp_path):
     assert [p.file for p in only_solid] == ["solid_displacement.png", "solid_von_mises.png"]
 
 
+def pieces(out: Path, name: str, mesh, axis: int) -> None:
+    """`mesh` as the only step of the series `name` as a coupler on 2 ranks writes it: a .pvtu of
+    two .vtu pieces cut at the middle along `axis`, the points on the cut in both."""
+    from coupler.output.results import _arrays, _pvtu, _vtk_type
+
+    below = mesh.cell_centers().points[:, axis] < 0.5
+    names = []
+    for rank, cells in enumerate((below, ~below)):
+        piece = mesh.extract_cells(np.flatnonzero(cells))
+        names.append(f"{name}_0000_p{rank}.vtu")
+        piece.save(out / names[-1])
+    layout = (_vtk_type(piece.points), _arrays({k: piece.point_data[k] for k in piece.point_data.keys()}),
+              _arrays({k: piece.cell_data[k] for k in piece.cell_data.keys()}))
+    (out / f"{name}_0000.pvtu").write_text(_pvtu(layout, names))
+    (out / f"{name}.pvd").write_text(f'<VTKFile type="Collection"><Collection><DataSet timestep="1" '
+                                     f'file="{name}_0000.pvtu"/></Collection></VTKFile>')
+
+
+def test_the_pieces_of_a_coupler_on_two_ranks_draw_as_the_whole(tmp_path):
+    """The solid and the fluid written in two pieces each (the pictures are drawn after the run from
+    the files of a coupler on 2 ranks) are read as one connected mesh, the cut's points merged: the
+    same pictures with the same figures as the whole files (the wetted faces: the top face's 49
+    vertices, no face at the cut)."""
+    from coupler.output.drawing import read
+
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    whole.mkdir(), parts.mkdir()
+    solid, fluid = solid_with_fields(), grid_with_speed()
+    series(whole, "solid", solid), series(whole, "fluid", fluid)
+    pieces(parts, "solid", solid, 0), pieces(parts, "fluid", fluid, 0)
+    joined = read(parts / "solid_0000.pvtu")
+    assert (joined.n_points, joined.n_cells) == (solid.n_points, solid.n_cells)
+    effects = ["elasticity", "flow", "contact"]
+    drawn = [{p.file: p.figures for p in pictures.render(d, effects)} for d in (whole, parts)]
+    assert list(drawn[1]) == list(drawn[0]) == ["solid_displacement.png", "solid_von_mises.png", "flow_speed.png",
+                                                "fluid_pressure_on_faces.png", "contact_pressure.png",
+                                                "contact_map.png"]
+    assert drawn[0]["fluid_pressure_on_faces.png"]["wetted_vertices"] == 49
+    for file, figures in drawn[0].items():
+        assert drawn[1][file] == pytest.approx(figures, rel=1e-12), file
+
+
 def test_a_renderer_that_fails_says_why(tmp_path):
     (tmp_path / "solid.pvd").write_text('<DataSet timestep="1" file="missing.vtu"/>')
     with pytest.raises(RuntimeError, match="the renderer exited with code"):
