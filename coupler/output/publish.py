@@ -12,7 +12,13 @@ from .report import write_page
 from .results import write_summary
 
 def publish(out: Path, summary: dict, pictures: bool, log=print) -> Path:
-    """Render the pictures of the run in `out` (when `pictures`), write its report page; returns it."""
+    """Render the pictures of the run in `out` (when `pictures`), write its report page; returns it.
+
+    This is post-processing of the written files on one process after the coupling (rank 0 of a
+    coupler on several ranks), not a gather inside the run: the pictures read each series' last
+    file, on several ranks the ``.pvtu`` of the ranks' pieces joined into one mesh
+    (:func:`coupler.output.drawing.read`, docs/scaling.md step 5). A mesh too large for one
+    process: ``[output] pictures = false``."""
     rendered = []
     if pictures and summary.get("steps"):
         start = time.perf_counter()

@@ -16,10 +16,12 @@ rank (:func:`agree`).
 
 Nothing is gathered: each rank gives the accelerator and the loop its own rows of the interface
 vector and their weights (``comm``: docs/scaling.md, step 4), writes the piece of each
-participant it works on (:meth:`RanksRun.pieces`: a ``.pvtu`` of per-rank ``.vtu`` files, step
-5), and the summary's figures are reduced over the ranks (rank 0 writes it); a ``[check]`` of a
-distributed kind (``DISTRIBUTED``) gets each rank's pieces and rows (:meth:`RanksRun.result`). Operators,
-checks, monitors and pictures that need a whole field on one process refuse P > 1
+participant it works on (:meth:`RanksRun.piece`: a ``.pvtu`` of per-rank ``.vtu`` files, step
+5), and the summary's figures are reduced over the ranks (rank 0 writes it). A ``[check]`` of a
+distributed kind (``DISTRIBUTED``) is evaluated from each rank's pieces and rows
+(:meth:`RanksRun.result`); the pictures are drawn after the run by rank 0 from the written pieces
+(:func:`coupler.output.publish.publish`). Operators, check kinds and monitors that need a whole
+field on one process refuse P > 1
 (:meth:`RanksRun.admit`)."""
 
 from __future__ import annotations
@@ -96,7 +98,10 @@ class RanksRun(Run):
 
     @staticmethod
     def admit(scene, plan, comm) -> None:
-        """SceneError (every rank) for what needs a whole field on one process."""
+        """SceneError (every rank) for what needs a whole field on one process: a ``[check]`` kind
+        not ``DISTRIBUTED`` (:mod:`coupler.checks`), monitors, participants served in the
+        coupler's process, operators without a distributed form, cell-centre fractions. The
+        pictures are not refused: they are drawn after the run from the written pieces."""
         P = comm.size
         ranks = f"with {P} coupler ranks ([coupling] ranks or mpirun -n {P})"
         if scene.check and not getattr(checks.KINDS[scene.check["kind"]], "DISTRIBUTED", False):
