@@ -264,7 +264,7 @@ def test_pictures_and_distributed_checks_are_admitted(tmp_path):
 def test_a_check_is_refused(tmp_path):
     text = refusal(tmp_path, "parallel_plates", append="\n[output]\npictures = false\n")
     assert "[check] kind: 'cubic_law' compares whole fields on one process" in text
-    assert text.endswith("; on several ranks: expression, hertz, sneddon, uniaxial")
+    assert text.endswith("; on several ranks: exact_transfer, expression, hertz, sneddon, uniaxial")
 
 
 def test_a_rigid_solid_is_refused(tmp_path):

@@ -1,6 +1,6 @@
 """Run under ``mpirun -n P`` by test_checks_mpi.py with the share of the rows per rank as argument
 ("0,3,2": rank 0 holds none, rank 1 three fifths, rank 2 the rest). Each distributed [check] kind
-(coupler/checks: hertz, sneddon, uniaxial, expression) evaluates a known result twice: serially
+(coupler/checks: hertz, sneddon, uniaxial, expression; exact_transfer has its own) evaluates a known result twice: serially
 (every rank the whole result, ``comm=None``) and on the ranks (each rank its rows, shuffled, and
 their points, ``comm``). Rank 0 prints, as JSON, per kind the largest relative difference of the
 two reports' numbers, whether their keys and texts are equal and whether every rank made the same
@@ -91,8 +91,7 @@ def evaluate(kind, settings, points, fields, rows=None):
     if rows is None:
         result = Result({"solid": SimpleNamespace(points=points)}, {"solid": fields})
     else:
-        result = Result({}, {"solid": {k: v[rows] for k, v in fields.items()}}, comm=comm,
-                        points={"solid": points[rows]})
+        result = Result({}, {}, comm=comm, held={"solid": (points[rows], {k: v[rows] for k, v in fields.items()})})
     try:
         return KINDS[kind].evaluate(settings, SCENE, result)
     except CouplerError as exc:
