@@ -246,6 +246,13 @@ class DistributedTransfer:
 
     __call__ = apply
 
+    def product(self, u) -> np.ndarray:
+        """B u at this rank's target dofs: the coupling matrix of eq. 3 alone, a scalar field `u`
+        at the source dofs (the serial ``Transfer.B @ u``). Collective."""
+        self._source.put(self._check(u)[:, 0])
+        self.B.mult(self._source.vec, self._target.vec)
+        return self._target.get()
+
     def integral_source(self, u) -> np.ndarray:
         """Integral of the source field over the overlap (1^T B u), on every rank."""
         ones, colsum = self.B.createVecLeft(), self.B.createVecRight()

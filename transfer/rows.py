@@ -22,6 +22,8 @@ class Rows:
         self.vec = PETSc.Vec().createMPI((int(self.ranges[comm.rank + 1] - self.ranges[comm.rank]), self.count),
                                          comm=comm)
         self._scatters: dict = {}
+        #: the rows of this rank's block
+        self.own = np.arange(self.ranges[comm.rank], self.ranges[comm.rank + 1], dtype=np.int64)
 
     def _local(self, ids: np.ndarray) -> _Local:
         """The scatter of `ids`, kept with the array (callers pass the same arrays every iteration)."""
@@ -57,3 +59,11 @@ class Rows:
                                                     PETSc.InsertMode.INSERT_VALUES)
         return self.vec.array.copy()
 
+
+    def numbering(self, held: np.ndarray) -> tuple[np.ndarray, int]:
+        """(index, m): the rows that some rank holds (`held`) numbered 0..m-1 in row order, nothing
+        gathered; ``index`` at this rank's block :attr:`own`, -1 for rows nobody holds. Collective."""
+        flags = self.block(held, np.ones(len(held))) > 0.5
+        first = self.comm.exscan(int(flags.sum())) or 0
+        index = np.where(flags, first + np.cumsum(flags) - 1, -1).astype(float)
+        return index, self.comm.allreduce(int(flags.sum()))

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from coupler.coupling.row_sums import RowSums
+
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
 from .flow_rate import percolates, section_flow_rates
 from .context import OperatorContext, fluid_solid
@@ -18,52 +20,72 @@ from .resolution import cells_across_warning, contact_area_warning
 
 
 class FractureFigures:
-    """Built once per run like an operator; :meth:`figures` on a converged step's outputs."""
+    """Built once per run like an operator; :meth:`figures` on a converged step's outputs. Every
+    figure is a sum (or a labelling) over the rows, cells and interface vertices given by
+    :meth:`local`, taken over the coupler's ranks before dividing (``comm``; the serial run:
+    None, the whole fields, ``block`` the whole grid): :class:`coupler.fsi.ranks.FractureFiguresRanks`
+    gives each rank's own."""
+
+    comm = None
+    block = None  # the cells of the grid whose fraction and velocity :meth:`local` gives (None: all)
 
     def __init__(self, ctx: OperatorContext):
         scene, g = ctx.scene, ctx.scene.fluid
-        self.ctx, self.fs = ctx, fluid_solid(ctx)
+        self.ctx = ctx
         flow = scene.effect_settings["flow"]
         # a flow rate: dp is what the rate control found (coupler/fsi/rate_control.py)
         self.control = ctx.shared("flow_rate_control", FlowRateControl) if "flow_rate" in flow["inlet"] else None
         self.fixed_drop = flow["inlet"].get("pressure", 0.0) - flow["outlet"]["pressure"]
         self.length, self.width = g.spacing[0] * g.shape[0], g.spacing[1] * g.shape[1]
         self.viscosity = scene.fluid_material["viscosity"]
-        self.points = np.asarray(ctx.meshes["solid"].points)
         extents = np.asarray(g.spacing) * np.asarray(g.shape)
         across = int(np.argmin(extents))  # the fracture lies across the grid's thinnest extent
         self.h = float(g.spacing[across])
         self.cell = tuple(float(g.spacing[d]) for d in range(3) if d != across)
         self.told: set[str] = set()
+        self.hold(ctx)
+
+    def hold(self, ctx) -> None:
+        """What :meth:`local` reads: the whole solid and grid (serial)."""
+        self.fs, self.grid = fluid_solid(ctx), ctx.meshes["fluid"]
+        self.points = np.asarray(ctx.meshes["solid"].points)
+
+    def local(self, outputs) -> dict:
+        """The arrays the figures sum: the slave nodes' ``gap``, ``in_contact`` and mortar
+        ``weights``, the grid cells' solid ``fraction`` and fluid ``velocity`` (at ``block``), the
+        interface vertices' open area ``wet`` and fluid ``pressure``."""
+        solid, fluid = outputs["solid"], outputs["fluid"]
+        slave = solid["slave"] > 0.5
+        on_grid = self.fs.update(outputs)
+        interface = on_grid.interface
+        return {"gap": solid["gap"][slave], "in_contact": solid["in_contact"][slave] > 0.5,
+                "weights": solid["mortar_weight"][slave], "fraction": on_grid.fraction, "velocity": fluid["velocity"],
+                "wet": interface.weights * open_share(interface, self.points, solid),  # the open area per vertex
+                "pressure": interface.from_fluid(fluid["pressure"])}
 
     @property
     def pressure_drop(self) -> float:
         return self.control.pressure_drop if self.control is not None else self.fixed_drop
 
     def figures(self, outputs) -> dict:
-        solid, fluid = outputs["solid"], outputs["fluid"]
-        slave = solid["slave"] > 0.5
-        weights, touching = solid["mortar_weight"][slave], solid["in_contact"][slave] > 0.5
-        on_grid = self.fs.update(outputs)
-        grid = self.ctx.meshes["fluid"]
-        connected = percolates(grid, on_grid.fraction)
-        rate = float(section_flow_rates(grid, fluid["velocity"]).mean()) if connected else 0.0
+        """This step's figures, the same on every rank (collective with ``comm``)."""
+        f, comm = self.local(outputs), self.comm
+        gap, touching, weights = f["gap"], f["in_contact"], f["weights"]
+        connected = percolates(self.grid, f["fraction"], block=self.block, comm=comm)
+        rate = float(section_flow_rates(self.grid, f["velocity"], self.block, comm).mean()) if connected else 0.0
         if not connected:
             self.ctx.warn(["fracture: no connected open path from the inlet (xmin) to the outlet (xmax): every path "
                            "crosses cells at least half solid; flow rate and hydraulic aperture reported as 0"])
-        interface = on_grid.interface
-        wet = interface.weights * open_share(interface, self.points, solid)  # the open area per vertex
-        pressure = interface.from_fluid(fluid["pressure"])
-        area = float(wet.sum())
-        open_aperture = mean_open_aperture(solid["gap"][slave], touching, weights)
-        fraction = contact_area_fraction(touching, weights)
+        area, force = RowSums(comm).sum(np.array([np.sum(f["wet"]), np.sum(f["wet"] * f["pressure"])]))
+        open_aperture = mean_open_aperture(gap, touching, weights, comm)
+        fraction = contact_area_fraction(touching, weights, comm)
         warnings = self.warnings(fraction, open_aperture)
-        return {"mechanical_aperture": mechanical_aperture(solid["gap"][slave], touching, weights),
+        return {"mechanical_aperture": mechanical_aperture(gap, touching, weights, comm),
                 "hydraulic_aperture": (hydraulic_aperture(rate, self.viscosity, self.length, self.width,
                                                           self.pressure_drop) if self.pressure_drop else 0.0),
                 "pressure_drop": self.pressure_drop,
                 "contact_area_fraction": fraction, "flow_rate": rate, "percolating": connected,
-                "mean_face_pressure": float(np.sum(wet * pressure) / area) if area else 0.0,
+                "mean_face_pressure": float(force / area) if area else 0.0,
                 "mean_open_aperture": open_aperture, "cells_across": open_aperture / self.h,
                 **({"warnings": warnings} if warnings else {})}
 

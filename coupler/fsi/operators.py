@@ -19,7 +19,7 @@ import numpy as np
 
 from .centres import centres_inside
 from .context import OperatorContext, fluid_solid
-from .open_gap import contact_share
+from . import open_gap
 from .projection import Projection
 from .rate_control import FlowRateControl
 from .viscous import FluidTraction, traction_figures
@@ -43,27 +43,32 @@ class PressureTrace:
         return self.fs.on_grid.interface.to_solid_vertices(x)
 
 
-class OpenPressureTrace(PressureTrace):
-    """Steps 2-3 in a fracture with contact: the pressure trace times the open share of each
-    interface vertex, zero where the faces touch (:func:`coupler.fsi.open_gap.contact_share`,
-    from the solid's latest ``in_contact``): there the contact pressure carries the load and no
-    fluid acts."""
+class OpenShare:
+    """The trace of a fracture with contact (mixed into a pressure trace, serial or on ranks):
+    the pressure times the open share of each interface vertex, zero where the faces touch
+    (:func:`coupler.fsi.open_gap.open_share`, from the solid's latest ``in_contact``): there the
+    contact pressure carries the load and no fluid acts."""
+
+    def evaluate(self, outputs=None) -> np.ndarray:
+        return self.open_share(outputs) * super().evaluate(outputs)
+
+
+class OpenPressureTrace(OpenShare, PressureTrace):
+    """Steps 2-3 in a fracture with contact: :class:`PressureTrace` on the open faces (:class:`OpenShare`)."""
 
     def __init__(self, ctx: OperatorContext, exchange=None):
         super().__init__(ctx, exchange)
         self.points = np.asarray(ctx.meshes["solid"].points)
 
-    def evaluate(self, outputs) -> np.ndarray:
-        return open_share(self.fs.on_grid.interface, self.points, outputs["solid"]) * super().evaluate(outputs)
+    def open_share(self, outputs) -> np.ndarray:
+        return open_share(self.fs.on_grid.interface, self.points, outputs["solid"])
 
 
 def open_share(interface, points: np.ndarray, solid: dict) -> np.ndarray:
-    """Per interface vertex: the share of it where the fluid acts (the faces do not touch), 1 - chi
-    of :func:`coupler.fsi.open_gap.contact_share`, from the solid's outputs (displacement, slave,
-    in_contact)."""
+    """Per vertex of the serial `interface`: the share of it where the fluid acts
+    (:func:`coupler.fsi.open_gap.open_share`), from the solid's outputs at its `points`."""
     v = interface.vertices
-    deformed = points[v] + solid["displacement"][v]
-    return 1.0 - contact_share(deformed, interface.triangles, solid["slave"][v] > 0.5, solid["in_contact"][v] > 0.5)
+    return open_gap.open_share(points[v], interface.triangles, lambda name: solid[name][v])
 
 
 class ViscousTraction:

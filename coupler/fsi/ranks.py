@@ -24,10 +24,14 @@ from transfer import Mesh, StructuredGrid
 from transfer.distributed import Part, assemble
 from transfer.rows import Rows
 
+from . import fracture
+from .fracture import FractureFigures
 from .held import Held
 from .projection import ProjectionRanks
 from .interface import (SolidOnGrid, WettedInterface, area_normals, folded_surface, invalid_deformation,
                         sampling_points)
+from .open_gap import open_share
+from .operators import OpenShare
 
 
 class GridSlab:
@@ -42,6 +46,7 @@ class GridSlab:
         lower, upper = [0, 0, 0], list(G.shape)
         lower[d], upper[d] = bounds[comm.rank], bounds[comm.rank + 1]
         self.G, self.part = G, Part.grid_block(G, lower, upper, "Q0")
+        self.block = (lower, upper)  # the cells lower <= (i, j, k) < upper
         self.ids = self.part.global_dofs
         self.cell_volume = float(np.prod(G.spacing))
 
@@ -68,13 +73,9 @@ class SolidPart:
         each input row of the solid parts, -1 off the interface): the serial order, nothing gathered."""
         rows = self.held.rows
         self.interface_vertices = np.unique(self.triangles)
-        flags = rows.block(self.interface_vertices, np.ones(len(self.interface_vertices))) > 0.5
-        first = self.comm.exscan(int(flags.sum())) or 0
-        self.interface_count = self.comm.allreduce(int(flags.sum()))
-        index = np.where(flags, first + np.cumsum(flags) - 1, -1).astype(float)
-        block = np.arange(rows.ranges[self.comm.rank], rows.ranges[self.comm.rank + 1], dtype=np.int64)
-        self.interface_ids = rows.move(block, index, self.interface_vertices).astype(np.int64)
-        self.input_interface = rows.move(block, index, self.held.in_ids).astype(np.int64)
+        index, self.interface_count = rows.numbering(self.interface_vertices)
+        self.interface_ids = rows.move(rows.own, index, self.interface_vertices).astype(np.int64)
+        self.input_interface = rows.move(rows.own, index, self.held.in_ids).astype(np.int64)
 
     def part(self, points=None) -> Part:
         """The P1 transfer part of these cells, at `points` (the deformed vertices) or undeformed."""
@@ -94,12 +95,13 @@ class WettedSlabs:
     def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, points=None):
         self.comm, self.solid = comm, solid
         self.rows = Rows(comm, solid.interface_count)
-        self.block = np.arange(self.rows.ranges[comm.rank], self.rows.ranges[comm.rank + 1], dtype=np.int64)
+        self.block = self.rows.own
         self._inputs = np.maximum(solid.input_interface, 0)
         ids, vertices = solid.interface_ids, solid.interface_vertices
         at = np.searchsorted(solid.vertices, vertices)
         here = (solid.reference if points is None else points)[at]
-        triangles = np.searchsorted(vertices, solid.triangles)
+        self.triangles = triangles = np.searchsorted(vertices, solid.triangles)
+        self.reference = solid.reference[at]
         normals = self.rows.move(ids[triangles].ravel(), np.repeat(area_normals(here, triangles), 3, axis=0), ids,
                                  add=True)
         length = np.linalg.norm(normals.reshape(-1, 3), axis=1)
@@ -131,6 +133,13 @@ class WettedSlabs:
         values = np.where(self.solid.input_interface >= 0, self.rows.move(self.block, x, self._inputs), 0.0)
         held = self.solid.held
         return np.split(values, np.cumsum([len(i) for i in held.input_rows])[:-1]) if held.ranks else []
+
+    def open_share(self, held: Held) -> np.ndarray:
+        """The open share of the interface vertices (:func:`coupler.fsi.open_gap.open_share`) at
+        `block`, from the solid's latest outputs `held`. Collective."""
+        v, ids = self.solid.interface_vertices, self.solid.interface_ids
+        share = open_share(self.reference, self.triangles, lambda name: held.fetch(name, v), self.rows, ids)
+        return self.rows.block(ids, share)
 
     describe = WettedInterface.describe
 
@@ -188,7 +197,7 @@ class RanksContext:
 
     def __init__(self, context, comm, held: dict[str, Held], parts: dict[str, list[dict]]):
         self.context, self.comm, self.held, self.parts = context, comm, held, parts
-        self.scene, self.phases, self.log = context.scene, context.phases, context.log
+        self.scene, self.phases, self.log, self.warn = context.scene, context.phases, context.log, context.warn
 
     def shared(self, key: str, build):
         return self.context.shared(key, lambda _: build(self))
@@ -265,6 +274,14 @@ class PressureTraceRanks:
         return self.fs.on_grid.interface.to_solid_parts(x)
 
 
+class OpenPressureTraceRanks(OpenShare, PressureTraceRanks):
+    """:class:`coupler.fsi.operators.OpenPressureTrace` on several ranks: the pressure on the open
+    faces at this rank's rows of the interface vector."""
+
+    def open_share(self, outputs=None) -> np.ndarray:
+        return self.fs.on_grid.interface.open_share(self.fs.solid_held)
+
+
 class SolidFractionRanks:
     """:class:`coupler.fsi.operators.SolidFraction` (exact fractions) on this rank's slab,
     delivered at the input rows of the fluid parts held here."""
@@ -292,8 +309,30 @@ class SolidVelocityRanks(SolidFractionRanks):
         return on_grid.to_fluid.apply(self.fs.solid_held.fetch("velocity", self.fs.solid.vertices), fill=0.0)
 
 
+class FractureFiguresRanks(FractureFigures):
+    """:class:`coupler.fsi.fracture.FractureFigures` on several ranks: the rows of the solid held
+    here, this rank's slab of the grid and its rows of the interface vector; the figures summed
+    (and the open cells labelled) over the ranks."""
+
+    def hold(self, ctx: RanksContext) -> None:
+        self.fs = fluid_solid_ranks(ctx)
+        self.comm, self.grid, self.block = ctx.comm, self.fs.slab.G, self.fs.slab.block
+
+    def local(self, outputs=None) -> dict:
+        solid, fluid, cells = self.fs.solid_held, self.fs.fluid_held, self.fs.slab.ids
+        slave = solid.fields["slave"] > 0.5
+        interface = self.fs.update().interface
+        return {"gap": solid.fields["gap"][slave], "in_contact": solid.fields["in_contact"][slave] > 0.5,
+                "weights": solid.fields["mortar_weight"][slave], "fraction": self.fs.on_grid.fraction,
+                "velocity": fluid.fetch("velocity", cells), "wet": interface.weights * interface.open_share(solid),
+                "pressure": interface.from_fluid(fluid.fetch("pressure", cells))}
+
+
 #: the operators a coupler on several ranks has (the others refuse P > 1: coupler.run.ranks)
-OPERATORS_RANKS = {"pressure_trace": PressureTraceRanks, "solid_fraction": SolidFractionRanks,
-                   "solid_velocity": SolidVelocityRanks,
+OPERATORS_RANKS = {"pressure_trace": PressureTraceRanks, "open_pressure_trace": OpenPressureTraceRanks,
+                   "solid_fraction": SolidFractionRanks, "solid_velocity": SolidVelocityRanks,
                    "l2": lambda ctx, exchange: ProjectionRanks(ctx, exchange, "l2"),
                    "pseudo_l2": lambda ctx, exchange: ProjectionRanks(ctx, exchange, "pseudo_l2")}
+
+#: the monitors a coupler on several ranks has (as :data:`coupler.fsi.monitors.MONITORS`)
+MONITORS_RANKS = {"fracture": (FractureFiguresRanks, fracture.table)}

@@ -17,9 +17,10 @@ rank (:func:`agree`).
 Nothing is gathered: each rank gives the accelerator and the loop its own rows of the interface
 vector and their weights (``comm``: docs/scaling.md, step 4), writes the piece of each
 participant it works on (:meth:`RanksRun.piece`: a ``.pvtu`` of per-rank ``.vtu`` files, step
-5), and the summary's figures are reduced over the ranks (rank 0 writes it). A ``[check]`` of a
-distributed kind (``DISTRIBUTED``) is evaluated from each rank's pieces and rows
-(:meth:`RanksRun.result`); the pictures are drawn after the run by rank 0 from the written pieces
+5), and the summary's figures are reduced over the ranks (rank 0 writes it; the monitors of
+:data:`coupler.fsi.ranks.MONITORS_RANKS` reduce their own). A ``[check]`` of a distributed kind
+(``DISTRIBUTED``) is evaluated from each rank's pieces and rows (:meth:`RanksRun.result`); the
+pictures are drawn after the run by rank 0 from the written pieces
 (:func:`coupler.output.publish.publish`). Operators, check kinds and monitors that need a whole
 field on one process refuse P > 1
 (:meth:`RanksRun.admit`)."""
@@ -38,7 +39,7 @@ from coupler import checks
 from coupler.errors import EXIT_CODES, CouplerError, SceneError, one_line, run_status
 from coupler.fsi.context import OperatorContext
 from coupler.fsi.held import Held, assigned
-from coupler.fsi.ranks import OPERATORS_RANKS, GridSlab, RanksContext
+from coupler.fsi.ranks import MONITORS_RANKS, OPERATORS_RANKS, GridSlab, RanksContext
 from coupler.output.results import REDUCTIONS, Series, reduce_figures, write_summary
 from coupler.protocol.participant import idle_barrier
 from coupler.protocol.wire import Field
@@ -108,8 +109,9 @@ class RanksRun(Run):
             kinds = ", ".join(k for k, m in checks.KINDS.items() if getattr(m, "DISTRIBUTED", False))
             raise SceneError(f"{scene.path}: [check] kind: {scene.check['kind']!r} compares whole fields on one "
                              f"process: not {ranks}; on several ranks: {kinds}")
-        if plan.monitors:
-            raise SceneError(f"{scene.path}: [physics] effects: the figures {', '.join(plan.monitors)} need whole "
+        whole = [name for name in plan.monitors if name not in MONITORS_RANKS]
+        if whole:
+            raise SceneError(f"{scene.path}: [physics] effects: the figures {', '.join(whole)} need whole "
                              f"fields on one process: not {ranks}")
         for p in plan.participants:
             if p.in_process and p.kind not in SERVED_IN_PARTS:
@@ -215,7 +217,8 @@ class RanksRun(Run):
         ranks_context = RanksContext(self.context, comm, self.held, parts)
         self.operators = agree(comm, lambda: [OPERATORS_RANKS[e.operator](ranks_context, e)
                                               for e in self.plan.exchanges])
-        self.monitors = {}
+        self.monitors = agree(comm, lambda: {name: MONITORS_RANKS[name][0](ranks_context)
+                                             for name in self.plan.monitors})
         self.summary.update(self.context.summary())
         self.pieces = agree(comm, lambda: {name: self.piece(name, parts[name]) for name in self.held})
         self.series = {name: Series(self.out, name, mesh, comm) for name, (mesh, _) in self.pieces.items()}
