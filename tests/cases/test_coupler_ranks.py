@@ -233,6 +233,58 @@ def test_sneddon_check_on_two_coupler_ranks(tmp_path):
     assert reports[1]["kind"] == "sneddon" and reports[1]["vertices"] == reports[0]["vertices"] == 25
 
 
+def hm_fracture(tmp_path, coupler: int, participants: int):
+    """cases/hm_fracture shortened (8 x 8 x 53 fluid cells, the first stress alone) with the
+    coupler on `coupler` ranks and the solid and the Chorin fluid on `participants` ranks."""
+    ranks = f"\nranks = {participants}" if participants > 1 else ""
+    case = copy_case(CASES / "hm_fracture", tmp_path / f"hm{coupler}{participants}", {
+        "shape = [16, 16, 53]": "shape = [8, 8, 53]", "stress = [1.0e6, 2.0e6, 4.0e6]": "stress = [1.0e6]",
+        "steps = 3": "steps = 1", 'participant = "chorin"': f'participant = "chorin"{ranks}',
+        "max_iterations = 30": "max_iterations = 30" + (f"\nranks = {coupler}" if coupler > 1 else "")})
+    with open(case / "scene.toml", "a") as f:
+        f.write(f"\n[output]\npictures = false\n" + (f"\n[solvers.solid]{ranks}\n" if ranks else ""))
+    out = tmp_path / f"hm{coupler}{participants}" / "out"
+    assert main(["run", str(case), "--output", str(out)]) == 0
+    return out
+
+
+def assert_same_fracture(serial, ranks, label: str) -> None:
+    """The fields of every VTU file and every summary figure to 1e-10, but the smallest gap of a
+    closed contact (round-off, about 1e-18 m: below 1e-15 m on both)."""
+    found = differences(serial, ranks)
+    gaps = [k for k in found if k.endswith("/min_gap")]
+    assert gaps and all(abs(json.loads((d / "summary.json").read_text())["steps"][0]["figures"]["solid"]["min_gap"])
+                        < 1e-15 for d in (serial, ranks))
+    worst = max((k for k in found if k not in gaps), key=found.get)
+    assert found[worst] < TOLERANCE, f"{label}: {worst} differs by {found[worst]:.2e}"
+    figures = [json.loads((d / "summary.json").read_text())["steps"][0]["fracture"] for d in (serial, ranks)]
+    assert figures[0]["percolating"] is figures[1]["percolating"] is True
+    assert 0 < figures[1]["contact_area_fraction"] < 1 and "summary /steps/0/fracture/flow_rate" in found
+
+
+@needs_mpi
+def test_hm_fracture_on_two_coupler_ranks(tmp_path):
+    """The hydro-mechanical fracture (open pressure trace, fracture monitor) with the coupler on 2
+    ranks, participants on one: coupler rank 1 holds no solid or fluid rows, only its slab of the
+    grid, across whose cut (slabs along z, through the fracture) the open space percolates."""
+    serial, ranks = hm_fracture(tmp_path, 1, 1), hm_fracture(tmp_path, 2, 1)
+    assert_same_fracture(serial, ranks, "hm_fracture, coupler on 2 ranks")
+    held = holdings(ranks)
+    assert [h["interface_triangles"] > 0 for h in held] == [True, False] and all(h["grid_cells"] for h in held)
+
+
+@pytest.mark.slow
+@needs_mpi
+def test_hm_fracture_on_two_coupler_ranks_with_participant_ranks(tmp_path):
+    """Solid and Chorin fluid on 2 ranks each: each coupler rank holds part of both fracture faces
+    (the contact share's mortar projection crosses the ranks); the one-rank coupler's results."""
+    serial, ranks = hm_fracture(tmp_path, 1, 2), hm_fracture(tmp_path, 2, 2)
+    assert_same_fracture(serial, ranks, "hm_fracture, coupler on 2 ranks, participants on 2")
+    held = holdings(ranks)
+    assert all(0 < h["interface_triangles"] < 160 for h in held)
+    assert sum(h["interface_triangles"] for h in held) == 160
+
+
 # -- refusals: what needs a whole field on one process ------------------------------------
 def refusal(tmp_path, case: str, replace: dict | None = None, append: str = "") -> str:
     scene_dir = copy_case(CASES / case, tmp_path / case, replace)
