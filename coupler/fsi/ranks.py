@@ -2,9 +2,11 @@
 holds a slab of the fluid grid (:class:`GridSlab`: every rank knows the grid by origin, spacing
 and shape) and the solid parts assigned to it (:class:`SolidPart`), and the operators are the
 distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the deformed solid
-(:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3), the
-solid fraction and the solid velocity on the grid (Step 6, before Step 1); and the projections
-between two participants' meshes (``l2``, ``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`).
+(:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3; on
+the open faces of a fracture in contact), the solid fraction and the solid velocity on the grid
+(Step 6, before Step 1); the projections between two participants' meshes (``l2``,
+``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`); and the fracture's figures per
+step (:class:`FractureFiguresRanks`).
 
 The interface vector of the fixed point (one pressure per interface vertex, numbered as the
 serial run numbers them: by increasing solid vertex id) is split by rows over the ranks

@@ -100,9 +100,10 @@ class RanksRun(Run):
     @staticmethod
     def admit(scene, plan, comm) -> None:
         """SceneError (every rank) for what needs a whole field on one process: a ``[check]`` kind
-        not ``DISTRIBUTED`` (:mod:`coupler.checks`), monitors, participants served in the
-        coupler's process, operators without a distributed form, cell-centre fractions. The
-        pictures are not refused: they are drawn after the run from the written pieces."""
+        not ``DISTRIBUTED`` (:mod:`coupler.checks`), monitors and operators without a distributed
+        variant (:data:`MONITORS_RANKS`, :data:`OPERATORS_RANKS`), participants served in the
+        coupler's process, cell-centre fractions. The pictures are not refused: they are drawn
+        after the run from the written pieces."""
         P = comm.size
         ranks = f"with {P} coupler ranks ([coupling] ranks or mpirun -n {P})"
         if scene.check and not getattr(checks.KINDS[scene.check["kind"]], "DISTRIBUTED", False):

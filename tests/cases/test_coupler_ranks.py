@@ -313,6 +313,22 @@ def test_pictures_and_distributed_checks_are_admitted(tmp_path):
         RanksRun.admit(scene, make_plan(scene), SimpleNamespace(size=2))
 
 
+def test_the_hydro_mechanical_fracture_is_admitted(tmp_path):
+    """hm_fracture's open pressure trace and fracture figures have distributed variants; a
+    monitor without one is still refused, named."""
+    scene_dir = copy_case(CASES / "hm_fracture", tmp_path / "hm")
+    with open(scene_dir / "scene.toml", "a") as f:
+        f.write("\n[output]\npictures = false\n")
+    scene = scenes.load(scene_dir)
+    plan = make_plan(scene)
+    assert plan.monitors == ["fracture"] and "open_pressure_trace" in [e.operator for e in plan.exchanges]
+    RanksRun.admit(scene, plan, SimpleNamespace(size=2))
+    plan.monitors = ["fracture", "elsewhere"]
+    with pytest.raises(SceneError, match=r"\[physics\] effects: the figures elsewhere need whole fields on one "
+                                         r"process: not with 2 coupler ranks"):
+        RanksRun.admit(scene, plan, SimpleNamespace(size=2))
+
+
 def test_a_check_is_refused(tmp_path):
     text = refusal(tmp_path, "parallel_plates", append="\n[output]\npictures = false\n")
     assert "[check] kind: 'cubic_law' compares whole fields on one process" in text
