@@ -16,6 +16,7 @@ from coupler.fsi.open_gap import contact_share
 from coupler.fsi.ranks import GridSlab
 from transfer import StructuredGrid
 from transfer.rows import Rows
+from test_fracture_figures import patch_in_contact  # this script's directory is on sys.path
 
 comm = MPI.COMM_WORLD
 
@@ -23,10 +24,6 @@ comm = MPI.COMM_WORLD
 def relative(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
-
-
-def slab_values(slab: GridSlab, whole: np.ndarray) -> np.ndarray:
-    return whole[slab.ids]
 
 
 def paths(grid: StructuredGrid, steps) -> np.ndarray:
@@ -87,23 +84,11 @@ def apertures() -> dict:
                                               contact_area_fraction(touching[mine], weights[mine], comm))}
 
 
-def square_face(n: int, m: int, z: float, shift: int):
-    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, m + 1), indexing="ij")
-    points = np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], axis=1)
-    ids = np.arange(x.size).reshape(n + 1, m + 1)
-    a, b, c, d = ids[:-1, :-1].ravel(), ids[1:, :-1].ravel(), ids[1:, 1:].ravel(), ids[:-1, 1:].ravel()
-    return points, shift + np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-
-
 def contact_shares() -> dict:
     """The fine slave face (7 x 6) in contact on a patch under the coarse face (3 x 2): the
     triangles dealt out one by one, or each face whole on one rank (every mortar pair across the
     ranks); each rank's shares at its vertices against the serial ones."""
-    sp, st = square_face(7, 6, 0.0, 0)
-    mp, mt = square_face(3, 2, 1e-4, len(sp))
-    points, triangles = np.concatenate([sp, mp]), np.concatenate([st, mt])
-    on_slave = np.arange(len(points)) < len(sp)
-    in_contact = on_slave & (points[:, 0] < 0.45) & (points[:, 1] > 0.3)
+    points, triangles, on_slave, in_contact = patch_in_contact()
     serial = contact_share(points, triangles, on_slave, in_contact)
     rows = Rows(comm, len(points))
     splits = {"dealt out": np.arange(len(triangles)) % comm.size == comm.rank,

@@ -58,6 +58,17 @@ def square_face(n: int, m: int, z: float, shift: int) -> tuple[np.ndarray, np.nd
     return points, shift + np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
 
 
+def patch_in_contact():
+    """(points, triangles, on_slave, in_contact): a fine slave face (7 x 6) in contact on a patch,
+    the coarse face (3 x 2) above it."""
+    sp, st = square_face(7, 6, 0.0, 0)
+    mp, mt = square_face(3, 2, 1e-4, len(sp))
+    points, triangles = np.concatenate([sp, mp]), np.concatenate([st, mt])
+    on_slave = np.arange(len(points)) < len(sp)
+    in_contact = on_slave & (points[:, 0] < 0.45) & (points[:, 1] > 0.3)
+    return points, triangles, on_slave, in_contact
+
+
 def lumped(points, triangles) -> np.ndarray:
     vertices, local = np.unique(triangles, return_inverse=True)
     D = FunctionSpace(Mesh(points[vertices], local.reshape(-1, 3), "triangle"), "P1").mass_matrix()
@@ -71,11 +82,7 @@ def test_the_other_face_loses_the_slaves_contact_area():
     slave nodes keep their in_contact, the other face's shares lie in [0, 1] and its contact
     area (lumped areas times chi) equals the slave's to round-off, so a uniform fluid pressure
     pushes both faces with the same force; no contact, or full contact, is 0 or 1 everywhere."""
-    sp, st = square_face(7, 6, 0.0, 0)
-    mp, mt = square_face(3, 2, 1e-4, len(sp))
-    points, triangles = np.concatenate([sp, mp]), np.concatenate([st, mt])
-    on_slave = np.arange(len(points)) < len(sp)
-    in_contact = on_slave & (points[:, 0] < 0.45) & (points[:, 1] > 0.3)
+    points, triangles, on_slave, in_contact = patch_in_contact()
     chi = contact_share(points, triangles, on_slave, in_contact)
     np.testing.assert_array_equal(chi[on_slave], in_contact[on_slave])
     assert np.all((chi >= 0) & (chi <= 1)) and 0 < chi[~on_slave].max() < 1
