@@ -61,7 +61,7 @@ def percolates(grid, fraction: np.ndarray, solid: float = 0.5, block=None, comm=
     for a, oa in zip(blocks, offsets):
         for b, ob in zip(blocks, offsets):
             if a is not b and a["upper"][axis] == b["lower"][axis] and a["count"] and b["count"]:
-                both = (a["last"] > 0) & (b["first"] > 0)  # the same cells on both sides of the cut
+                both = (a["last"] > 0) & (b["first"] > 0)  # open cells facing each other across the cut
                 a_ids.append(oa + a["last"][both])
                 b_ids.append(ob + b["first"][both])
     n = int(offsets[-1]) + 1
