@@ -21,11 +21,13 @@ from .assembly import COVERED_RTOL
 
 
 def destroy_dropped(comm) -> None:
-    """Destroy the parallel PETSc objects Python has dropped on `comm`. petsc4py (PETSc >= 3.18)
-    does not destroy them when their last reference goes: it queues them until this collective
-    call; without it every transfer rebuilt (the coupler's, each time the solid deforms) would
-    keep its predecessors' matrices. Collective."""
+    """Destroy the PETSc objects Python has dropped on `comm` and on PETSc's COMM_SELF (the
+    sequential vectors, index sets and scatters of :class:`_Local`). petsc4py (PETSc >= 3.18)
+    does not destroy them when their last reference goes: it queues them per communicator until
+    a cleanup of that communicator; without it every transfer rebuilt (the coupler's, each time
+    the solid deforms) would keep its predecessors' matrices and scatters. Collective on `comm`."""
     PETSc.garbage_cleanup(comm)
+    PETSc.garbage_cleanup(PETSc.COMM_SELF)
 
 
 def ownership(n: int, size: int) -> np.ndarray:
