@@ -344,8 +344,8 @@ def assemble(source: Part, target: Part, method: str, comm, *, quadrature_degree
     found = overlap_warnings(*extents, proximity=surface)
     for text in found:
         warnings.warn(text, OverlapWarning, stacklevel=3)
-    rows = {name: _global_rows(raw[name], target.global_dofs, cols)
-            for name, cols in (("B", held.global_dofs), ("D", target.global_dofs))}
+    rows = {"B": (raw.pop("B"), target.global_dofs, held.global_dofs),
+            "D": (raw.pop("D"), target.global_dofs, target.global_dofs)}
     cells, nb = target.space.cell_dofs, target.space.basis_per_cell
     per_dof = {name: np.bincount(cells.ravel(), np.repeat(raw[name], nb), target.space.num_dofs)
                for name in ("measure", "overlap")}
@@ -363,13 +363,6 @@ def _no_rows(target: Part) -> dict:
     empty = (np.zeros(target.space.num_dofs + 1, np.int64), np.zeros(0, np.int32), np.zeros(0))
     zeros = np.zeros(target.num_cells)
     return {"B": empty, "D": empty, "overlap": zeros, "measure": zeros, "pairs_tested": 0, "pairs_intersected": 0}
-
-
-def _global_rows(csr, row_ids, col_ids):
-    """CSR rows of the kernel (local dof numbers) as COO triplets of global dof ids."""
-    indptr, indices, data = csr
-    rows = np.repeat(row_ids, np.diff(indptr))
-    return rows, col_ids[indices], data
 
 
 def gather(part: Part, values, comm, root: int = 0):

@@ -36,18 +36,23 @@ def ownership(n: int, size: int) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
-def _to_owners(comm, ranges, rows, *arrays):
-    """Send every entry (rows[i], arrays[.][i]) to the rank owning rows[i]."""
-    owner = np.searchsorted(ranges, rows, side="right") - 1
-    order = np.argsort(owner, kind="stable")
-    counts = np.bincount(owner, minlength=comm.size).astype(np.int64)
-    incoming = np.empty(comm.size, np.int64)
-    comm.Alltoall(counts, incoming)
+def _to_owners(comm, row_ranges, indptr, rows, cols, vals):
+    """The CSR rows given here whose global ids `rows` another rank owns, sent to it as CSR blocks
+    (row ids, row lengths, columns, values); returns the rows this rank received (the same four)."""
+    owner = np.searchsorted(row_ranges, rows, side="right") - 1
+    foreign = np.flatnonzero(owner != comm.rank)
+    order = foreign[np.argsort(owner[foreign], kind="stable")]
+    lengths = (indptr[order + 1] - indptr[order]).astype(PETSc.IntType)
+    entries = np.repeat(indptr[order] - (np.cumsum(lengths) - lengths), lengths) + np.arange(int(lengths.sum()))
+    counts = np.stack([np.bincount(owner[order], minlength=comm.size),
+                       np.bincount(owner[order], lengths, minlength=comm.size)]).astype(np.int64)
+    incoming = np.empty_like(counts)
+    for k in (0, 1):
+        comm.Alltoall(counts[k], incoming[k])
     out = []
-    for a in (rows, *arrays):
-        a = np.ascontiguousarray(a[order])
-        r = np.empty(int(incoming.sum()), a.dtype)
-        comm.Alltoallv([a, counts], [r, incoming])
+    for a, k in ((rows[order], 0), (lengths, 0), (cols[entries], 1), (vals[entries], 1)):
+        r = np.empty(int(incoming[k].sum()), a.dtype)
+        comm.Alltoallv([a, counts[k]], [r, incoming[k]])
         out.append(r)
     return out
 
@@ -59,15 +64,37 @@ def _indices(ids) -> np.ndarray:
     return ids.astype(PETSc.IntType)
 
 
-def aij(comm, coo, shape, row_ranges, col_ranges) -> PETSc.Mat:
-    """A parallel AIJ matrix from COO triplets (global ids, duplicates summed) given on any rank."""
-    rows, cols, vals = _to_owners(comm, row_ranges, *coo)
-    r0, r1 = row_ranges[comm.rank], row_ranges[comm.rank + 1]
-    local = sp.csr_matrix((vals, (rows - r0, cols)), shape=(r1 - r0, shape[1]))
-    local.sum_duplicates()
-    c0, c1 = col_ranges[comm.rank], col_ranges[comm.rank + 1]
-    A = PETSc.Mat().createAIJ(size=((r1 - r0, shape[0]), (c1 - c0, shape[1])),
-                              csr=(_indices(local.indptr), _indices(local.indices), local.data), comm=comm)
+def _nonzeros(indptr, rows, diagonal, r0, r1) -> np.ndarray:
+    """(2, r1 - r0): the nonzeros of every row r0..r1 in the diagonal block and off it, counted from
+    CSR rows at global ids `rows` (others ignored; a row given several times counts each time);
+    `diagonal` marks the entries whose column is owned here."""
+    inside = np.concatenate([[0], np.cumsum(diagonal, dtype=np.int64)])
+    d = inside[indptr[1:]] - inside[indptr[:-1]]
+    here = (rows >= r0) & (rows < r1)
+    at = np.where(here, rows - r0, 0)
+    return np.stack([np.bincount(at, n * here, minlength=r1 - r0)[:r1 - r0] for n in (d, np.diff(indptr) - d)])
+
+
+def aij(comm, csr, row_ids, col_ids, shape, row_ranges, col_ranges) -> PETSc.Mat:
+    """A parallel AIJ matrix from CSR rows given on any rank: `csr` (indptr, indices, data) in local
+    numbers, `row_ids` and `col_ids` their global ids (a row given by several ranks is summed). The
+    rows this rank owns go straight into its preallocated block; only those owned elsewhere travel,
+    as CSR blocks (:func:`_to_owners`); nothing is converted to triplets."""
+    indptr, indices, data = csr
+    r0, r1, c0, c1 = (ranges[comm.rank + k] for ranges in (row_ranges, col_ranges) for k in (0, 1))
+    rows, cols = _indices(row_ids), _indices(col_ids)[indices]
+    got_rows, got_lengths, got_cols, got_vals = _to_owners(comm, row_ranges, indptr, rows, cols, data)
+    got_indptr = np.concatenate([[0], np.cumsum(got_lengths)])
+    nnz = (_nonzeros(indptr, rows, (cols >= c0) & (cols < c1), r0, r1)
+           + _nonzeros(got_indptr, got_rows, (got_cols >= c0) & (got_cols < c1), r0, r1))
+    width = np.array([[c1 - c0], [shape[1] - (c1 - c0)]])  # a row summed from several ranks: at most its columns
+    nnz = np.minimum(nnz, width).astype(PETSc.IntType)
+    A = PETSc.Mat().createAIJ(size=((r1 - r0, shape[0]), (c1 - c0, shape[1])), nnz=(nnz[0], nnz[1]), comm=comm)
+    A.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, True)
+    add = PETSc.InsertMode.ADD_VALUES
+    owned = np.where((rows >= r0) & (rows < r1), rows, -1).astype(PETSc.IntType)  # PETSc skips rows < 0
+    A.setValuesIJV(_indices(indptr), cols, data, addv=add, rowmap=owned)
+    A.setValuesIJV(_indices(got_indptr), got_cols, got_vals, addv=add, rowmap=got_rows)
     A.assemble()
     return A
 
@@ -129,8 +156,9 @@ class DistributedTransfer:
         n_src, n_tgt = (comm.allreduce(int(p.global_dofs.max()) + 1 if len(p.global_dofs) else 0, op=MPI.MAX)
                         for p in (source, target))
         rows_t, rows_s = ownership(n_tgt, comm.size), ownership(n_src, comm.size)
-        self.B = aij(comm, rows["B"], (n_tgt, n_src), rows_t, rows_s)
-        self.D = aij(comm, rows["D"], (n_tgt, n_tgt), rows_t, rows_t)
+        # each matrix's kernel rows are let go as soon as it is made (popped: nothing else holds them)
+        self.B = aij(comm, *rows.pop("B"), (n_tgt, n_src), rows_t, rows_s)
+        self.D = aij(comm, *rows.pop("D"), (n_tgt, n_tgt), rows_t, rows_t)
         x, y = self.B.createVecs()
         self._source, self._target = _Local(x, source.global_dofs), _Local(y, target.global_dofs)
         measure, overlap = (self._target.put(per_dof[name], PETSc.InsertMode.ADD_VALUES).array.copy()
