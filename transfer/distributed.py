@@ -30,6 +30,7 @@ from mpi4py import MPI
 
 from .errors import NoOverlapError, OverlapWarning, TransferError
 from .grid import StructuredGrid
+from .heap import give_back
 from .mesh import Mesh
 from .assembly import (METHODS, assemble_rows, boxes_overlap, integration_rule, no_overlap_message,
                        overlap_warnings, pairing)
@@ -293,9 +294,19 @@ def assemble(source: Part, target: Part, method: str, comm, *, quadrature_degree
              search_distance: float | None = None, max_normal_angle: float = 45.0, nthreads: int = 1):
     """Distributed ``T = D^-1 B`` from `source` to `target` (each this rank's :class:`Part`):
     a :class:`transfer.petsc.DistributedTransfer`. Collective on `comm`."""
-    from .petsc import DistributedTransfer, destroy_dropped
+    from .petsc import destroy_dropped
 
     destroy_dropped(comm)  # the transfers dropped before this one go before its kernel runs (peak memory)
+    transfer = _assembled(source, target, method, comm, quadrature_degree=quadrature_degree,
+                          search_distance=search_distance, max_normal_angle=max_normal_angle, nthreads=nthreads)
+    give_back()  # the kernel's and the matrices' intermediates, freed by now, leave the resident memory
+    return transfer
+
+
+def _assembled(source: Part, target: Part, method: str, comm, *, quadrature_degree, search_distance,
+               max_normal_angle, nthreads):
+    from .petsc import DistributedTransfer
+
     if method not in METHODS:
         raise TransferError(f"unknown method {method!r}; use one of {METHODS}")
     for part in (source, target):
@@ -343,7 +354,7 @@ def assemble(source: Part, target: Part, method: str, comm, *, quadrature_degree
         raise NoOverlapError(no_overlap_message(*extents))
     found = overlap_warnings(*extents, proximity=surface)
     for text in found:
-        warnings.warn(text, OverlapWarning, stacklevel=3)
+        warnings.warn(text, OverlapWarning, stacklevel=4)
     rows = {"B": (raw.pop("B"), target.global_dofs, held.global_dofs),
             "D": (raw.pop("D"), target.global_dofs, target.global_dofs)}
     cells, nb = target.space.cell_dofs, target.space.basis_per_cell

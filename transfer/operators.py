@@ -31,6 +31,7 @@ import scipy.sparse.linalg as spla
 from .assembly import (COVERED_RTOL, METHODS, assemble_rows, boxes_overlap, default_search_distance,
                        integration_rule, no_overlap_message, overlap_warnings, pairing)
 from .errors import FieldError, NoOverlapError, OverlapWarning, TransferError
+from .heap import give_back
 from .spaces import FunctionSpace
 
 @dataclass
@@ -126,7 +127,9 @@ class Transfer:
             from .distributed import assemble
 
             return assemble(source, target, method, comm, **kwargs)
-        return cls(source, target, method, coupling_operator(source, target, method, **kwargs))
+        transfer = cls(source, target, method, coupling_operator(source, target, method, **kwargs))
+        give_back()  # the kernel's intermediates leave the resident memory
+        return transfer
 
     @property
     def stats(self) -> dict:
