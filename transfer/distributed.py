@@ -297,6 +297,7 @@ def assemble(source: Part, target: Part, method: str, comm, *, quadrature_degree
     from .petsc import destroy_dropped
 
     destroy_dropped(comm)  # the transfers dropped before this one go before its kernel runs (peak memory)
+    give_back()  # so does whatever the caller freed: the kernel's large arrays do not reuse the heap's holes
     transfer = _assembled(source, target, method, comm, quadrature_degree=quadrature_degree,
                           search_distance=search_distance, max_normal_angle=max_normal_angle, nthreads=nthreads)
     give_back()  # the kernel's and the matrices' intermediates, freed by now, leave the resident memory

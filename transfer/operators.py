@@ -127,8 +127,9 @@ class Transfer:
             from .distributed import assemble
 
             return assemble(source, target, method, comm, **kwargs)
+        give_back()  # what the caller freed leaves the resident memory before the kernel's large arrays come
         transfer = cls(source, target, method, coupling_operator(source, target, method, **kwargs))
-        give_back()  # the kernel's intermediates leave the resident memory
+        give_back()  # and so do the kernel's intermediates
         return transfer
 
     @property

@@ -239,3 +239,48 @@ def test_an_assembly_leaves_no_freed_heap_resident(distributed):
     libc.malloc_trim(0)
     assert T.covered.all()
     assert after - private_mb() < 1.0
+
+
+@pytest.mark.parametrize("distributed", [False, True], ids=["serial", "distributed"])
+def test_an_assembly_runs_in_the_heap_its_caller_freed(distributed):
+    """What the caller freed before an assembly (here 64 MB of small arrays, one in eight kept, so
+    the heap cannot shrink from its top) is given back before the kernel runs, so the assembly's
+    large arrays take those pages again instead of adding to them: the peak above the memory
+    resident when it starts, freed heap included, is a fraction of the peak without that heap."""
+    import ctypes
+
+    from mpi4py import MPI
+
+    from transfer.distributed import Part, assemble
+    from transfer.petsc import destroy_dropped
+
+    def status_mb(key: str) -> float:
+        return int(next(line for line in Path("/proc/self/status").read_text().splitlines()
+                        if line.startswith(key)).split()[1]) / 1024
+
+    S = box_tetrahedra((24, 24, 24), (0, 0, 0), (1, 1, 1))
+    G = StructuredGrid((0, 0, 0), (1 / 30,) * 3, (30, 30, 30))
+    if distributed:
+        source, target = Part.of_cells(S, np.arange(S.num_cells), "P1"), Part.grid_block(G, (0, 0, 0), G.shape, "Q0")
+        build = lambda: assemble(source, target, "pseudo_l2", MPI.COMM_WORLD)  # noqa: E731
+    else:
+        build = lambda: Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(G, "Q0"), "pseudo_l2")  # noqa: E731
+
+    def peak(garbage: bool) -> float:
+        """The peak resident memory of an assembly above the memory resident when it starts."""
+        destroy_dropped(MPI.COMM_WORLD)
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+        kept = []
+        if garbage:
+            arrays = [np.ones(2048) for _ in range(4096)]  # 16 kB each: on the heap, not mapped
+            kept = arrays[::8]
+            del arrays
+        Path("/proc/self/clear_refs").write_text("5")  # the peak starts again from now
+        before = status_mb("VmRSS")
+        T = build()
+        assert T.covered.all() and len(kept) in (0, 512)
+        return status_mb("VmHWM") - before
+
+    peak(False)
+    clean = peak(False)
+    assert clean > 20.0 and peak(True) < 0.25 * clean, clean
