@@ -139,6 +139,28 @@ def test_box_search_finds_every_overlap_touching_ones_too():
     assert not _meets(boxes, others[:0]).any() and len(_meets(boxes[:0], others)) == 0
 
 
+def status_mb(key: str) -> float:
+    """A figure of /proc/self/status (VmRSS, VmHWM, RssAnon) in MB."""
+    return int(next(line for line in Path("/proc/self/status").read_text().splitlines()
+                    if line.startswith(key)).split()[1]) / 1024
+
+
+@pytest.fixture(params=[False, True], ids=["serial", "distributed"])
+def box_to_grid(request):
+    """Assembles pseudo-L2 from a 24^3 box of P1 tets (82,944) to a 30^3 Q0 grid, serial or on
+    COMM_WORLD (a process of its own: one rank)."""
+    from mpi4py import MPI
+
+    from transfer.distributed import Part, assemble
+
+    S = box_tetrahedra((24, 24, 24), (0, 0, 0), (1, 1, 1))
+    G = StructuredGrid((0, 0, 0), (1 / 30,) * 3, (30, 30, 30))
+    if request.param:
+        source, target = Part.of_cells(S, np.arange(S.num_cells), "P1"), Part.grid_block(G, (0, 0, 0), G.shape, "Q0")
+        return lambda: assemble(source, target, "pseudo_l2", MPI.COMM_WORLD)
+    return lambda: Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(G, "Q0"), "pseudo_l2")
+
+
 @pytest.mark.parametrize("world", [False, True], ids=["COMM_SELF", "COMM_WORLD"])
 def test_a_rebuilt_transfer_frees_its_predecessor(world):
     """petsc4py queues the objects Python drops until a cleanup of their communicator: assemble
@@ -156,8 +178,7 @@ def test_a_rebuilt_transfer_frees_its_predecessor(world):
 
     def private_mb() -> float:  # the heap given back first: freed memory is not counted
         libc.malloc_trim(0)
-        status = Path("/proc/self/status").read_text().splitlines()
-        return int(next(line for line in status if line.startswith("RssAnon")).split()[1]) / 1024
+        return status_mb("RssAnon")
 
     S = box_tetrahedra((24, 24, 24), (0, 0, 0), (1, 1, 1))
     G = StructuredGrid((0, 0, 0), (1 / 30,) * 3, (30, 30, 30))
@@ -184,10 +205,6 @@ def test_matrices_are_made_from_the_kernels_rows_without_copies_of_them():
 
     from transfer.petsc import aij, destroy_dropped, gather_matrix, ownership
 
-    def status_mb(key: str) -> float:
-        return int(next(line for line in Path("/proc/self/status").read_text().splitlines()
-                        if line.startswith(key)).split()[1]) / 1024
-
     m, n, k = 100_000, 50_000, 10
     rng = np.random.default_rng(0)
     indptr, indices, data = np.arange(m + 1) * k, rng.integers(0, n, m * k).astype(np.int32), rng.random(m * k)
@@ -207,42 +224,23 @@ def test_matrices_are_made_from_the_kernels_rows_without_copies_of_them():
     destroy_dropped(comm)
 
 
-@pytest.mark.parametrize("distributed", [False, True], ids=["serial", "distributed"])
-def test_an_assembly_leaves_no_freed_heap_resident(distributed):
+def test_an_assembly_leaves_no_freed_heap_resident(box_to_grid):
     """An assembly frees several times what it keeps (the kernel's row pieces, the matrices'
     intermediates); assemble gives those pages back (transfer.heap.give_back), so a rebuilt transfer
     does not leave the process at the peak of its assembly: the private memory right after it is
     what stays after glibc trims its heap (before: 33 MB more here, serial and distributed alike)."""
     import ctypes
 
-    from mpi4py import MPI
-
-    from transfer.distributed import Part, assemble
-
-    libc = ctypes.CDLL("libc.so.6")
-
-    def private_mb() -> float:
-        status = Path("/proc/self/status").read_text().splitlines()
-        return int(next(line for line in status if line.startswith("RssAnon")).split()[1]) / 1024
-
-    S = box_tetrahedra((24, 24, 24), (0, 0, 0), (1, 1, 1))
-    G = StructuredGrid((0, 0, 0), (1 / 30,) * 3, (30, 30, 30))
-    if distributed:
-        source, target = Part.of_cells(S, np.arange(S.num_cells), "P1"), Part.grid_block(G, (0, 0, 0), G.shape, "Q0")
-        build = lambda: assemble(source, target, "pseudo_l2", MPI.COMM_WORLD)  # noqa: E731
-    else:
-        build = lambda: Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(G, "Q0"), "pseudo_l2")  # noqa: E731
-    T = build()
+    T = box_to_grid()
     T = None
-    T = build()
-    after = private_mb()
-    libc.malloc_trim(0)
+    T = box_to_grid()
+    after = status_mb("RssAnon")
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
     assert T.covered.all()
-    assert after - private_mb() < 1.0
+    assert after - status_mb("RssAnon") < 1.0
 
 
-@pytest.mark.parametrize("distributed", [False, True], ids=["serial", "distributed"])
-def test_an_assembly_runs_in_the_heap_its_caller_freed(distributed):
+def test_an_assembly_runs_in_the_heap_its_caller_freed(box_to_grid):
     """What the caller freed before an assembly (here 64 MB of small arrays, one in eight kept, so
     the heap cannot shrink from its top) is given back before the kernel runs, so the assembly's
     large arrays take those pages again instead of adding to them: the peak above the memory
@@ -251,20 +249,7 @@ def test_an_assembly_runs_in_the_heap_its_caller_freed(distributed):
 
     from mpi4py import MPI
 
-    from transfer.distributed import Part, assemble
     from transfer.petsc import destroy_dropped
-
-    def status_mb(key: str) -> float:
-        return int(next(line for line in Path("/proc/self/status").read_text().splitlines()
-                        if line.startswith(key)).split()[1]) / 1024
-
-    S = box_tetrahedra((24, 24, 24), (0, 0, 0), (1, 1, 1))
-    G = StructuredGrid((0, 0, 0), (1 / 30,) * 3, (30, 30, 30))
-    if distributed:
-        source, target = Part.of_cells(S, np.arange(S.num_cells), "P1"), Part.grid_block(G, (0, 0, 0), G.shape, "Q0")
-        build = lambda: assemble(source, target, "pseudo_l2", MPI.COMM_WORLD)  # noqa: E731
-    else:
-        build = lambda: Transfer.assemble(FunctionSpace(S, "P1"), FunctionSpace(G, "Q0"), "pseudo_l2")  # noqa: E731
 
     def peak(garbage: bool) -> float:
         """The peak resident memory of an assembly above the memory resident when it starts."""
@@ -277,7 +262,7 @@ def test_an_assembly_runs_in_the_heap_its_caller_freed(distributed):
             del arrays
         Path("/proc/self/clear_refs").write_text("5")  # the peak starts again from now
         before = status_mb("VmRSS")
-        T = build()
+        T = box_to_grid()
         assert T.covered.all() and len(kept) in (0, 512)
         return status_mb("VmHWM") - before
 
