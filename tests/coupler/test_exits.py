@@ -89,7 +89,7 @@ def test_participant_the_launcher_kills_is_not_blamed_on_memory(tmp_path):
     launcher.stop_all(timeout=0.5)
     assert proc.returncode == -signal.SIGKILL
     text = launcher.check("fluid")
-    assert "killed by SIGKILL (signal 9), stopped by the launcher" in text and "memory" not in text
+    assert "killed by SIGKILL (signal 9), stopped by the launcher" in text and PROBABLY not in text
 
 
 # ------------------------------------------------------------------ OpenFOAM binaries
