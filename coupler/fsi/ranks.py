@@ -95,6 +95,10 @@ class WettedSlabs:
     method = "surface trace"
 
     def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, points=None):
+        if comm.allreduce(len(solid.triangles)) == 0:
+            raise CouplerError(f"{where}: the solid gives no boundary triangles (a stand-in such as spring_solid): "
+                               f"on several coupler ranks the pressure is traced onto wetted faces only; the volume "
+                               f"projection onto every solid vertex runs on one coupler rank")
         self.comm, self.solid = comm, solid
         self.rows = Rows(comm, solid.interface_count)
         self.block = self.rows.own

@@ -259,16 +259,26 @@ class RanksRun(Run):
             raise
 
     def _hold(self, name: str, header: dict, replies) -> tuple[Held, list[dict]]:
-        """This rank's share of participant `name` from its parts' geometry replies."""
+        """This rank's share of participant `name` from its parts' geometry replies. A participant
+        of one part may give no ids: its part is the whole, rows 0..n-1 (docs/protocol.md, "Parts").
+        Collective: a part that does not fit fails every rank."""
         location = "cell_ids" if header.get("location") == "cells" else "point_ids"
         geometry = [{k: np.asarray(f.data) for k, f in part.fields.items()} for part in replies]
-        for part, g in zip(replies, geometry):
-            if location not in g:
-                raise part.fail(name, f"its geometry part has no {location!r}: the rows of its fields have no owners")
-        ids = [g[location].astype(np.int64) for g in geometry]
-        inputs = [g.get("input_ids", g[location]).astype(np.int64) for g in geometry]
-        return agree(self.comm, Held, self.comm, name, self.clients[name].mine, ids, inputs,
-                     header.get("cell_type", "tetra")), geometry
+
+        def held() -> Held:
+            for part, g in zip(replies, geometry):
+                if location not in g and self.clients[name].parts == 1:
+                    g[location] = np.arange(StructuredGrid(header["grid"]["origin"], header["grid"]["spacing"],
+                                                           header["grid"]["shape"]).num_cells if "grid" in header
+                                            else len(np.asarray(g["points"]).reshape(-1, 3)))
+                if location not in g:
+                    raise part.fail(name, f"its geometry part has no {location!r}: the rows of its fields have no "
+                                          f"owners")
+            ids = [g[location].astype(np.int64) for g in geometry]
+            inputs = [g.get("input_ids", g[location]).astype(np.int64) for g in geometry]
+            return Held(self.comm, name, self.clients[name].mine, ids, inputs, header.get("cell_type", "tetra"))
+
+        return agree(self.comm, held), geometry
 
     # -- one coupling iteration -------------------------------------------------------
     def _advance(self, name: str, window, iteration: int, inputs: dict) -> None:

@@ -19,7 +19,7 @@ import pytest
 from cli_helpers import CHECK, transfer_case
 from coupler import scene as scenes
 from coupler.cli import main
-from coupler.errors import SceneError
+from coupler.errors import EXIT_CODES, SceneError
 from coupler.plan.plan import make_plan
 from coupler.run.execute import coupler_ranks
 from coupler.run.ranks import RanksRun
@@ -189,16 +189,42 @@ def test_a_partly_covered_target_on_two_ranks(tmp_path):
         assert np.isnan(piece.point_data["T"][~covered]).all() and np.isfinite(piece.point_data["T"][covered]).all()
 
 
-def solid_case(tmp_path, case: str, coupler: int, replace: dict) -> object:
-    """`case` (a solid alone, its [check] evaluated) with the text replacements `replace`, the
-    coupler on `coupler` ranks; its output directory."""
+def case_run(tmp_path, case: str, coupler: int, replace: dict, exit_code: int = 0) -> object:
+    """`case` with the text replacements `replace`, the coupler on `coupler` ranks (``[coupling]
+    ranks``), run to `exit_code`; its output directory."""
     scene_dir = copy_case(CASES / case, tmp_path / f"{case}{coupler}", replace)
     if coupler > 1:
-        with open(scene_dir / "scene.toml", "a") as f:
-            f.write(f"\n[coupling]\nranks = {coupler}\n")
+        scene = scene_dir / "scene.toml"
+        text = scene.read_text()
+        scene.write_text(text.replace("[coupling]\n", f"[coupling]\nranks = {coupler}\n", 1) if "[coupling]\n" in text
+                         else text + f"\n[coupling]\nranks = {coupler}\n")
     out = tmp_path / f"{case}{coupler}" / "out"
-    assert main(["run", str(scene_dir), "--output", str(out)]) == 0, (case, coupler)
+    assert main(["run", str(scene_dir), "--output", str(out)]) == exit_code, (case, coupler)
     return out
+
+
+@needs_mpi
+@pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM not installed")
+def test_one_rank_participants_without_row_ids_on_two_coupler_ranks(tmp_path):
+    """plates_fsi: the solid and the OpenFOAM fluid on one rank each give no row ids (a participant
+    of one part sends its whole arrays): on 2 coupler ranks their part is rows 0..n-1, held by
+    coupler rank 0, and the run gives the one-rank coupler's fields and iterations to 1e-10."""
+    serial, ranks = (case_run(tmp_path, "plates_fsi", p, {}) for p in (1, 2))
+    assert_same(serial, ranks, "plates_fsi, coupler on 2 ranks")
+    held = holdings(ranks)
+    assert [h["solid_rows"] > 0 for h in held] == [True, False] and [h["fluid_rows"] > 0 for h in held] == [True, False]
+
+
+@needs_mpi
+def test_a_solid_without_boundary_triangles_fails_on_every_coupler_rank(tmp_path):
+    """standin_flow's spring solid gives no boundary triangles: on 2 coupler ranks (the pressure is
+    traced onto wetted faces only) every rank fails with the one line naming it, at once (not one
+    rank alone, the other aborted after waiting)."""
+    out = case_run(tmp_path, "standin_flow", 2, {}, exit_code=EXIT_CODES["failed"])
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed" and summary["error"].startswith("CouplerError: ")
+    assert "the solid gives no boundary triangles (a stand-in such as spring_solid)" in summary["error"]
+    assert "went on" not in summary["error"]
 
 
 #: block_compression's [check] against an x displacement 10 % y too large at y = 1 (the exact one is
@@ -214,7 +240,7 @@ def test_a_displacement_check_on_two_coupler_ranks(tmp_path):
     ranks, each with one solid rank's vertices, the check (expression; uniaxial and sneddon share
     its comparison) reports the one-rank coupler's error, its largest at one rank's vertex, and
     the vertices of both ranks, like its fields, to 1e-10."""
-    serial, ranks = (solid_case(tmp_path, "block_compression", p, WRONG_X) for p in (1, 2))
+    serial, ranks = (case_run(tmp_path, "block_compression", p, WRONG_X) for p in (1, 2))
     assert_same(serial, ranks, "block_compression, coupler on 2 ranks")
     reports = [json.loads((d / "summary.json").read_text())["check"] for d in (serial, ranks)]
     assert reports[1]["kind"] == "expression" and reports[1]["vertices"] == reports[0]["vertices"] == 75
@@ -227,7 +253,7 @@ def test_sneddon_check_on_two_coupler_ranks(tmp_path):
     """pressurized_fracture (solid on one rank: its CG on 2 ranks stops where its partition lets
     it, 6e-9 apart from run to run): its Sneddon check on 2 coupler ranks, rank 1 holding no
     vertex, reports the one-rank coupler's figures to 1e-10."""
-    serial, ranks = (solid_case(tmp_path, "pressurized_fracture", p, {}) for p in (1, 2))
+    serial, ranks = (case_run(tmp_path, "pressurized_fracture", p, {}) for p in (1, 2))
     assert_same(serial, ranks, "pressurized_fracture, coupler on 2 ranks")
     reports = [json.loads((d / "summary.json").read_text())["check"] for d in (serial, ranks)]
     assert reports[1]["kind"] == "sneddon" and reports[1]["vertices"] == reports[0]["vertices"] == 25
