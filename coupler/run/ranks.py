@@ -361,31 +361,24 @@ class RanksRun(Run):
         sys.stderr.flush()
         self.comm.Abort(EXIT_CODES["failed"])
 
-    # -- control verbs: rank 0 --------------------------------------------------------
+    # -- control verbs: every rank its served parts, rank 0 the processes ------------------
     def finish(self) -> None:
         for client in self.clients.values():
             client.finished = True  # the participants' tokens go: no warning on this rank
-        served, started = self._served()
-        agree(self.comm, self._finish, served)
-        self._on_root(self._finish, started)
+        self._control(self._finish)
 
     def save(self, window) -> None:
-        self._on_ranks("save_state", window)
+        self._control(self._checkpoint, "save_state", window)
 
     def restore(self, window) -> None:
-        self._on_ranks("restore_state", window)
+        self._control(self._checkpoint, "restore_state", window)
 
-    def _on_ranks(self, verb: str, window) -> None:
-        """A checkpoint verb: every rank its own part of each participant served here, rank 0 the
-        started participants."""
-        served, started = self._served()
-        agree(self.comm, self._checkpoint, verb, window, served)
-        self._on_root(self._checkpoint, verb, window, started)
-
-    def _served(self) -> tuple[list, list]:
-        """(participants served on every coupler rank, participants started as processes)."""
-        return ([p for p in self.plan.participants if p.in_process],
-                [p for p in self.plan.participants if not p.in_process])
+    def _control(self, verb, *args) -> None:
+        """``verb(*args, participants)`` of a control verb: on every rank for the participants served
+        here (each rank its own part), on rank 0 for those started as processes."""
+        participants = self.plan.participants
+        agree(self.comm, verb, *args, [p for p in participants if p.in_process])
+        self._on_root(verb, *args, [p for p in participants if not p.in_process])
 
 
 class _Caller:
