@@ -223,14 +223,18 @@ class SolidOnGrid:
             if self.traction == "full":
                 self.deeper = [self._deeper(depth, None if u is None else S.points) for depth in DEPTHS]
         elif self.wetted:
-            if self.outside > 1e-9:
-                raise CouplerError(f"{self.where}: the fluid grid does not cover the solid "
-                                   f"({self.outside:.3g} of the solid's volume lies outside it)")
+            self._check_inside()
             interface = VolumeInterface(S, self.G, self.where)
         self.to_fluid, self.fraction, self.interface = to_fluid, volumes / self.G.cell_measures(), interface
         self.current = S
         self.builds += 1
         self.build_seconds += time.perf_counter() - start
+
+    def _check_inside(self) -> None:
+        """The volume fallback's condition: the whole solid inside the grid (CouplerError if not)."""
+        if self.outside > 1e-9:
+            raise CouplerError(f"{self.where}: the fluid grid does not cover the solid "
+                               f"({self.outside:.3g} of the solid's volume lies outside it)")
 
     def _deeper(self, depth: float, points):
         """A deeper sampling surface, or None where it leaves the grid entirely (a thin channel)."""

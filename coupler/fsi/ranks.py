@@ -3,7 +3,8 @@ holds a slab of the fluid grid (:class:`GridSlab`: every rank knows the grid by 
 and shape) and the solid parts assigned to it (:class:`SolidPart`), and the operators are the
 distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the deformed solid
 (:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3; on
-the open faces of a fracture in contact), the solid fraction and the solid velocity on the grid
+the open faces of a fracture in contact; onto every solid vertex for a solid without boundary
+triangles, :class:`VolumeSlabs`), the solid fraction and the solid velocity on the grid
 (Step 6, before Step 1); the projections between two participants' meshes (``l2``,
 ``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`); and the fracture's figures per
 step (:class:`FractureFiguresRanks`).
@@ -30,8 +31,8 @@ from . import fracture
 from .fracture import FractureFigures
 from .held import Held
 from .projection import ProjectionRanks
-from .interface import (SolidOnGrid, WettedInterface, area_normals, folded_surface, invalid_deformation,
-                        sampling_points)
+from .interface import (SolidOnGrid, VolumeInterface, WettedInterface, area_normals, folded_surface,
+                        invalid_deformation, sampling_points)
 from .open_gap import open_share
 from .operators import OpenShare
 
@@ -95,10 +96,6 @@ class WettedSlabs:
     method = "surface trace"
 
     def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, points=None):
-        if comm.allreduce(len(solid.triangles)) == 0:
-            raise CouplerError(f"{where}: the solid gives no boundary triangles (a stand-in such as spring_solid): "
-                               f"on several coupler ranks the pressure is traced onto wetted faces only; the volume "
-                               f"projection onto every solid vertex runs on one coupler rank")
         self.comm, self.solid = comm, solid
         self.rows = Rows(comm, solid.interface_count)
         self.block = self.rows.own
@@ -150,10 +147,41 @@ class WettedSlabs:
     describe = WettedInterface.describe
 
 
+class VolumeSlabs:
+    """:class:`coupler.fsi.interface.VolumeInterface` on several ranks (a solid without boundary
+    triangles): the pressure of the grid slabs projected onto every vertex of the solid cells held
+    here (distributed pseudo-L2, Q0 -> P1); the interface vector is every solid vertex in its row
+    order, this rank's rows ``block`` of the solid's rows, its weights the lumped solid mass there."""
+
+    method = VolumeInterface.method
+
+    def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str):
+        self.solid, self.rows = solid, solid.held.rows
+        self.block = self.rows.own
+        self.size = solid.held.count
+        self.transfer = assemble(slab.part, solid.part(), "pseudo_l2", comm)
+        uncovered = self.size - self.transfer.num_covered
+        if uncovered:
+            raise CouplerError(f"{where}: the fluid grid does not cover the solid ({uncovered} solid vertices "
+                               f"outside it)")
+        self.weights = self.transfer.row_sums()  # D is diagonal: its row sums are VolumeInterface's weights
+
+    def from_fluid(self, pressure) -> np.ndarray:
+        """The interface vector at `block` from the cell pressure at this rank's slab. Collective."""
+        return self.rows.block(self.solid.vertices, self.transfer.apply(pressure))
+
+    def to_solid_parts(self, x) -> list[np.ndarray]:
+        """The pressure `x` (at `block`) at the input rows of each solid part held here. Collective."""
+        return self.solid.held.inputs(self.block, x)
+
+    describe = VolumeInterface.describe
+
+
 class SolidOnSlabs(SolidOnGrid):
-    """:class:`coupler.fsi.interface.SolidOnGrid` on several ranks (the wetted surface, pressure
-    traction): ``fraction`` and ``to_fluid`` on this rank's slab, ``interface``, rebuilt from the
-    deformed solid by the same rules (:meth:`update`, its reductions over the ranks)."""
+    """:class:`coupler.fsi.interface.SolidOnGrid` on several ranks (pressure traction): ``fraction``
+    and ``to_fluid`` on this rank's slab, ``interface`` (:class:`WettedSlabs`, or :class:`VolumeSlabs`
+    when no rank has a boundary triangle), rebuilt from the deformed solid by the same rules
+    (:meth:`update`, its reductions over the ranks)."""
 
     def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, deform: bool = True,
                  wetted: bool = True):
@@ -182,7 +210,12 @@ class SolidOnSlabs(SolidOnGrid):
         inside, total = comm.allreduce(np.array([volumes.sum(), measure]))
         self.outside = max(1.0 - float(inside) / float(total), 0.0)
         self.to_fluid, self.fraction = to_fluid, volumes / self.slab.cell_volume
-        self.interface = WettedSlabs(comm, solid, self.slab, self.where, points) if self.wetted else None
+        self.interface = None  # a solid the fluid does not load has none
+        if self.wetted and solid.wetted:
+            self.interface = WettedSlabs(comm, solid, self.slab, self.where, points)
+        elif self.wetted:
+            self._check_inside()
+            self.interface = VolumeSlabs(comm, solid, self.slab, self.where)
         self.builds += 1
         self.build_seconds += time.perf_counter() - start
 
@@ -230,9 +263,14 @@ class FluidSolidRanks:
         ctx.phases.add("transfer", time.perf_counter() - start)
         interface = self.on_grid.interface
         self.interface = {**interface.describe(), "traction": scene.coupling["traction"]}
-        ctx.log(f"interface {scene.coupling['interface']}: {interface.size} vertices, {interface.num_triangles} "
-                f"triangles, pressure sampled up to {interface.offset:.3g} m into the fluid ({comm.size} coupler "
-                f"ranks: this rank {len(self.slab.ids)} grid cells, {self.solid.mesh.num_cells} solid cells)")
+        ranks = (f"{comm.size} coupler ranks: this rank {len(self.slab.ids)} grid cells, {self.solid.mesh.num_cells} "
+                 f"solid cells")
+        if self.solid.wetted:
+            ctx.log(f"interface {scene.coupling['interface']}: {interface.size} vertices, {interface.num_triangles} "
+                    f"triangles, pressure sampled up to {interface.offset:.3g} m into the fluid ({ranks})")
+        else:
+            ctx.log(f"interface: no boundary triangles from the solid; pressure projected onto all {interface.size} "
+                    f"solid vertices (volume projection; {ranks})")
         self._seen = None
         #: what each coupler rank holds (summary.json "coupler_ranks")
         self.holdings = comm.allgather({"grid_cells": len(self.slab.ids), "solid_cells": self.solid.mesh.num_cells,
