@@ -59,14 +59,15 @@ Participants that solve nothing, which the runner serves in its own process
     A mesh file and, with ``"field"``, one of its fields, served as its output (P1/Q1 point
     data or P0/Q0 cell data). It accepts any input (a transferred field, which the runner
     writes with its own outputs) and gives ``covered``: 1 at the dofs where every input is
-    finite (a transfer reached them), 0 elsewhere. Config: ``{"file": "path", "field": "name"}``.
+    finite (a transfer reached them), 0 elsewhere. Config: ``{"file": "path", "field": "name",
+    "location": "points"}`` (``"cells"``: its fields' rows are its cells, for P0/Q0 data).
     ``report_figures``: ``reoriented_cells``, cells the file numbers with negative orientation
     (reordered on reading). Its ``geometry`` names the mesh after the file and describes it
     (``note``: cells, points, reordered cells, the field). Bound to rank r of P > 1 (a coupler
     on P ranks serves one on each), it reads the whole file and serves its part
     (docs/protocol.md, "Parts"): its cells as ``mpirun -n P varcouple transfer`` cuts the file
     and the points it owns (:func:`transfer.partition.part_rows`), with point fields at those
-    points.
+    points, cell fields (location ``cells``) at those cells.
 """
 
 from __future__ import annotations
@@ -369,6 +370,7 @@ class MeshFileParticipant(Participant):
 
     def __init__(self):
         self.file = self.field = self.part = None
+        self.location = "points"
 
     def announce(self) -> dict:
         return {"kind": self.kind, "provides": [self.field.name] if self.field else ["covered"], "accepts": ["*"]}
@@ -380,6 +382,9 @@ class MeshFileParticipant(Participant):
         self.file = MeshFile.read(config["file"])
         self.field = self.file.field(config["field"]) if config.get("field") else None
         self.part = part_rows(self.file.mesh, self.rank, self.size) if self.size > 1 else None
+        self.location = config.get("location", "points")
+        if self.location not in ("points", "cells"):
+            raise ValueError(f"location must be 'points' or 'cells', got {self.location!r}")
         log.info("mesh_file %s: %s", self.file.path, self.file.describe())
 
     def geometry(self):
@@ -387,12 +392,19 @@ class MeshFileParticipant(Participant):
             raise RuntimeError("geometry before configure")
         m = self.file.mesh
         note = f"{self.file.path}: {self.file.describe()}" + (f"; {self.field.describe()}" if self.field else "")
-        header = {"cell_type": m.cell_type, "boundaries": {}, "name": self.file.path, "note": note}
+        header = {"cell_type": m.cell_type, "boundaries": {}, "name": self.file.path, "note": note,
+                  "location": self.location}
         if self.part is None:
             return header, {"points": Field("points", m.points, "m"), "cells": Field("cells", m.cells)}
         cells, points = self.part
         return header, {"point_ids": points, "points": Field("points", m.points[points], "m"), "cell_ids": cells,
                         "cells": Field("cells", m.cells[cells])}
+
+    @property
+    def rows(self) -> np.ndarray:
+        """This part's rows of its fields: its cells' ids (location cells) or its points' ids."""
+        cells, points = self.part
+        return cells if self.location == "cells" else points
 
     def advance(self, window, iteration, t, dt, inputs):
         if self.file is None:
@@ -400,7 +412,7 @@ class MeshFileParticipant(Participant):
         self.report_figures(reoriented_cells=self.file.mesh.reoriented)
         out = {}
         if self.field is not None:
-            values = self.field.values if self.part is None else self.field.values[self.part[1]]
+            values = self.field.values if self.part is None else self.field.values[self.rows]
             out[self.field.name] = Field(self.field.name, values)
         if inputs:
             arrays = [np.asarray(f.data).reshape(len(f.data), -1) for f in inputs.values()]

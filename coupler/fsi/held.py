@@ -28,11 +28,12 @@ class Held:
     part order: ``out_ids``), their input rows (``in_ids``) and the latest output fields at
     ``out_ids`` (:attr:`fields`), and for a mesh the coordinates of those rows (:attr:`points`,
     once :meth:`mesh` made it). ``count``: the rows of the whole participant; ``cell_type``: that
-    of the cells of its geometry (:meth:`mesh`)."""
+    of the cells of its geometry (:meth:`mesh`); ``location``: what a row is, a point (``points``)
+    or a cell (``cells``: P0/Q0 fields, the rows the global cell ids of its geometry)."""
 
     def __init__(self, comm, name: str, ranks: list[int], ids: list[np.ndarray], inputs: list[np.ndarray],
-                 cell_type: str = "tetra"):
-        self.comm, self.name, self.ranks, self.cell_type = comm, name, ranks, cell_type
+                 cell_type: str = "tetra", location: str = "points"):
+        self.comm, self.name, self.ranks, self.cell_type, self.location = comm, name, ranks, cell_type, location
         self.ids, self.input_rows = ids, inputs
         self.out_ids = np.concatenate(ids).astype(np.int64) if ids else np.zeros(0, np.int64)
         self.in_ids = np.concatenate(inputs).astype(np.int64) if inputs else np.zeros(0, np.int64)
@@ -64,8 +65,9 @@ class Held:
         return float(np.max(np.linalg.norm(a.reshape(len(a), -1), axis=1))) if a is not None and len(a) else 0.0
 
     def mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
-        """(vertices, mesh): the cells of the parts held here (their `geometry`) on the global
-        `vertices` they use, with the coordinates of those owned elsewhere fetched; made once (the
+        """(rows, mesh): the cells of the parts held here (their `geometry`) on the global vertices
+        they use, with the coordinates of those owned elsewhere fetched, and the global ids of the
+        mesh's rows (its vertices; with ``location`` cells its cells, ``out_ids``); made once (the
         operators and the output share it). Collective the first time."""
         if self._mesh is None:
             self._mesh = self._made_mesh(geometry)
@@ -76,10 +78,21 @@ class Held:
         points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
         cells = [np.asarray(g["cells"], np.int64).reshape(-1, k) for g in geometry]
         cells = np.concatenate(cells) if cells else np.zeros((0, k), np.int64)
+        points = np.concatenate(points) if points else np.zeros((0, 3))
         vertices, local = np.unique(cells, return_inverse=True)
-        self.points = np.concatenate(points) if points else np.zeros((0, 3))
-        reference = self.rows.move(self.out_ids, self.points, vertices).reshape(-1, 3)
+        if self.location == "points":
+            rows, ids = self.rows, self.out_ids
+        else:  # the coordinates are rows of the points, not of the fields
+            ids = [np.asarray(g.get("point_ids", np.arange(len(np.asarray(g["points"]).reshape(-1, 3)))), np.int64)
+                   for g in geometry]
+            ids = np.concatenate(ids) if ids else np.zeros(0, np.int64)
+            rows = Rows(self.comm, self.comm.allreduce(len(ids)))
+        reference = rows.move(ids, points, vertices).reshape(-1, 3)
         name = f"{self.name} part"
-        return vertices, (Mesh(reference, local.reshape(-1, k), self.cell_type, name=name, reorient=True)
-                          if len(cells) else Mesh.empty(self.cell_type, name))
-
+        mesh = (Mesh(reference, local.reshape(-1, k), self.cell_type, name=name, reorient=True) if len(cells)
+                else Mesh.empty(self.cell_type, name))
+        if self.location == "points":
+            self.points = points
+            return vertices, mesh
+        self.points = mesh.points[mesh.cells].mean(axis=1)  # the cells' centroids (their P0 dofs)
+        return self.out_ids, mesh

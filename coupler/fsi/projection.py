@@ -86,29 +86,31 @@ class Projection:
 
 
 class ProjectionRanks(Projection):
-    """:class:`Projection` of a point field (P1/Q1) on the coupler's ranks: between the cells of the
-    parts this rank holds of each participant (:meth:`coupler.fsi.held.Held.mesh`, the global ids
-    of their vertices the dofs of a :class:`transfer.distributed.Part`), the source values fetched
-    at those vertices, the result delivered at the input rows of the target's parts held here."""
+    """:class:`Projection` on the coupler's ranks: between the cells of the parts this rank holds
+    of each participant (:meth:`coupler.fsi.held.Held.mesh`), the global ids of their rows the dofs
+    of a :class:`transfer.distributed.Part` (vertices for P1/Q1, cells for P0/Q0: the participants'
+    ``location``), the source values fetched at those rows, the result delivered at the input rows
+    of the target's parts held here."""
 
     def __init__(self, ctx, exchange, method: str):
         self.comm = ctx.comm
         names = (exchange.sources[0].split(".", 1)[0], exchange.target_participant)
         self.held = {name: ctx.held[name] for name in names}
-        self.parts = {name: self.held[name].mesh(ctx.parts[name]) for name in names}  # (vertices, mesh)
+        self.parts = {name: self.held[name].mesh(ctx.parts[name]) for name in names}  # (rows, mesh)
         super().__init__(ctx, exchange, method)
 
     def spaces(self, kind: str) -> tuple:
-        return tuple(Part(mesh, _family(mesh, kind), vertices)
-                     for vertices, mesh in (self.parts[self.participant], self.parts[self.target_participant]))
+        return tuple(Part(mesh, _family(mesh, kind), rows)
+                     for rows, mesh in (self.parts[self.participant], self.parts[self.target_participant]))
 
     def source_values(self, outputs=None) -> tuple[np.ndarray, str]:
-        vertices, _ = self.parts[self.participant]
-        return self.held[self.participant].fetch(self.field, vertices), "point"
+        rows, _ = self.parts[self.participant]
+        held = self.held[self.participant]
+        return held.fetch(self.field, rows), "cell" if held.location == "cells" else "point"
 
     def deliver(self, value) -> list[np.ndarray]:
-        vertices, _ = self.parts[self.target_participant]
-        return self.held[self.target_participant].inputs(vertices, value)
+        rows, _ = self.parts[self.target_participant]
+        return self.held[self.target_participant].inputs(rows, value)
 
 
 def _family(mesh, kind: str, grid: str | None = None) -> str:

@@ -118,10 +118,6 @@ class RanksRun(Run):
             if p.in_process and p.kind not in SERVED_IN_PARTS:
                 raise SceneError(f"{scene.path}: [solvers.{p.name}]: {p.kind!r} is served whole in the coupler's "
                                  f"process: not {ranks}")
-        transfer = scene.effect_settings.get("transfer")
-        if transfer and transfer["kind"] != "point":
-            raise SceneError(f"{scene.path}: [transfer] field: {transfer['field']!r} is cell data: the projections "
-                             f"of P0/Q0 fields run on one process: not {ranks}")
         for e in plan.exchanges:
             if e.operator not in OPERATORS_RANKS:
                 raise SceneError(f"{scene.path}: [physics] effects: the exchange to {e.target} uses the operator "
@@ -212,7 +208,9 @@ class RanksRun(Run):
         self.summary["sizes"] = {name: {"cells": meshes[name].num_cells, "vertices": meshes[name].num_points}
                                  if name in meshes else
                                  {"cells": comm.allreduce(sum(len(part["cell_ids"]) for part in parts[name])),
-                                  "vertices": held.count} for name, held in self.held.items()}
+                                  "vertices": comm.allreduce(sum(len(np.asarray(part["points"]).reshape(-1, 3))
+                                                                 for part in parts[name]))}
+                                 for name in self.held}
         self.meshes = meshes
         self.context = OperatorContext(self.scene, meshes, {}, self.phases, self.log)
         ranks_context = RanksContext(self.context, comm, self.held, parts)
@@ -276,7 +274,8 @@ class RanksRun(Run):
                                           f"owners")
             ids = [g[location].astype(np.int64) for g in geometry]
             inputs = [g.get("input_ids", g[location]).astype(np.int64) for g in geometry]
-            return Held(self.comm, name, self.clients[name].mine, ids, inputs, header.get("cell_type", "tetra"))
+            return Held(self.comm, name, self.clients[name].mine, ids, inputs, header.get("cell_type", "tetra"),
+                        "cells" if location == "cell_ids" else "points")
 
         return agree(self.comm, held), geometry
 

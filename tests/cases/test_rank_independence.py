@@ -27,6 +27,7 @@ are left out, as is the plan (``participants``: it restates the ranks).
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -78,7 +79,7 @@ def joined(pvtu, like: meshio.Mesh) -> meshio.Mesh:
 def matched(pieces: list[meshio.Mesh], name, like: meshio.Mesh) -> meshio.Mesh:
     """The meshes `pieces` as one mesh in the numbering of `like`, points and cells matched by
     coordinates (a vertex on a cut is in several pieces); every point and cell of `like` must be
-    in a piece."""
+    in a piece (a field may be NaN there: a transfer that did not reach it)."""
     scale = np.max(np.abs(like.points))
 
     def keys(x):
@@ -91,15 +92,17 @@ def matched(pieces: list[meshio.Mesh], name, like: meshio.Mesh) -> meshio.Mesh:
              "cell": {k: i for i, k in enumerate(keys(centres(like)))}}
     data = {"point": {k: np.full(np.shape(v), np.nan) for k, v in like.point_data.items()},
             "cell": {k: np.full(np.shape(v[0]), np.nan) for k, v in like.cell_data.items()}}
+    placed = {kind: {k: np.zeros(len(v), bool) for k, v in fields.items()} for kind, fields in data.items()}
     for piece in pieces:
         for kind, found, at in (("point", piece.point_data, keys(piece.points)),
                                 ("cell", {k: v[0] for k, v in piece.cell_data.items()}, keys(centres(piece)))):
             rows = [where[kind][k] for k in at]
             for k, v in found.items():
                 data[kind][k][rows] = v
-    for kind, fields in data.items():
+                placed[kind][k][rows] = True
+    for kind, fields in placed.items():
         for k, v in fields.items():
-            assert not np.isnan(v).any(), f"{name}: {kind} field {k}: not every row is in a piece"
+            assert v.all(), f"{name}: {kind} field {k}: not every row is in a piece"
     return meshio.Mesh(like.points, like.cells, point_data=data["point"],
                        cell_data={k: [v] for k, v in data["cell"].items()})
 
@@ -122,9 +125,11 @@ def differences(reference, other, by_coordinates: bool = False) -> dict:
         pairs = {"points": (a.points, b.points),
                  **{f"point:{k}": (v, b.point_data[k]) for k, v in a.point_data.items()},
                  **{f"cell:{k}": (v[0], b.cell_data[k][0]) for k, v in a.cell_data.items()}}
-        for field, (x, y) in pairs.items():
-            scale = np.max(np.abs(x))
-            out[f"{name} {field}"] = float(np.max(np.abs(x - y)) / (scale if scale > 0 else 1.0))
+        for field, (x, y) in pairs.items():  # NaN (not reached by a transfer) must be NaN in both
+            x, y, nan = np.asarray(x, float), np.asarray(y, float), np.isnan(x)
+            scale = np.max(np.abs(x[~nan]), initial=0.0)
+            out[f"{name} {field}"] = (float(np.max(np.abs(x - y)[~nan], initial=0.0) / (scale if scale > 0 else 1.0))
+                                      if np.array_equal(nan, np.isnan(y)) else math.inf)
     sa, sb = (dict(_numbers(json.loads((d / "summary.json").read_text()))) for d in (reference, other))
     assert {k for k in sa if not k.startswith("/coupler_ranks/")} == {k for k in sb if not k.startswith("/coupler_ranks/")}
     for key, x in sa.items():

@@ -14,7 +14,9 @@ from cli_helpers import CHECK, TRANSFER_SCENE, assert_clean_error, run_cli, tran
 from coupler.errors import SceneError
 from coupler.plan.plan import make_plan
 from coupler.run import runner
+from coupler.protocol.wire import Field
 from coupler.scene import load
+from coupler.standins import MeshFileParticipant
 from transfer.generate import box_tetrahedra
 from vc_helpers import CASES
 
@@ -51,6 +53,27 @@ def test_a_cell_field_is_written_per_cell(tmp_path, capsys):
     out = meshio.read(tmp_path / "out" / "target_pseudo_l2_0000.vtu")
     np.testing.assert_allclose(out.cell_data["k"][0], 7.0, rtol=1e-12)
     assert out.cell_data["covered"][0].min() == 1 and "k" not in out.point_data
+
+
+def test_a_cell_field_plans_files_whose_rows_are_cells(tmp_path):
+    """The source and every target of a P0/Q0 field are served with location 'cells'; a file's part
+    (rank 1 of 2, as on a coupler of 2 ranks) says so and gives its field and ``covered`` at its own
+    cells, the rows its ``cell_ids`` name."""
+    plan = make_plan(load(case(tmp_path, field="k")))
+    assert [p.config.get("location") for p in plan.participants] == ["cells"] * 3
+    source = box_tetrahedra((2, 2, 2))
+    path = write_mesh(tmp_path / "cells.vtu", source, cell_data={"c": np.arange(source.num_cells, dtype=float)})
+    part = MeshFileParticipant()
+    part.rank, part.size = 1, 2
+    part.configure({"file": str(path), "field": "c", "location": "cells"})
+    header, geometry = part.geometry()
+    cells = np.asarray(geometry["cell_ids"])
+    assert header["location"] == "cells" and 0 < len(cells) < source.num_cells
+    out = part.advance(0, 0, 0.0, 1.0, {"c": Field("c", np.r_[np.nan, np.ones(len(cells) - 1)])})
+    np.testing.assert_array_equal(out["c"].data, cells)
+    np.testing.assert_array_equal(out["covered"].data, np.r_[0, np.ones(len(cells) - 1)])
+    with pytest.raises(ValueError, match="location must be 'points' or 'cells', got 'cell'"):
+        part.configure({"file": str(path), "location": "cell"})
 
 
 def test_where_the_source_does_not_reach_the_target_is_nan_and_not_covered(tmp_path, capsys):

@@ -89,16 +89,17 @@ def plan(scene, plan) -> None:
 
     s = scene.effect_settings[NAME]
     field = s["field"]
+    location = {"location": "cells"} if s["kind"] == "cell" else {}  # the rows of a P0/Q0 field are cells
     plan.participants.append(PlannedParticipant("source", "mesh_file", "coupler.standins", 1,
-                                                {"file": s["source"], "field": field}, in_process=True))
+                                                {"file": s["source"], "field": field, **location}, in_process=True))
     options = {"kind": s["kind"], "fill": "nan", "threads": s["threads"]}
     if s["quadrature_degree"] is not None:
         options["quadrature_degree"] = s["quadrature_degree"]
     space = "P1/Q1 at the points" if s["kind"] == "point" else "P0/Q0 in the cells"
     for method in s["methods"]:
         target = f"target_{method}"
-        plan.participants.append(PlannedParticipant(target, "mesh_file", "coupler.standins", 1, {"file": s["target"]},
-                                                    in_process=True))
+        plan.participants.append(PlannedParticipant(target, "mesh_file", "coupler.standins", 1,
+                                                    {"file": s["target"], **location}, in_process=True))
         plan.exchanges.append(Exchange([f"source.{field}"], f"{target}.{field}", method, "", options=options,
                                        description=f"{space}, T = D^-1 B (paper 2.1, eq. 3-4); NaN where the "
                                                    f"source does not reach"))
