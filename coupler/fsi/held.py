@@ -78,15 +78,14 @@ class Held:
         points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
         cells = [np.asarray(g["cells"], np.int64).reshape(-1, k) for g in geometry]
         cells = np.concatenate(cells) if cells else np.zeros((0, k), np.int64)
-        points = np.concatenate(points) if points else np.zeros((0, 3))
         vertices, local = np.unique(cells, return_inverse=True)
         if self.location == "points":
             rows, ids = self.rows, self.out_ids
         else:  # the coordinates are rows of the points, not of the fields
-            ids = [np.asarray(g.get("point_ids", np.arange(len(np.asarray(g["points"]).reshape(-1, 3)))), np.int64)
-                   for g in geometry]
+            ids = [np.asarray(g.get("point_ids", np.arange(len(p))), np.int64) for g, p in zip(geometry, points)]
             ids = np.concatenate(ids) if ids else np.zeros(0, np.int64)
             rows = Rows(self.comm, self.comm.allreduce(len(ids)))
+        points = np.concatenate(points) if points else np.zeros((0, 3))
         reference = rows.move(ids, points, vertices).reshape(-1, 3)
         name = f"{self.name} part"
         mesh = (Mesh(reference, local.reshape(-1, k), self.cell_type, name=name, reorient=True) if len(cells)
