@@ -182,22 +182,21 @@ struct Evaluator {
 // the bin of its box's lower corner, with a copy of its box (bins in order, each a
 // contiguous run): a query visits the bins of the lower corners that can overlap, the
 // target box widened below by the largest source box, row by row in one sweep each,
-// without duplicates to skip.
+// without duplicates to skip. A grid source is searched by its index arithmetic alone.
 class SourceSearch {
  public:
-  SourceSearch(const ElementSet& src, const GridInfo* grid) : boxes_(src.ncells), grid_(grid) {
-    for (int64_t e = 0; e < src.ncells; ++e)
-      for (int k = 0; k < src.nverts; ++k) boxes_[e].grow(src.vertex(e, k));
+  SourceSearch(const ElementSet& src, const GridInfo* grid) : src_(src), grid_(grid) {
     if (grid_) return;
     BBox all;
     double mean = 0.0;
-    for (const auto& b : boxes_) {
+    for (int64_t e = 0; e < src.ncells; ++e) {
+      const BBox b = box_of(e);
       all.grow(b.lo);
       all.grow(b.hi);
       mean += (b.hi[0] - b.lo[0]) + (b.hi[1] - b.lo[1]) + (b.hi[2] - b.lo[2]);
       for (int d = 0; d < 3; ++d) extent_[d] = std::max(extent_[d], b.hi[d] - b.lo[d]);
     }
-    mean /= std::max<double>(1.0, 3.0 * boxes_.size());
+    mean /= std::max<double>(1.0, 3.0 * src.ncells);
     lo_ = all.lo;
     int64_t total = 1;
     for (int d = 0; d < 3; ++d) {
@@ -205,7 +204,7 @@ class SourceSearch {
       n_[d] = std::max<int64_t>(1, static_cast<int64_t>(ext / std::max(kBinSize * mean, 1e-300)));
       total *= n_[d];
     }
-    while (total > 4 * static_cast<int64_t>(boxes_.size()) + 64) {  // cap the bin count
+    while (total > 4 * src.ncells + 64) {  // cap the bin count
       total = 1;
       for (int d = 0; d < 3; ++d) {
         n_[d] = std::max<int64_t>(1, n_[d] / 2);
@@ -213,23 +212,19 @@ class SourceSearch {
       }
     }
     for (int d = 0; d < 3; ++d) h_[d] = std::max((all.hi[d] - all.lo[d]) / n_[d], 1e-300);
-    std::vector<int64_t> bin(boxes_.size());
+    // the boxes recomputed per pass rather than kept twice (peak memory)
     start_.assign(total + 1, 0);
-    for (size_t e = 0; e < boxes_.size(); ++e) {
-      int64_t r[3];
-      for (int d = 0; d < 3; ++d) r[d] = cell(boxes_[e].lo[d], d);
-      bin[e] = r[0] + n_[0] * (r[1] + n_[1] * r[2]);
-      ++start_[bin[e] + 1];
-    }
+    for (int64_t e = 0; e < src.ncells; ++e) ++start_[bin(box_of(e)) + 1];
     for (int64_t k = 0; k < total; ++k) start_[k + 1] += start_[k];
-    filed_.resize(boxes_.size());
+    filed_.resize(src.ncells);
     std::vector<int64_t> fill(start_.begin(), start_.end() - 1);
-    for (size_t e = 0; e < boxes_.size(); ++e) filed_[fill[bin[e]]++] = {boxes_[e], static_cast<int64_t>(e)};
+    for (int64_t e = 0; e < src.ncells; ++e) {
+      const BBox b = box_of(e);
+      filed_[fill[bin(b)]++] = {b, e};
+    }
   }
 
-  const BBox& box(int64_t e) const { return boxes_[e]; }
-
-  // Calls f(e) once for every source element whose box overlaps `b` within tol.
+  // Calls f(e, box of e) once for every source element whose box overlaps `b` within tol.
   template <class F>
   void for_each(const BBox& b, double tol, F&& f) const {
     int64_t r[3][2] = {{0, 0}, {0, 0}, {0, 0}};
@@ -243,7 +238,15 @@ class SourceSearch {
       }
       for (int64_t k = r[2][0]; k <= r[2][1]; ++k)
         for (int64_t j = r[1][0]; j <= r[1][1]; ++j)
-          for (int64_t i = r[0][0]; i <= r[0][1]; ++i) f(i + grid_->shape[0] * (j + grid_->shape[1] * k));
+          for (int64_t i = r[0][0]; i <= r[0][1]; ++i) {
+            const int64_t ijk[3] = {i, j, k};
+            BBox cell;  // its corners as the grid's points are placed: origin + spacing * index
+            for (int d = 0; d < 3; ++d) {
+              cell.lo[d] = grid_->origin[d] + grid_->spacing[d] * static_cast<double>(ijk[d]);
+              cell.hi[d] = grid_->origin[d] + grid_->spacing[d] * static_cast<double>(ijk[d] + 1);
+            }
+            f(i + grid_->shape[0] * (j + grid_->shape[1] * k), cell);
+          }
       return;
     }
     for (int d = 0; d < 3; ++d) {
@@ -258,13 +261,22 @@ class SourceSearch {
       for (int64_t j = r[1][0]; j <= r[1][1]; ++j) {
         const int64_t row = n_[0] * (j + n_[1] * k);
         for (int64_t q = start_[row + r[0][0]]; q < start_[row + r[0][1] + 1]; ++q)
-          if (filed_[q].box.overlaps(b, tol)) f(filed_[q].e);
+          if (filed_[q].box.overlaps(b, tol)) f(filed_[q].e, filed_[q].box);
       }
   }
 
  private:
   // Bins of about this many mean source box sizes.
   static constexpr double kBinSize = 0.7;
+
+  BBox box_of(int64_t e) const {
+    BBox b;
+    for (int k = 0; k < src_.nverts; ++k) b.grow(src_.vertex(e, k));
+    return b;
+  }
+
+  // The bin of a box: that of its lower corner.
+  int64_t bin(const BBox& b) const { return cell(b.lo[0], 0) + n_[0] * (cell(b.lo[1], 1) + n_[1] * cell(b.lo[2], 2)); }
 
   // The bin of coordinate x along axis d, clamped to the grid.
   int64_t cell(double x, int d) const {
@@ -276,7 +288,7 @@ class SourceSearch {
     BBox box;
     int64_t e;
   };
-  std::vector<BBox> boxes_;
+  const ElementSet& src_;
   const GridInfo* grid_;
   Vec3 lo_{}, h_{}, extent_{0, 0, 0};
   int64_t n_[3] = {1, 1, 1};

@@ -113,6 +113,7 @@ struct CSR {
 // Sum the row pieces of all threads (their last windows merged first) into a CSR matrix
 // with nrows rows and ncols columns (duplicates added in the order of the threads and
 // pieces, columns sorted within each row).
+// `parts` are left empty (their memory goes before the CSR is made).
 CSR to_csr(std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthreads = 1);
 
 // How a target element enters D (paper eqs. 3-4):

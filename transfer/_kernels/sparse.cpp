@@ -1,5 +1,6 @@
 // Row pieces -> CSR with duplicate summation: the pieces (not the entries) sorted by row,
-// then each row's entries summed through a marker per column and sorted (rows in parallel).
+// then each row's entries summed through a marker per column and sorted (rows in parallel);
+// the pieces are emptied on the way.
 #include <algorithm>
 #include <numeric>
 
@@ -135,6 +136,9 @@ CSR to_csr(std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthr
       }
     }
   }
+  // the pieces go before the CSR is made, each block of merged rows once copied (peak memory)
+  std::vector<Piece>().swap(pieces);
+  for (auto& p : parts) p = RowPieces();
   CSR csr;
   csr.indptr.resize(nrows + 1);
   std::partial_sum(unique.begin(), unique.end(), csr.indptr.begin());
@@ -147,6 +151,7 @@ CSR to_csr(std::vector<RowPieces>& parts, int64_t nrows, int64_t ncols, int nthr
       csr.indices[offset + e] = merged[blk][e].col;
       csr.data[offset + e] = merged[blk][e].val;
     }
+    std::vector<Entry>().swap(merged[blk]);
   }
   return csr;
 }

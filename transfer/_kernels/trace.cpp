@@ -141,7 +141,7 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
       if (nt > 1 && !te.init()) continue;
       const double eps = 1e-12 * h + 4 * DBL_EPSILON * h;
       const BBox search_box{add(box.lo, origin), add(box.hi, origin)};
-      search.for_each(search_box, 1e-10 * h, [&](int64_t s) {
+      search.for_each(search_box, 1e-10 * h, [&](int64_t s, const BBox&) {
         ++tested;
         sg.build(src, s, origin, false);
         sg.build_planes();
@@ -163,7 +163,7 @@ AssemblyResult assemble_trace(const ElementSet& src, const ElementSet& tgt, cons
               const Vec3 probe = add(scale(c0, 1.0 / P.n), scale(kTieBreak, 1e-6 * std::min(h, sg.box.diagonal())));
               const Vec3 abs_probe = add(probe, origin);
               bool owned = inside(sg, probe, eps);  // another tet of the same hexahedron
-              if (!owned) search.for_each(BBox{abs_probe, abs_probe}, 0.0, [&](int64_t s2) {
+              if (!owned) search.for_each(BBox{abs_probe, abs_probe}, 0.0, [&](int64_t s2, const BBox&) {
                 if (owned || s2 == s) return;
                 other.build(src, s2, origin, false);
                 other.build_planes();

@@ -529,156 +529,156 @@ AssemblyResult assemble_volume(const ElementSet& src_in, const ElementSet& tgt, 
                                bool dual, bool lump, int64_t n_src_dofs, int64_t n_tgt_dofs,
                                const GridInfo* src_grid, int nthreads, int stages, bool reject) {
   AssemblyResult result(tgt.ncells);
-  ElementSet src = src_in;
-  const bool tet_pairs = src.kind == TET && tgt.kind == TET;
-  // Source vertices cell by cell: one read per candidate where the search visits cells in no
-  // order; tet-tet pairs with rejection read the points through PointDistances instead.
-  std::vector<double> coords;
-  if (!(tet_pairs && reject)) {
-    coords = src.packed_coords();
-    src.cell_coords = coords.data();
-  }
-  const SourceSearch search(src, src_grid);
-  const SourceTets src_tets = tet_pairs ? SourceTets(src) : SourceTets();
-
   const int nth = thread_count(nthreads);
   std::vector<RowPieces> Bparts(nth), Dparts(nth);
   int64_t tested = 0, intersected = 0;
-  const int nt = tgt.nbasis(), ns = src.nbasis();
-  // An empty rule asks for exact integration from moments (affine bases only).
-  const bool exact = rule.npts == 0;
-  if (exact && !(is_affine(src) && is_affine(tgt)))
-    throw std::invalid_argument("exact (moment) integration needs affine bases: P0/P1 on tets, degree 0");
+  {  // the search structures go before the rows are merged (peak memory)
+    ElementSet src = src_in;
+    const bool tet_pairs = src.kind == TET && tgt.kind == TET;
+    // Source vertices cell by cell: one read per candidate where the search visits cells in no
+    // order; tet-tet pairs with rejection read the points through PointDistances instead.
+    std::vector<double> coords;
+    if (!(tet_pairs && reject)) {
+      coords = src.packed_coords();
+      src.cell_coords = coords.data();
+    }
+    const SourceSearch search(src, src_grid);
+    const SourceTets src_tets = tet_pairs ? SourceTets(src) : SourceTets();
+    const int nt = tgt.nbasis(), ns = src.nbasis();
+    // An empty rule asks for exact integration from moments (affine bases only).
+    const bool exact = rule.npts == 0;
+    if (exact && !(is_affine(src) && is_affine(tgt)))
+      throw std::invalid_argument("exact (moment) integration needs affine bases: P0/P1 on tets, degree 0");
 
 #pragma omp parallel num_threads(nth) reduction(+ : tested, intersected)
-  {
-    int tid = 0;
+    {
+      int tid = 0;
 #ifdef _OPENMP
-    tid = omp_get_thread_num();
+      tid = omp_get_thread_num();
 #endif
-    std::vector<int32_t> slot(n_src_dofs, -1);
-    // about 14 source dofs per target cell of P1 tet pairs of similar size: room for 16
-    const size_t cells = tgt.ncells / nth + 1;
-    Bparts[tid].reserve(nt * cells, 16 * nt * cells);
-    Dparts[tid].reserve(nt * cells, (lump ? 1 : nt) * nt * cells);
-    // tet-tet pairs: the first separating-plane test from distances of the source points
-    PointDistances near = reject && !src_tets.empty() ? PointDistances(src.npoints) : PointDistances();
-    LocalAssembly la;
-    Polyhedron poly;
-    ElementGeometry tg, sg;
-    Evaluator tev, sev;
-    Moments pair, total;
-    int64_t tdofs[8], sdofs[8];
-    double phi_t[8], phi_s[8], ct[8], cs[8], block[64];
-    Vec3 gt[8], gs[8];
+      std::vector<int32_t> slot(n_src_dofs, -1);
+      // about 14 source dofs per target cell of P1 tet pairs of similar size: room for 16
+      const size_t cells = tgt.ncells / nth + 1;
+      Bparts[tid].reserve(nt * cells, 16 * nt * cells);
+      Dparts[tid].reserve(nt * cells, (lump ? 1 : nt) * nt * cells);
+      // tet-tet pairs: the first separating-plane test from distances of the source points
+      PointDistances near = reject && !src_tets.empty() ? PointDistances(src.npoints) : PointDistances();
+      LocalAssembly la;
+      Polyhedron poly;
+      ElementGeometry tg, sg;
+      Evaluator tev, sev;
+      Moments pair, total;
+      int64_t tdofs[8], sdofs[8];
+      double phi_t[8], phi_s[8], ct[8], cs[8], block[64];
+      Vec3 gt[8], gs[8];
 
 #pragma omp for schedule(dynamic, 64)
-    for (int64_t t = 0; t < tgt.ncells; ++t) {
-      const Vec3 origin = tgt.vertex(t, 0);
-      tg.build(tgt, t, origin);
-      tev.build(tgt, tg);
-      tgt.dofs(t, tdofs);
-      la.reset(nt, &slot);
-      total = Moments{};
-      const double h = tg.box.diagonal();
-      const double vmin = 1e-15 * tg.measure;
-      if (exact) tev.affine(ct, gt);
-      const bool moments_t = exact && shape(gt, nt, h) <= kSliverShape;
-      const BBox search_box{add(tg.box.lo, origin), add(tg.box.hi, origin)};
-      tg.build_planes();
-      // A source box outside a plane of a convex target (a tet, a box) needs no clipping.
-      const double eps_box = 1e-12 * h + 4 * DBL_EPSILON * h;
-      search.for_each(search_box, 1e-10 * h, [&](int64_t s) {
-        ++tested;
-        if (stages < kReject) return;
-        // the tolerance of the pair's tests and clipping, from the smaller of the two elements
-        auto tolerance = [&](double diagonal) { return 1e-12 * std::min(h, diagonal) + 4 * DBL_EPSILON * h; };
-        double eps = src_tets.empty() ? 0.0 : tolerance(src_tets.diagonal(s));
-        unsigned cuts = 0;
-        if (!near.empty()) {  // source points outside a target plane
-          const int64_t* v = src.cells + 4 * s;
-          const double* d[4];
-          for (int k = 0; k < 4; ++k) d[k] = near.of(v[k], src.points + 3 * v[k], origin, tg.convex[0], t);
-          if (outside_a_plane(d, eps, cuts)) return;
-        } else if (reject && tg.nconvex == 1) {
-          const BBox& b = search.box(s);
-          if (box_outside(sub(b.lo, origin), sub(b.hi, origin), tg.convex[0], eps_box)) return;
-        }
-        sg.build(src, s, origin, false);
-        if (src_tets.empty()) eps = tolerance(sg.box.diagonal());
-        // Clip the tets of the element with fewer of them by the convex pieces
-        // of the other (fewest tet-piece pairs).
-        const bool clip_source = sg.ntets * tg.convex_count() <= tg.ntets * sg.convex_count();
-        const ElementGeometry& subj = clip_source ? sg : tg;
-        ElementGeometry& clipper = clip_source ? tg : sg;
-        clipper.build_planes();
-        // a subject tet whose faces leave a tet clipper outside (the faces of a source tet
-        // are computed once, those of other tets here)
-        const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
-        const bool source_faces = clip_source && !src_tets.empty();  // computed once per source tet
-        auto faces = [&](int k) { return source_faces ? src_tets.faces(s, sg.verts[0]) : tet_planes(subj.tets[k]); };
-        auto separated = [&](int k, unsigned& faces_cut) {
-          if (source_faces) return src_tets.separates(s, sg.verts[0], *other, eps, faces_cut);
-          return outside_a_plane(faces(k), other, 1, eps, faces_cut);
-        };
-        bool prepared = false, any = false, moments = false;
-        const SimplexRule* q_rule = &rule;
-        auto integrate = [&](const Polyhedron& poly) {
-          if (stages < kIntegrate) return;
-          if (!prepared) {
-            src.dofs(s, sdofs);
-            std::fill(block, block + ns * nt, 0.0);
-            if (exact && !src_tets.empty()) {
-              src_tets.affine(s, sg.verts[0], cs, gs);
-              moments = moments_t && src_tets.shape_number(s) <= kSliverShape;
-            } else if (exact) {
-              sev.build(src, sg);
-              sev.affine(cs, gs);
-              moments = moments_t && shape(gs, ns, sg.box.diagonal()) <= kSliverShape;
-            }
-            if (exact && !moments) q_rule = &kDegree2;
-            if (!moments) sev.build(src, sg);
-            pair = Moments{};
-            prepared = true;
+      for (int64_t t = 0; t < tgt.ncells; ++t) {
+        const Vec3 origin = tgt.vertex(t, 0);
+        tg.build(tgt, t, origin);
+        tev.build(tgt, tg);
+        tgt.dofs(t, tdofs);
+        la.reset(nt, &slot);
+        total = Moments{};
+        const double h = tg.box.diagonal();
+        const double vmin = 1e-15 * tg.measure;
+        if (exact) tev.affine(ct, gt);
+        const bool moments_t = exact && shape(gt, nt, h) <= kSliverShape;
+        const BBox search_box{add(tg.box.lo, origin), add(tg.box.hi, origin)};
+        tg.build_planes();
+        // A source box outside a plane of a convex target (a tet, a box) needs no clipping.
+        const double eps_box = 1e-12 * h + 4 * DBL_EPSILON * h;
+        search.for_each(search_box, 1e-10 * h, [&](int64_t s, const BBox& b) {
+          ++tested;
+          if (stages < kReject) return;
+          // the tolerance of the pair's tests and clipping, from the smaller of the two elements
+          auto tolerance = [&](double diagonal) { return 1e-12 * std::min(h, diagonal) + 4 * DBL_EPSILON * h; };
+          double eps = src_tets.empty() ? 0.0 : tolerance(src_tets.diagonal(s));
+          unsigned cuts = 0;
+          if (!near.empty()) {  // source points outside a target plane
+            const int64_t* v = src.cells + 4 * s;
+            const double* d[4];
+            for (int k = 0; k < 4; ++k) d[k] = near.of(v[k], src.points + 3 * v[k], origin, tg.convex[0], t);
+            if (outside_a_plane(d, eps, cuts)) return;
+          } else if (reject && tg.nconvex == 1) {
+            if (box_outside(sub(b.lo, origin), sub(b.hi, origin), tg.convex[0], eps_box)) return;
           }
-          if (moments) {
-            any = poly.add_moments(vmin, pair) || any;
-            return;
-          }
-          poly.for_each_tet([&](const Tet& piece) {
-            const double vol = tet_volume(piece);
-            if (!(vol > vmin)) return;
-            any = true;
-            for (int q = 0; q < q_rule->npts; ++q) {
-              const double* l = &q_rule->bary[4 * q];
-              Vec3 x{0, 0, 0};
-              for (int k = 0; k < 4; ++k) x = add(x, scale(piece.v[k], l[k]));
-              tev.eval(x, phi_t);
-              sev.eval(x, phi_s);
-              la.add_point(q_rule->weights[q] * vol, phi_t, phi_s, ns, block);
+          sg.build(src, s, origin, false);
+          if (src_tets.empty()) eps = tolerance(sg.box.diagonal());
+          // Clip the tets of the element with fewer of them by the convex pieces
+          // of the other (fewest tet-piece pairs).
+          const bool clip_source = sg.ntets * tg.convex_count() <= tg.ntets * sg.convex_count();
+          const ElementGeometry& subj = clip_source ? sg : tg;
+          ElementGeometry& clipper = clip_source ? tg : sg;
+          clipper.build_planes();
+          // a subject tet whose faces leave a tet clipper outside (the faces of a source tet
+          // are computed once, those of other tets here)
+          const Tet* other = clipper.kind == TET ? &clipper.tets[0] : nullptr;  // its faces separate too
+          const bool source_faces = clip_source && !src_tets.empty();  // computed once per source tet
+          auto faces = [&](int k) { return source_faces ? src_tets.faces(s, sg.verts[0]) : tet_planes(subj.tets[k]); };
+          auto separated = [&](int k, unsigned& faces_cut) {
+            if (source_faces) return src_tets.separates(s, sg.verts[0], *other, eps, faces_cut);
+            return outside_a_plane(faces(k), other, 1, eps, faces_cut);
+          };
+          bool prepared = false, any = false, moments = false;
+          const SimplexRule* q_rule = &rule;
+          auto integrate = [&](const Polyhedron& poly) {
+            if (stages < kIntegrate) return;
+            if (!prepared) {
+              src.dofs(s, sdofs);
+              std::fill(block, block + ns * nt, 0.0);
+              if (exact && !src_tets.empty()) {
+                src_tets.affine(s, sg.verts[0], cs, gs);
+                moments = moments_t && src_tets.shape_number(s) <= kSliverShape;
+              } else if (exact) {
+                sev.build(src, sg);
+                sev.affine(cs, gs);
+                moments = moments_t && shape(gs, ns, sg.box.diagonal()) <= kSliverShape;
+              }
+              if (exact && !moments) q_rule = &kDegree2;
+              if (!moments) sev.build(src, sg);
+              pair = Moments{};
+              prepared = true;
             }
-          });
-        };
-        for (int c = 0; c < clipper.nconvex; ++c)
-          clip_convex(subj.tets, subj.ntets, separated, faces, clipper.convex[c], other, eps, reject,
-                      stages >= kClip, exact && tet_pairs, poly, integrate, near.empty() ? nullptr : &cuts);
-        if (!any) return;
-        ++intersected;
-        if (moments) {  // B block from the moments of the intersection
-          pair.products(nt, ct, gt, ns, cs, gs, block);
-          total.merge(pair);
+            if (moments) {
+              any = poly.add_moments(vmin, pair) || any;
+              return;
+            }
+            poly.for_each_tet([&](const Tet& piece) {
+              const double vol = tet_volume(piece);
+              if (!(vol > vmin)) return;
+              any = true;
+              for (int q = 0; q < q_rule->npts; ++q) {
+                const double* l = &q_rule->bary[4 * q];
+                Vec3 x{0, 0, 0};
+                for (int k = 0; k < 4; ++k) x = add(x, scale(piece.v[k], l[k]));
+                tev.eval(x, phi_t);
+                sev.eval(x, phi_s);
+                la.add_point(q_rule->weights[q] * vol, phi_t, phi_s, ns, block);
+              }
+            });
+          };
+          for (int c = 0; c < clipper.nconvex; ++c)
+            clip_convex(subj.tets, subj.ntets, separated, faces, clipper.convex[c], other, eps, reject,
+                        stages >= kClip, exact && tet_pairs, poly, integrate, near.empty() ? nullptr : &cuts);
+          if (!any) return;
+          ++intersected;
+          if (moments) {  // B block from the moments of the intersection
+            pair.products(nt, ct, gt, ns, cs, gs, block);
+            total.merge(pair);
+          }
+          la.add_block(sdofs, ns, block);
+        });
+        if (total.m0 > 0.0) {  // target mass over the overlap, from the summed moments
+          double mass[64];
+          total.products(nt, ct, gt, nt, ct, gt, mass);
+          for (int k = 0; k < nt * nt; ++k) la.m[k] += mass[k];
+          la.overlap += total.m0;
         }
-        la.add_block(sdofs, ns, block);
-      });
-      if (total.m0 > 0.0) {  // target mass over the overlap, from the summed moments
-        double mass[64];
-        total.products(nt, ct, gt, nt, ct, gt, mass);
-        for (int k = 0; k < nt * nt; ++k) la.m[k] += mass[k];
-        la.overlap += total.m0;
+        result.measure[t] = tg.measure;
+        result.overlap[t] = la.overlap;
+        if (stages >= kAll) la.finish(tdofs, tg.measure, dual, lump, Bparts[tid], Dparts[tid]);
       }
-      result.measure[t] = tg.measure;
-      result.overlap[t] = la.overlap;
-      if (stages >= kAll) la.finish(tdofs, tg.measure, dual, lump, Bparts[tid], Dparts[tid]);
     }
   }
   result.pairs_tested = tested;
