@@ -36,11 +36,11 @@ class Rows:
         """The values at the rows `wanted` from every rank's `values` at its rows `held` ((n,) or
         (n, k)); with `add` the values given for one row by several ranks are summed, else they
         must be equal. Rows nobody holds read zero; a rank that holds none gets (k,) columns
-        of the others' width k (scalars when k is 1). Collective."""
+        of the others' width k (scalars when k is 1, or when no rank holds any). Collective."""
         values = np.asarray(values, dtype=np.float64)
         columns = values.reshape(len(held), -1) if len(held) else np.zeros((0, 0))
         width = self.comm.allreduce(columns.shape[1] if len(held) else 0, op=MPI.MAX)
-        out = np.zeros((len(wanted), width))
+        out = np.zeros((len(wanted), max(width, 1)))
         source, target = self._local(held), self._local(wanted)
         for c in range(width):
             self.vec.zeroEntries()

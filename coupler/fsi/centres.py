@@ -15,6 +15,15 @@ CHUNK = 1 << 20
 def centres_inside(S: Mesh, G: StructuredGrid, tolerance: float = 1e-9) -> np.ndarray:
     """Per grid cell (x fastest): True where its centre lies in a tetrahedron of `S`, a point on
     the solid's boundary included (barycentric coordinates >= -`tolerance`)."""
+    inside = np.zeros(G.num_cells, bool)
+    inside[centre_cells(S, G, tolerance)] = True
+    return inside
+
+
+def centre_cells(S: Mesh, G: StructuredGrid, tolerance: float = 1e-9) -> np.ndarray:
+    """The ids of the grid cells (x fastest) whose centre lies in a tetrahedron of `S`
+    (:func:`centres_inside`), sorted, each once: only the cells in the tetrahedra's bounding
+    boxes are looked at, no array of the whole grid is made."""
     origin, h, n = np.asarray(G.origin, float), np.asarray(G.spacing, float), np.asarray(G.shape, np.int64)
     p = np.asarray(S.points)[S.cells]  # (m, 4, 3)
     lo = np.ceil((p.min(axis=1) - origin) / h - 0.5 - tolerance).astype(np.int64)
@@ -23,7 +32,7 @@ def centres_inside(S: Mesh, G: StructuredGrid, tolerance: float = 1e-9) -> np.nd
     extent = np.maximum(hi - lo + 1, 0)  # centres per axis in each tet's bounding box
     counts = extent.prod(axis=1)
     inverse = np.linalg.inv(np.transpose(p[:, 1:] - p[:, :1], (0, 2, 1)))  # x -> barycentric 1..3
-    inside = np.zeros(G.num_cells, bool)
+    found = []
     ends = np.cumsum(counts)
     first = 0
     while first < len(counts):  # tets whose candidate pairs fit in one chunk
@@ -36,6 +45,6 @@ def centres_inside(S: Mesh, G: StructuredGrid, tolerance: float = 1e-9) -> np.nd
         lam = np.einsum("nij,nj->ni", inverse[tets], x - p[tets, 0])
         hit = (lam.min(axis=1) >= -tolerance) & (lam.sum(axis=1) <= 1 + tolerance)
         cells = ijk[hit]
-        inside[cells[:, 0] + n[0] * (cells[:, 1] + n[1] * cells[:, 2])] = True
+        found.append(np.unique(cells[:, 0] + n[0] * (cells[:, 1] + n[1] * cells[:, 2])))
         first = last
-    return inside
+    return np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)

@@ -14,6 +14,8 @@ from transfer import FunctionSpace, Mesh, NoOverlapError, StructuredGrid, Transf
 
 from coupler.errors import CouplerError
 
+from .centres import centres_inside
+
 
 class WettedInterface:
     """Steps 2-3 on the wetted boundary: the trace of the fluid's Q0 pressure on the solid's
@@ -168,7 +170,8 @@ class SolidOnGrid:
     """The solid as the fluid sees it, from the solid's current shape (two-way coupling).
 
     ``fraction``: the solid volume fraction per grid cell (the Q0 projection of the solid's
-    indicator: exact intersection volumes / cell volume); ``to_fluid``: the P1 -> Q0 transfer
+    indicator: exact intersection volumes / cell volume; :meth:`centre_fraction` the binary one
+    of the cell centres); ``to_fluid``: the P1 -> Q0 transfer
     of the solid velocity; ``interface``: the wetted surface (:class:`WettedInterface`) or the
     fallback (:class:`VolumeInterface`), None for a solid the fluid does not load
     (``wetted=False``); ``current``: the solid's mesh as it is now. :meth:`update` rebuilds them
@@ -226,9 +229,19 @@ class SolidOnGrid:
             self._check_inside()
             interface = VolumeInterface(S, self.G, self.where)
         self.to_fluid, self.fraction, self.interface = to_fluid, volumes / self.G.cell_measures(), interface
-        self.current = S
+        self.current, self._centres = S, None
         self.builds += 1
         self.build_seconds += time.perf_counter() - start
+
+    def centre_fraction(self) -> np.ndarray:
+        """The binary fraction (``[flow] solid_fraction = "cell_centre"``): 1 in the grid cells whose
+        centre lies in the solid as it is now, 0 elsewhere; sampled once per build."""
+        if self._centres is None:
+            self._centres = self._centres_inside().astype(np.float64)
+        return self._centres
+
+    def _centres_inside(self) -> np.ndarray:
+        return centres_inside(self.current, self.G)
 
     def _check_inside(self) -> None:
         """The volume fallback's condition: the whole solid inside the grid (CouplerError if not)."""

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .centres import centres_inside
 from .context import OperatorContext, fluid_solid
 from . import open_gap
 from .projection import Projection
@@ -110,19 +109,19 @@ class SolidFraction:
 
     def __init__(self, ctx: OperatorContext, exchange=None):
         self.fs = fluid_solid(ctx)
-        self.centres = (exchange.options.get("fraction", "exact") == "cell_centre") if exchange else False
-        self._mask = None  # (the solid mesh it was sampled on, the mask)
+        self.centres = sampled_at_centres(exchange)
 
-    def evaluate(self, outputs) -> np.ndarray:
+    def evaluate(self, outputs=None) -> np.ndarray:
         on_grid = self.fs.update(outputs)
-        if not self.centres:
-            return on_grid.fraction
-        if self._mask is None or self._mask[0] is not on_grid.current:
-            self._mask = on_grid.current, centres_inside(on_grid.current, on_grid.G).astype(np.float64)
-        return self._mask[1]
+        return on_grid.centre_fraction() if self.centres else on_grid.fraction
 
     def deliver(self, value) -> np.ndarray:
         return value
+
+
+def sampled_at_centres(exchange) -> bool:
+    """Whether the solid fraction of `exchange` is sampled at the cell centres (option ``fraction``)."""
+    return (exchange.options.get("fraction", "exact") == "cell_centre") if exchange else False
 
 
 class SolidVelocity:

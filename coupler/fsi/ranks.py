@@ -28,13 +28,14 @@ from transfer.distributed import Part, assemble
 from transfer.rows import Rows
 
 from . import fracture
+from .centres import centre_cells
 from .fracture import FractureFigures
 from .held import Held
 from .projection import ProjectionRanks
 from .interface import (SolidOnGrid, VolumeInterface, WettedInterface, area_normals, folded_surface,
                         invalid_deformation, sampling_points)
 from .open_gap import open_share
-from .operators import OpenShare
+from .operators import OpenShare, SolidFraction, sampled_at_centres
 
 
 class GridSlab:
@@ -52,6 +53,16 @@ class GridSlab:
         self.block = (lower, upper)  # the cells lower <= (i, j, k) < upper
         self.ids = self.part.global_dofs
         self.cell_volume = float(np.prod(G.spacing))
+
+
+def slab_centres(comm, S: Mesh, slab: GridSlab) -> np.ndarray:
+    """Per cell of this rank's `slab`: whether its centre lies in a tetrahedron of `S` on any
+    rank (each rank its own tetrahedra, wherever they lie): every rank finds the cells its
+    tetrahedra hold a centre of (:func:`coupler.fsi.centres.centre_cells`) and the slab's owner
+    of each gets their OR (a sum over the ranks through :class:`transfer.rows.Rows`); nothing
+    gathered. Collective."""
+    found = centre_cells(S, slab.G)
+    return Rows(comm, slab.G.num_cells).move(found, np.ones(len(found)), slab.ids, add=True) > 0
 
 
 class SolidPart:
@@ -210,6 +221,7 @@ class SolidOnSlabs(SolidOnGrid):
         inside, total = comm.allreduce(np.array([volumes.sum(), measure]))
         self.outside = max(1.0 - float(inside) / float(total), 0.0)
         self.to_fluid, self.fraction = to_fluid, volumes / self.slab.cell_volume
+        self.current, self._centres = part.mesh, None
         self.interface = None  # a solid the fluid does not load has none
         if self.wetted and solid.wetted:
             self.interface = WettedSlabs(comm, solid, self.slab, self.where, points)
@@ -218,6 +230,9 @@ class SolidOnSlabs(SolidOnGrid):
             self.interface = VolumeSlabs(comm, solid, self.slab, self.where)
         self.builds += 1
         self.build_seconds += time.perf_counter() - start
+
+    def _centres_inside(self) -> np.ndarray:
+        return slab_centres(self.comm, self.current, self.slab)
 
     def _largest(self, u: np.ndarray) -> float:
         return self.comm.allreduce(super()._largest(u), op=MPI.MAX)
@@ -280,8 +295,9 @@ class FluidSolidRanks:
                                         "interface_triangles": len(self.solid.triangles),
                                         "interface_rows": len(interface.block)})
 
-    def update(self) -> SolidOnSlabs:
-        """The solid on the slabs as its latest displacement deforms it, once per new output. Collective."""
+    def update(self, outputs=None) -> SolidOnSlabs:
+        """The solid on the slabs as the solid's latest displacement (held here, not `outputs`)
+        deforms it, once per new output. Collective."""
         u = self.solid_held.fields.get("displacement")
         if u is not None and u is self._seen:
             return self.on_grid
@@ -326,17 +342,13 @@ class OpenPressureTraceRanks(OpenShare, PressureTraceRanks):
         return self.fs.on_grid.interface.open_share(self.fs.solid_held)
 
 
-class SolidFractionRanks:
-    """:class:`coupler.fsi.operators.SolidFraction` (exact fractions) on this rank's slab,
-    delivered at the input rows of the fluid parts held here."""
-
-    units = "1"
+class SolidFractionRanks(SolidFraction):
+    """:class:`coupler.fsi.operators.SolidFraction` on this rank's slab (exact, or at the cell
+    centres: :func:`slab_centres`), delivered at the input rows of the fluid parts held here."""
 
     def __init__(self, ctx: RanksContext, exchange=None):
         self.fs = fluid_solid_ranks(ctx)
-
-    def evaluate(self, outputs=None) -> np.ndarray:
-        return self.fs.update().fraction
+        self.centres = sampled_at_centres(exchange)
 
     def deliver(self, value) -> list[np.ndarray]:
         return self.fs.fluid_held.inputs(self.fs.slab.ids, value)

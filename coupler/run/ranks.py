@@ -101,9 +101,9 @@ class RanksRun(Run):
     def admit(scene, plan, comm) -> None:
         """SceneError (every rank) for what needs a whole field on one process: a ``[check]`` kind
         not ``DISTRIBUTED`` (:mod:`coupler.checks`), monitors and operators without a distributed
-        variant (:data:`MONITORS_RANKS`, :data:`OPERATORS_RANKS`), participants served in the
-        coupler's process, cell-centre fractions. The pictures are not refused: they are drawn
-        after the run from the written pieces."""
+        variant (:data:`MONITORS_RANKS`, :data:`OPERATORS_RANKS`), participants served whole in the
+        coupler's process (not :data:`SERVED_IN_PARTS`). The pictures are not refused: they are
+        drawn after the run from the written pieces."""
         P = comm.size
         ranks = f"with {P} coupler ranks ([coupling] ranks or mpirun -n {P})"
         if scene.check and not getattr(checks.KINDS[scene.check["kind"]], "DISTRIBUTED", False):
@@ -123,9 +123,6 @@ class RanksRun(Run):
                 raise SceneError(f"{scene.path}: [physics] effects: the exchange to {e.target} uses the operator "
                                  f"{e.operator!r}, which needs whole fields on one process: not {ranks}; on "
                                  f"several ranks: {', '.join(OPERATORS_RANKS)}")
-            if e.options.get("fraction") == "cell_centre":
-                raise SceneError(f"{scene.path}: [flow] solid_fraction: 'cell_centre' samples the whole solid "
-                                 f"mesh on one process: not {ranks}; use 'exact'")
 
     @staticmethod
     @contextmanager
