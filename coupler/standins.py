@@ -72,6 +72,7 @@ Participants that solve nothing, which the runner serves in its own process
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import sys
 import time
@@ -310,7 +311,39 @@ class Echo(Participant):
 
 
 # -- participants that solve nothing (served in the coupler's process) ------------------------------
-class RigidSolid(Participant):
+class MeshParts:
+    """A mesh every rank of the participant holds whole, served in parts when it is bound to
+    rank r of P > 1 (a coupler on P ranks serves it on each): its cells as ``mpirun -n P
+    varcouple transfer`` cuts a file and the points it owns (:func:`transfer.partition.part_rows`).
+    ``part``: (cells, points) of this rank, None on one rank."""
+
+    part = None
+
+    def cut(self, mesh, what: str) -> None:
+        """This rank's part of `mesh` (`what`: the mesh as the error names it), which must be the
+        same mesh on every rank (ValueError naming the first rank that made another). Collective."""
+        from transfer.partition import part_rows
+
+        if self.size == 1:
+            return
+        digest = hashlib.sha256(np.ascontiguousarray(mesh.points).tobytes()
+                                + np.ascontiguousarray(mesh.cells).tobytes()).hexdigest()
+        other = next((r for r, d in enumerate(self.comm.allgather(digest)) if d != digest), None)
+        if other is not None:
+            raise ValueError(f"{what}: rank {other} made another mesh than rank {self.rank} (each rank "
+                             f"makes it whole: its points and cells must not depend on the rank)")
+        self.part = part_rows(mesh, self.rank, self.size)
+
+    def mesh_fields(self, mesh) -> dict:
+        """The geometry's fields of this rank's part of `mesh` (the whole mesh on one rank)."""
+        if self.part is None:
+            return {"points": Field("points", mesh.points, "m"), "cells": Field("cells", mesh.cells)}
+        cells, points = self.part
+        return {"point_ids": points, "points": Field("points", mesh.points[points], "m"), "cell_ids": cells,
+                "cells": Field("cells", mesh.cells[cells])}
+
+
+class RigidSolid(MeshParts, Participant):
     """A fixed solid: its mesh, zero displacement (see module doc)."""
 
     kind = "rigid_solid"
@@ -325,35 +358,36 @@ class RigidSolid(Participant):
         if "mesh" in config:
             from transfer.meshfile import MeshFile
 
-            mesh = MeshFile.read(config["mesh"]).mesh
+            mesh, made = MeshFile.read(config["mesh"]).mesh, config["mesh"]
         elif "box" in config:
             from transfer.generate import box_tetrahedra
 
             b = config["box"]
             mesh = box_tetrahedra(b["shape"], b["lower"], b["upper"], jitter=float(b.get("jitter", 0.0)),
                                   seed=int(b.get("seed", 0)))
+            made = "its box"
         elif "generator" in config:
             from transfer.generators import generate
 
             g = config["generator"]
-            mesh = generate(g["name"], g.get("parameters")).mesh
+            mesh, made = generate(g["name"], g.get("parameters")).mesh, f"the generator {g['name']!r}"
         else:
             raise ValueError("rigid_solid needs config 'mesh', 'box' or 'generator'")
         if mesh.cell_type != "tetra":
             raise ValueError(f"rigid_solid needs a tetrahedral mesh, got {mesh.cell_type} cells")
+        self.cut(mesh, f"rigid_solid ({made})")
         self.mesh = mesh
         log.info("rigid_solid: %d tetrahedra, %d points", mesh.num_cells, mesh.num_points)
 
     def geometry(self):
         if self.mesh is None:
             raise RuntimeError("geometry before configure")
-        return ({"cell_type": "tetra", "boundaries": {}},
-                {"points": Field("points", self.mesh.points, "m"), "cells": Field("cells", self.mesh.cells)})
+        return {"cell_type": "tetra", "boundaries": {}}, self.mesh_fields(self.mesh)
 
     def advance(self, window, iteration, t, dt, inputs):
         if self.mesh is None:
             raise RuntimeError("advance before configure")
-        zero = np.zeros_like(self.mesh.points)
+        zero = np.zeros((self.mesh.num_points if self.part is None else len(self.part[1]), 3))
         return {"displacement": Field("displacement", zero, "m"), "velocity": Field("velocity", zero, "m/s")}
 
     def save_state(self, window):
@@ -363,13 +397,13 @@ class RigidSolid(Participant):
         pass
 
 
-class MeshFileParticipant(Participant):
+class MeshFileParticipant(MeshParts, Participant):
     """A mesh file, and optionally one of its fields as output (see module doc)."""
 
     kind = "mesh_file"
 
     def __init__(self):
-        self.file = self.field = self.part = None
+        self.file = self.field = None
         self.location = "points"
 
     def announce(self) -> dict:
@@ -377,11 +411,10 @@ class MeshFileParticipant(Participant):
 
     def configure(self, config: dict) -> None:
         from transfer.meshfile import MeshFile
-        from transfer.partition import part_rows
 
         self.file = MeshFile.read(config["file"])
         self.field = self.file.field(config["field"]) if config.get("field") else None
-        self.part = part_rows(self.file.mesh, self.rank, self.size) if self.size > 1 else None
+        self.cut(self.file.mesh, self.file.path)
         self.location = config.get("location", "points")
         if self.location not in ("points", "cells"):
             raise ValueError(f"location must be 'points' or 'cells', got {self.location!r}")
@@ -394,11 +427,7 @@ class MeshFileParticipant(Participant):
         note = f"{self.file.path}: {self.file.describe()}" + (f"; {self.field.describe()}" if self.field else "")
         header = {"cell_type": m.cell_type, "boundaries": {}, "name": self.file.path, "note": note,
                   "location": self.location}
-        if self.part is None:
-            return header, {"points": Field("points", m.points, "m"), "cells": Field("cells", m.cells)}
-        cells, points = self.part
-        return header, {"point_ids": points, "points": Field("points", m.points[points], "m"), "cell_ids": cells,
-                        "cells": Field("cells", m.cells[cells])}
+        return header, self.mesh_fields(m)
 
     @property
     def rows(self) -> np.ndarray:

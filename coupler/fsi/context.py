@@ -54,14 +54,13 @@ class FluidSolid:
         start = time.perf_counter()
         triangles = ctx.geometry["solid"].get("interface_triangles")
         triangles = None if triangles is None else np.asarray(triangles)
-        wetted = scene.coupling["interface"] is not None
+        wetted = loaded(scene)
         self.on_grid = SolidOnGrid(ctx.meshes["solid"], ctx.meshes["fluid"], triangles,
                                    f"{scene.path}: [geometry.fluid]", deform=scene.coupling["deformation"],
                                    traction=scene.coupling["traction"], wetted=wetted)
         ctx.phases.add("transfer", time.perf_counter() - start)
         interface, g = self.on_grid.interface, self.on_grid
-        self.interface = ({**interface.describe(), "traction": scene.coupling["traction"]} if wetted
-                          else {"method": "none (the fluid does not load the solid)"})  # as first built
+        self.interface = described(interface, scene)  # as first built
         if isinstance(interface, WettedInterface):
             ctx.log(f"interface {scene.coupling['interface']}: {interface.num_vertices} vertices, "
                     f"{interface.num_triangles} triangles, pressure sampled up to {interface.offset:.3g} m into "
@@ -93,6 +92,19 @@ class FluidSolid:
 
     def summary(self) -> dict:
         return {"interface": self.interface, "geometry_update": self.on_grid.describe()}
+
+
+def loaded(scene) -> bool:
+    """Whether the fluid loads the solid (a ``[coupling] interface``; not a fixed solid)."""
+    return scene.coupling["interface"] is not None
+
+
+def described(interface, scene) -> dict:
+    """summary.json's ``interface``: what `interface` tells of itself and the traction, or none
+    for a solid the fluid does not load (`interface` None)."""
+    if interface is None:
+        return {"method": "none (the fluid does not load the solid)"}
+    return {**interface.describe(), "traction": scene.coupling["traction"]}
 
 
 def fluid_solid(ctx: OperatorContext) -> FluidSolid:

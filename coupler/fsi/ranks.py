@@ -30,6 +30,7 @@ from transfer.rows import Rows
 from . import fracture
 from .centres import centre_cells
 from .fracture import FractureFigures
+from .context import described, loaded
 from .held import Held
 from .projection import ProjectionRanks
 from .interface import (SolidOnGrid, VolumeInterface, WettedInterface, area_normals, folded_surface,
@@ -274,13 +275,16 @@ class FluidSolidRanks:
         self.ctx, self.solid_held, self.fluid_held = ctx, ctx.held["solid"], ctx.held["fluid"]
         self.slab = GridSlab(comm, ctx.context.meshes["fluid"], where)
         self.solid = SolidPart(comm, self.solid_held, ctx.parts["solid"])
-        self.on_grid = SolidOnSlabs(comm, self.solid, self.slab, where, deform=scene.coupling["deformation"])
+        self.on_grid = SolidOnSlabs(comm, self.solid, self.slab, where, deform=scene.coupling["deformation"],
+                                    wetted=loaded(scene))
         ctx.phases.add("transfer", time.perf_counter() - start)
         interface = self.on_grid.interface
-        self.interface = {**interface.describe(), "traction": scene.coupling["traction"]}
+        self.interface = described(interface, scene)
         ranks = (f"{comm.size} coupler ranks: this rank {len(self.slab.ids)} grid cells, {self.solid.mesh.num_cells} "
                  f"solid cells")
-        if self.solid.wetted:
+        if interface is None:
+            ctx.log(f"the fluid does not load the solid: its fraction only ({ranks})")
+        elif self.solid.wetted:
             ctx.log(f"interface {scene.coupling['interface']}: {interface.size} vertices, {interface.num_triangles} "
                     f"triangles, pressure sampled up to {interface.offset:.3g} m into the fluid ({ranks})")
         else:
@@ -293,7 +297,7 @@ class FluidSolidRanks:
                                         "solid_rows": len(self.solid_held.out_ids),
                                         "fluid_rows": len(self.fluid_held.out_ids),
                                         "interface_triangles": len(self.solid.triangles),
-                                        "interface_rows": len(interface.block)})
+                                        "interface_rows": len(interface.block) if interface else 0})
 
     def update(self, outputs=None) -> SolidOnSlabs:
         """The solid on the slabs as the solid's latest displacement (held here, not `outputs`)

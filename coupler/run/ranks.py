@@ -51,7 +51,7 @@ from transfer import StructuredGrid
 
 
 #: participants served in the coupler's process that a coupler on P ranks serves in P parts
-SERVED_IN_PARTS = ("mesh_file",)
+SERVED_IN_PARTS = ("mesh_file", "rigid_solid")
 
 
 def agree(comm, fn, *args, **kwargs):

@@ -450,7 +450,11 @@ def test_a_check_is_refused(tmp_path):
     assert text.endswith("; on several ranks: exact_transfer, expression, hertz, sneddon, uniaxial")
 
 
-def test_a_rigid_solid_is_refused(tmp_path):
+def test_a_participant_served_whole_is_refused(tmp_path, monkeypatch):
+    """A participant served in the coupler's process that is not served in parts is refused, named."""
+    from coupler.run import ranks
+
+    monkeypatch.setattr(ranks, "SERVED_IN_PARTS", ("mesh_file",))
     scene = (CASES / "parallel_plates" / "scene.toml").read_text()
     text = refusal(tmp_path, "parallel_plates", {scene[scene.index("[check]"):]: ""},
                    append="\n[output]\npictures = false\n")

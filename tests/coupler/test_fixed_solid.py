@@ -91,6 +91,64 @@ def test_a_rigid_solid_serves_its_mesh_and_stays_put():
         client.configure({})
 
 
+class RankOfTwo:
+    """Rank `rank` of two coupler ranks whose other rank made the mesh of digest `other` (None: the same)."""
+
+    def __init__(self, rank: int, other=None):
+        self.rank, self.other = rank, other
+
+    def Get_rank(self):
+        return self.rank
+
+    def Get_size(self):
+        return 2
+
+    def allgather(self, value):
+        mine = [value, value]
+        mine[1 - self.rank] = self.other or value
+        return mine
+
+
+BOX = {"box": {"lower": [0, 0, 0], "upper": [1, 2, 3], "shape": [2, 2, 1], "jitter": 0.2, "seed": 1}}
+
+
+def test_a_rigid_solid_on_two_ranks_serves_its_part():
+    """Bound to rank r of 2 (a coupler on 2 ranks serves it on each), it serves part r of its mesh
+    (transfer.partition.part_rows): the cells of both parts are the mesh's once, each point owned
+    once, and its outputs are the zero rows of the points it owns."""
+    whole = LocalClient("solid", RigidSolid())
+    whole.configure(BOX)
+    mesh = whole.handler.mesh
+    seen_cells, seen_points = [], []
+    for rank in (0, 1):
+        solid = RigidSolid()
+        solid.bind("r1", "solid", RankOfTwo(rank))
+        client = LocalClient("solid", solid)
+        client.configure(BOX)
+        (part,) = client.exchange("geometry", None, [None, None])
+        f = {k: np.asarray(getattr(v, "data", v)) for k, v in part.fields.items()}
+        np.testing.assert_array_equal(f["cells"], mesh.cells[f["cell_ids"]])
+        np.testing.assert_array_equal(f["points"], mesh.points[f["point_ids"]])
+        (out,) = client.exchange("advance", {"window": 0, "iteration": 0, "t": 0.0, "dt": 1.0}, [None, None])
+        assert out.fields["displacement"].data.shape == (len(f["point_ids"]), 3)
+        assert not np.any(out.fields["velocity"].data)
+        seen_cells.append(f["cell_ids"])
+        seen_points.append(f["point_ids"])
+    assert all(len(c) for c in seen_cells)
+    np.testing.assert_array_equal(np.sort(np.concatenate(seen_cells)), np.arange(mesh.num_cells))
+    np.testing.assert_array_equal(np.sort(np.concatenate(seen_points)), np.arange(mesh.num_points))
+
+
+def test_a_rigid_solid_made_otherwise_on_another_rank_is_an_error():
+    """Each rank makes the whole mesh: one that made another (a generator that depended on the rank)
+    fails the configure, naming how it was made and the rank."""
+    solid = RigidSolid()
+    solid.bind("r1", "solid", RankOfTwo(1, other="another digest"))
+    with pytest.raises(ParticipantError, match=r"rigid_solid \(its box\): rank 0 made another mesh than rank 1 "
+                                               r"\(each rank makes it whole"):
+        LocalClient("solid", solid).configure(BOX)
+
+
 def test_a_plan_served_in_process_opens_no_session():
     plan = make_plan(load(CASE))
     with processes(load(CASE), plan, "r1", "logs") as (session, launcher):
