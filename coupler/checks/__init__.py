@@ -15,7 +15,8 @@ Each kind is one module of this package (``[check] kind = "NAME"``, default
 - ``describe(report) -> str``: the comparison as one line for the log;
 - ``DISTRIBUTED = True`` when ``evaluate`` makes every figure of local sums, maxima and minima
   combined by ``Result.sums`` (:class:`coupler.coupling.row_sums.RowSums`) over the rows a rank
-  counts (``Result.rows``) or the cells of its pieces (``Result.meshes``, ``Result.fields``):
+  counts (``Result.rows``) or the cells of its pieces (``Result.meshes``, ``Result.fields``; a
+  grid's piece is a block of it, ``Result.grid``):
   such a kind also runs on a coupler of several ranks (docs/scaling.md, step 3); the others
   compare whole meshes on one process and are refused there.
 
@@ -52,20 +53,27 @@ class Result:
     last step.
 
     On a coupler of several ranks (`comm`) ``meshes`` and ``fields`` are this rank's pieces (each
-    cell in one piece, a vertex on a cut in several: sums over cells add up) and ``held`` the rows
+    cell in one piece, a vertex on a cut in several: sums over cells add up), ``held`` the rows
     each rank counts once (a participant's vertices or cells held here, disjoint over the ranks:
-    their coordinates and fields), which :meth:`rows` gives; on one process (`comm` None) both
-    are the whole mesh."""
+    their coordinates and fields), which :meth:`rows` gives, and ``grids`` each grid's whole grid
+    and the block of its cells this rank's piece is, which :meth:`grid` gives; on one process
+    (`comm` None) these are the whole mesh."""
 
     meshes: dict
     fields: dict
     figures: dict = field(default_factory=dict)
     comm: object = None
     held: dict = field(default_factory=dict)
+    grids: dict = field(default_factory=dict)
 
     def rows(self, name: str) -> tuple:
         """(points, fields) of the rows of participant `name` that this rank counts (module doc)."""
         return self.held[name] if name in self.held else (self.meshes[name].points, self.fields[name])
+
+    def grid(self, name: str) -> tuple:
+        """(grid, block) of grid participant `name`: the whole grid and this rank's piece of it,
+        ``(lower, upper)`` cell indices (None: the whole grid, on one process)."""
+        return self.grids[name] if name in self.grids else (self.meshes[name], None)
 
     @property
     def sums(self) -> RowSums:

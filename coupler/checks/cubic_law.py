@@ -7,6 +7,10 @@ The flow rate is measured through every cross-section of the grid (a column of c
 per unit width: the cells' x velocity times their height across the aperture, summed across
 and averaged over the width) and averaged along x; their spread tells how well the discrete
 flow conserves mass.
+
+On a coupler of P ranks (``DISTRIBUTED``) each rank sums the cells of its slab of the grid into
+the sections (:func:`coupler.fsi.flow_rate.section_flow_rates` with its block and ``comm``: one
+allreduce of nx numbers), and every rank has the whole grid's flow rates.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import numpy as np
 from coupler.fsi.flow_rate import section_flow_rates
 
 KIND = "cubic_law"
+DISTRIBUTED = True
 DESCRIPTION = "the flow rate through a gap against the cubic law w^3 dp / (12 mu L)"
 KEYS = {"aperture": "w, the gap [m] (default: the aperture parameter of the [geometry.solid] generator)",
         "across": "the grid axis across the gap, 'y' (default) or 'z'; the other one is the width",
@@ -59,17 +64,19 @@ def parse(table, scene) -> dict:
             "pressure_drop": dp, "viscosity": scene.fluid_material["viscosity"], "length": g.spacing[0] * g.shape[0]}
 
 
-def flow_rates(grid, velocity: np.ndarray, across: int) -> np.ndarray:
+def flow_rates(grid, velocity: np.ndarray, across: int, block=None, comm=None) -> np.ndarray:
     """The flow rate per unit width through each cross-section x = const of `grid` (one per
     column of cells along x) [m^2/s]; `across`: the axis (1 or 2) across the gap, the other
-    one (2 or 1) is the width."""
+    one (2 or 1) is the width; `velocity` at the cells of `block` (the whole grid when None),
+    summed over the ranks of `comm` (:func:`coupler.fsi.flow_rate.section_flow_rates`)."""
     width = 3 - across
-    return section_flow_rates(grid, velocity) / (grid.spacing[width] * grid.shape[width])
+    return section_flow_rates(grid, velocity, block, comm) / (grid.spacing[width] * grid.shape[width])
 
 
 def evaluate(settings, scene, result) -> dict:
     across = "xyz".index(settings["across"])
-    Q = flow_rates(result.meshes["fluid"], result.fields["fluid"]["velocity"], across)
+    grid, block = result.grid("fluid")
+    Q = flow_rates(grid, result.fields["fluid"]["velocity"], across, block, result.comm)
     w, dp, mu, L = (settings["aperture"], found_pressure_drop(settings, scene, result), settings["viscosity"],
                     settings["length"])
     q_cubic = w ** 3 * dp / (12 * mu * L)

@@ -9,6 +9,9 @@ whole periods the limits are, with the means over one period,
 
 - along the flow (apertures in series): e_h^3 = 1 / mean(1 / e^3) = e0^3 (1 - a^2)^(5/2) / (1 + a^2 / 2),
 - across the flow (in parallel): e_h^3 = mean(e^3) = e0^3 (1 + 3 a^2 / 2).
+
+On a coupler of P ranks (``DISTRIBUTED``) Q is summed from each rank's slab of the grid, as
+``cubic_law``'s.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from coupler.fsi.flow_rate import section_flow_rates
 from .cubic_law import found_pressure_drop, pressure_drop
 
 KIND = "lubrication"
+DISTRIBUTED = True
 DESCRIPTION = "the hydraulic aperture through a sinusoidal aperture against its lubrication limit (series or parallel)"
 KEYS = {"aperture": "e0, the mean aperture [m] (default: the [geometry.solid] generator wavy_plates' aperture)",
         "amplitude": "a, the relative amplitude (default: the generator's)",
@@ -59,7 +63,8 @@ def parse(table, scene) -> dict:
 
 def evaluate(settings, scene, result) -> dict:
     e0, a = settings["aperture"], settings["amplitude"]
-    rate = float(section_flow_rates(result.meshes["fluid"], result.fields["fluid"]["velocity"]).mean())
+    grid, block = result.grid("fluid")
+    rate = float(section_flow_rates(grid, result.fields["fluid"]["velocity"], block, result.comm).mean())
     e_h = hydraulic_aperture(rate, settings["viscosity"], settings["length"], settings["width"],
                              found_pressure_drop(settings, scene, result))
     series, parallel = series_limit(e0, a), parallel_limit(e0, a)

@@ -216,16 +216,17 @@ class RanksRun(Run):
         self.monitors = agree(comm, lambda: {name: MONITORS_RANKS[name][0](ranks_context)
                                              for name in self.plan.monitors})
         self.summary.update(self.context.summary())
+        self.slabs = agree(comm, lambda: {name: GridSlab(comm, grid, f"{self.scene.path}: [geometry.{name}]")
+                                          for name, grid in meshes.items()})
         self.pieces = agree(comm, lambda: {name: self.piece(name, parts[name]) for name in self.held})
         self.series = {name: Series(self.out, name, mesh, comm) for name, (mesh, _) in self.pieces.items()}
 
     def piece(self, name: str, geometry: list[dict]):
         """(mesh, row ids): what this rank writes of participant `name`: its slab of a grid
-        (:class:`coupler.fsi.ranks.GridSlab`, cell rows), or the tetrahedra of the parts held here
-        on the vertices they use (point rows). Collective."""
-        if name in self.meshes:
-            slab = GridSlab(self.comm, self.meshes[name], f"{self.scene.path}: [geometry.{name}]")
-            return slab.part.mesh, slab.ids
+        (:attr:`slabs`, cell rows), or the tetrahedra of the parts held here on the vertices they
+        use (point rows). Collective."""
+        if name in self.slabs:
+            return self.slabs[name].part.mesh, self.slabs[name].ids
         vertices, mesh = self.held[name].mesh(geometry)
         return mesh, vertices
 
@@ -320,8 +321,9 @@ class RanksRun(Run):
 
     def result(self) -> checks.Result:
         """Each participant's piece of this rank (:meth:`piece`) with its final fields, the rows
-        held here (their coordinates, outputs and inputs moved to them), the last figures and
-        `comm`: what a distributed check kind sums over (:class:`coupler.checks.Result`). Collective."""
+        held here (their coordinates, outputs and inputs moved to them), each grid's slab, the
+        last figures and `comm`: what a distributed check kind sums over
+        (:class:`coupler.checks.Result`). Collective."""
         held = {}
         for name, h in self.held.items():
             if h.points is not None:
@@ -329,7 +331,8 @@ class RanksRun(Run):
                 held[name] = (h.points, {**inputs, **h.fields})
         return checks.Result(meshes={name: mesh for name, (mesh, _) in self.pieces.items()},
                              fields={name: self.piece_fields(name) for name in self.held},
-                             figures=dict(self.figures), comm=self.comm, held=held)
+                             figures=dict(self.figures), comm=self.comm, held=held,
+                             grids={name: (slab.G, slab.block) for name, slab in self.slabs.items()})
 
     def execute(self, progress) -> dict:
         """The run; a failure on this rank that the other ranks do not share within
