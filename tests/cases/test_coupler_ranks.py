@@ -333,24 +333,30 @@ def assert_same_but_round_off(serial, ranks, label: str) -> dict:
     return found
 
 
-#: the shipped fixed-solid cases, pictures off; parallel_plates with the Chorin fluid
+#: the shipped fixed-solid cases, pictures off; parallel_plates with the Chorin fluid, its fraction exact and
+#: at the cell centres
 NO_PICTURES = {"steps = 1\n": "steps = 1\n\n[output]\npictures = false\n"}
-FIXED_SOLID = {"parallel_plates": {**NO_PICTURES, 'participant = "openfoam"': 'participant = "chorin"  #',
-                                   "max_iterations = 5000\n": ""},
-               "lubrication": NO_PICTURES}
+PLATES = {**NO_PICTURES, 'participant = "openfoam"': 'participant = "chorin"  #', "max_iterations = 5000\n": ""}
+FIXED_SOLID = {"parallel_plates": ("parallel_plates", PLATES),
+               "parallel_plates, cell centres": ("parallel_plates", {
+                   **PLATES, 'solid_fraction = "exact" ': 'solid_fraction = "cell_centre" '}),
+               "lubrication": ("lubrication", NO_PICTURES)}
 
 
 @needs_mpi
-@pytest.mark.parametrize("case", FIXED_SOLID)
-def test_a_fixed_solid_and_its_check_on_two_and_three_coupler_ranks(tmp_path, case):
+@pytest.mark.parametrize("label", FIXED_SOLID)
+def test_a_fixed_solid_and_its_check_on_two_and_three_coupler_ranks(tmp_path, label):
     """The fixed solid (rigid_solid, served in the coupler's process) in parts, coupler rank r its part
     r of the generated mesh, and the one-way plan (the solid fraction only): on 2 and 3 coupler ranks
     every field (the pieces joined), every figure and the check's report (flow rates through the
     sections x = const summed from each rank's grid slab) equal the one-rank coupler's to 1e-10, the
     check passing as serially."""
-    serial = case_run(tmp_path, case, 1, FIXED_SOLID[case])
+    case, replace = FIXED_SOLID[label]
+    serial = case_run(tmp_path, case, 1, replace)
+    fraction = meshio.read(serial / "fluid_0000.vtu").cell_data["solid_fraction"][0]
+    assert (set(np.unique(fraction)) == {0.0, 1.0}) is ("cell centres" in label)
     for p in (2, 3):
-        ranks = case_run(tmp_path, case, p, FIXED_SOLID[case])
+        ranks = case_run(tmp_path, case, p, replace)
         found = assert_same_but_round_off(serial, ranks, f"{case}, coupler on {p} ranks")
         assert "fluid_0000.vtu cell:solid_fraction" in found and "solid_0000.vtu point:displacement" in found
         reports = [summary(d)["check"] for d in (serial, ranks)]
