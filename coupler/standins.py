@@ -53,7 +53,9 @@ Participants that solve nothing, which the runner serves in its own process
     A fixed solid: its tetrahedral mesh, and zero displacement and velocity in every
     ``advance`` (no inner solve). Config: ``{"mesh": "file"}`` (any format meshio reads),
     ``{"box": {...}}`` (as ``spring_solid``) or ``{"generator": {"name": ..., "parameters":
-    {...}}}`` (:mod:`transfer.generators`).
+    {...}}}`` (:mod:`transfer.generators`). Bound to rank r of P > 1, it makes or reads the whole
+    mesh, checks that every rank has the same, and serves its part as ``mesh_file`` does
+    (:class:`MeshParts`), its outputs at the points it owns.
 
 ``mesh_file``
     A mesh file and, with ``"field"``, one of its fields, served as its output (P1/Q1 point
@@ -66,8 +68,8 @@ Participants that solve nothing, which the runner serves in its own process
     (``note``: cells, points, reordered cells, the field). Bound to rank r of P > 1 (a coupler
     on P ranks serves one on each), it reads the whole file and serves its part
     (docs/protocol.md, "Parts"): its cells as ``mpirun -n P varcouple transfer`` cuts the file
-    and the points it owns (:func:`transfer.partition.part_rows`), with point fields at those
-    points, cell fields (location ``cells``) at those cells.
+    and the points it owns (:func:`transfer.partition.part_rows`; :class:`MeshParts`), with point
+    fields at those points, cell fields (location ``cells``) at those cells.
 """
 
 from __future__ import annotations

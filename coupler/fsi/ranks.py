@@ -4,8 +4,9 @@ and shape) and the solid parts assigned to it (:class:`SolidPart`), and the oper
 distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the deformed solid
 (:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3; on
 the open faces of a fracture in contact; onto every solid vertex for a solid without boundary
-triangles, :class:`VolumeSlabs`), the solid fraction and the solid velocity on the grid
-(Step 6, before Step 1); the projections between two participants' meshes (``l2``,
+triangles, :class:`VolumeSlabs`; none for a fixed solid the fluid does not load), the solid
+fraction (exact, or at the cell centres: :func:`slab_centres`) and the solid velocity on the
+grid (Step 6, before Step 1); the projections between two participants' meshes (``l2``,
 ``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`); and the fracture's figures per
 step (:class:`FractureFiguresRanks`).
 

@@ -8,9 +8,10 @@ own zenoh session, a peer, to which the participant ranks it talks to link direc
 (:meth:`RanksRun.processes`). Each coupler rank talks to the participant ranks assigned to it
 (round-robin, :func:`coupler.fsi.held.assigned`): it sends their requests and receives their
 parts directly, no other process routing them, and holds their rows
-(:class:`coupler.fsi.held.Held`). A participant served in the coupler's process (a ``mesh_file``)
-is served on every coupler rank, each its own part of it (:meth:`coupler.run.local.LocalClient.exchange`):
-to the run, a participant of P parts, coupler rank r holding part r. The operators are the
+(:class:`coupler.fsi.held.Held`). A participant served in the coupler's process (a ``mesh_file``,
+the fixed solid ``rigid_solid``: :data:`SERVED_IN_PARTS`) is served on every coupler rank, each its
+own part of it (:meth:`coupler.run.local.LocalClient.exchange`): to the run, a participant of P
+parts, coupler rank r holding part r. The operators are the
 distributed ones of :mod:`coupler.fsi.ranks`. Whatever fails on one rank is raised on every
 rank (:func:`agree`).
 
@@ -22,8 +23,8 @@ participant it works on (:meth:`RanksRun.piece`: a ``.pvtu`` of per-rank ``.vtu`
 (``DISTRIBUTED``) is evaluated from each rank's pieces and rows (:meth:`RanksRun.result`); the
 pictures are drawn after the run by rank 0 from the written pieces
 (:func:`coupler.output.publish.publish`). Operators, check kinds and monitors that need a whole
-field on one process refuse P > 1
-(:meth:`RanksRun.admit`)."""
+field on one process refuse P > 1 (:meth:`RanksRun.admit`: ``traction = "full"`` and the flow-rate
+control)."""
 
 from __future__ import annotations
 
