@@ -3,8 +3,10 @@ the Chorin fluid gives the one-rank coupler's fields and summary to 1e-10 with t
 ranks, each coupler rank holding a slab of the grid and the solid parts of its solid ranks (never
 the whole solid); the transfer effect (mesh files served in parts, the l2 and pseudo_l2
 projections distributed, the exact_transfer check from sums over the ranks' pieces) gives the
-one-rank run's fields, figures and check to 1e-10; what still needs a whole field on one process
-refuses P > 1 with one line naming the scene file, the key and the reason."""
+one-rank run's fields, figures and check to 1e-10, and so do the fixed solid served in parts with
+its checks cubic_law and lubrication (parallel_plates, lubrication on 2 and 3 ranks) and the
+fraction sampled at the cell centres; what still needs a whole field on one process refuses P > 1
+with one line naming the scene file, the key and the reason."""
 
 from __future__ import annotations
 
