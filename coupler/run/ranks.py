@@ -15,7 +15,9 @@ distributed ones of :mod:`coupler.fsi.ranks`. Whatever fails on one rank is rais
 rank (:func:`agree`).
 
 Nothing is gathered: each rank gives the accelerator and the loop its own rows of the interface
-vector and their weights (``comm``: docs/scaling.md, step 4), writes the piece of each
+vector and their weights (``comm``: docs/scaling.md, step 4; a flow rate's pressure difference is
+rank 0's row, and the inlet pressure it makes goes whole to each fluid part: :attr:`RanksRun.singles`,
+in no piece, as the serial run writes it in no VTU), writes the piece of each
 participant it works on (:meth:`RanksRun.piece`: a ``.pvtu`` of per-rank ``.vtu`` files, step
 5), and the summary's figures are reduced over the ranks (rank 0 writes it; the monitors of
 :data:`coupler.fsi.ranks.MONITORS_RANKS` reduce their own). A ``[check]`` of a distributed kind
@@ -218,6 +220,10 @@ class RanksRun(Run):
                                               for e in self.plan.exchanges])
         self.monitors = agree(comm, lambda: {name: MONITORS_RANKS[name][0](ranks_context)
                                              for name in self.plan.monitors})
+        #: (participant, field) of the inputs of one value for the whole participant (the flow-rate
+        #: control's inlet pressure): each part gets it whole, they are not rows
+        self.singles = {(e.target_participant, e.target_field) for e, op in zip(self.plan.exchanges, self.operators)
+                        if getattr(op, "single", False)}
         self.summary.update(self.context.summary())
         self.pieces = agree(comm, lambda: {name: self.piece(name, parts[name]) for name in self.held})
         self.series = {name: Series(self.out, name, mesh, comm) for name, (mesh, _) in self.pieces.items()}
@@ -316,10 +322,17 @@ class RanksRun(Run):
         """Participant `name`'s latest outputs and inputs (and `accepted`, inputs per part) at the
         rows of this rank's piece (:meth:`piece`), each in its own dtype. Collective."""
         held, (_, ids) = self.held[name], self.pieces[name]
-        inputs = {**self.inputs.get(name, {}), **(accepted or {})}
         fields = {k: held.rows.move(held.out_ids, v, ids).astype(v.dtype) for k, v in held.fields.items()}
-        fields.update({k: held.rows.move(held.in_ids, _rows(v), ids) for k, v in inputs.items()})
+        fields.update({k: held.rows.move(held.in_ids, _rows(v), ids)
+                       for k, v in self._row_inputs(name, accepted).items()})
         return fields
+
+    def _row_inputs(self, name: str, accepted: dict | None = None) -> dict:
+        """Participant `name`'s latest inputs (and `accepted`) given by rows, per part; those of
+        one value (:attr:`singles`) left to the step's figures, as the serial run's
+        :func:`coupler.run.runner.mesh_fields` leaves them."""
+        inputs = {**self.inputs.get(name, {}), **(accepted or {})}
+        return {k: v for k, v in inputs.items() if (name, k) not in self.singles}
 
     def result(self) -> checks.Result:
         """Each participant's piece of this rank (:meth:`piece`) with its final fields, the rows
@@ -328,7 +341,7 @@ class RanksRun(Run):
         held = {}
         for name, h in self.held.items():
             if h.points is not None:
-                inputs = {k: h.rows.move(h.in_ids, _rows(v), h.out_ids) for k, v in self.inputs.get(name, {}).items()}
+                inputs = {k: h.rows.move(h.in_ids, _rows(v), h.out_ids) for k, v in self._row_inputs(name).items()}
                 held[name] = (h.points, {**inputs, **h.fields})
         return checks.Result(meshes={name: mesh for name, (mesh, _) in self.pieces.items()},
                              fields={name: self.piece_fields(name) for name in self.held},
