@@ -28,13 +28,14 @@ class FractureFigures:
 
     comm = None
     block = None  # the cells of the grid whose fraction and velocity :meth:`local` gives (None: all)
+    rate_control = FlowRateControl  # the pressure difference of a flow rate, shared with its exchange
 
     def __init__(self, ctx: OperatorContext):
         scene, g = ctx.scene, ctx.scene.fluid
         self.ctx = ctx
         flow = scene.effect_settings["flow"]
         # a flow rate: dp is what the rate control found (coupler/fsi/rate_control.py)
-        self.control = ctx.shared("flow_rate_control", FlowRateControl) if "flow_rate" in flow["inlet"] else None
+        self.control = ctx.shared("flow_rate_control", self.rate_control) if "flow_rate" in flow["inlet"] else None
         self.fixed_drop = flow["inlet"].get("pressure", 0.0) - flow["outlet"]["pressure"]
         self.length, self.width = g.spacing[0] * g.shape[0], g.spacing[1] * g.shape[1]
         self.viscosity = scene.fluid_material["viscosity"]

@@ -7,13 +7,15 @@ the open faces of a fracture in contact; onto every solid vertex for a solid wit
 triangles, :class:`VolumeSlabs`; none for a fixed solid the fluid does not load), the solid
 fraction (exact, or at the cell centres: :func:`slab_centres`) and the solid velocity on the
 grid (Step 6, before Step 1); the projections between two participants' meshes (``l2``,
-``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`); and the fracture's figures per
-step (:class:`FractureFiguresRanks`).
+``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`); the pressure difference of a
+flow rate (:class:`FlowRateControlRanks`); and the fracture's figures per step
+(:class:`FractureFiguresRanks`).
 
 The interface vector of the fixed point (one pressure per interface vertex, numbered as the
 serial run numbers them: by increasing solid vertex id) is split by rows over the ranks
 (:class:`transfer.rows.Rows`' blocks): each rank gives the accelerator and the loop its own
-rows and their weights (docs/scaling.md, step 4), nothing is gathered."""
+rows and their weights (docs/scaling.md, step 4), nothing is gathered. The flow-rate control's
+one unknown, dp, is rank 0's row; every rank knows it once delivered."""
 
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ from .fracture import FractureFigures
 from .context import described, loaded
 from .held import Held
 from .projection import ProjectionRanks
+from .rate_control import FlowRateControl
 from .interface import (SolidOnGrid, VolumeInterface, WettedInterface, area_normals, folded_surface,
                         invalid_deformation, sampling_points)
 from .open_gap import open_share
@@ -258,6 +261,11 @@ class RanksContext:
     def shared(self, key: str, build):
         return self.context.shared(key, lambda _: build(self))
 
+    @property
+    def window(self):
+        """The time window of the coupling iteration under way (the runner sets the context's)."""
+        return self.context.window
+
     def warn(self, texts) -> None:
         self.context.warn(texts)
 
@@ -370,14 +378,34 @@ class SolidVelocityRanks(SolidFractionRanks):
         return on_grid.to_fluid.apply(self.fs.solid_held.fetch("velocity", self.fs.solid.vertices), fill=0.0)
 
 
-class FractureFiguresRanks(FractureFigures):
-    """:class:`coupler.fsi.fracture.FractureFigures` on several ranks: the rows of the solid held
-    here, this rank's slab of the grid and its rows of the interface vector; the figures summed
-    (and the open cells labelled) over the ranks."""
+class OnSlab:
+    """What a figure summed over the grid's slabs reads on a coupler rank: the solid as this rank's
+    slab sees it (``fs``), the whole grid (``grid``), the slab's cells (``block``) and ``comm``."""
 
     def hold(self, ctx: RanksContext) -> None:
         self.fs = fluid_solid_ranks(ctx)
         self.comm, self.grid, self.block = ctx.comm, self.fs.slab.G, self.fs.slab.block
+
+
+class FlowRateControlRanks(OnSlab, FlowRateControl):
+    """:class:`coupler.fsi.rate_control.FlowRateControl` on several ranks: dp's row of the
+    interface vector and its weight on rank 0, none on the others; dp known on every rank once
+    delivered, given whole to each fluid part held here; the flow rate and the percolation from
+    this rank's slab of the grid (taken over the ranks)."""
+
+    def local(self, outputs=None) -> tuple[np.ndarray, np.ndarray]:
+        return self.fs.fluid_held.fetch("velocity", self.fs.slab.ids), self.fs.update().fraction
+
+    def inlet(self, pressure: float) -> list[np.ndarray]:
+        return [np.array([pressure]) for _ in self.fs.fluid_held.ranks]
+
+
+class FractureFiguresRanks(OnSlab, FractureFigures):
+    """:class:`coupler.fsi.fracture.FractureFigures` on several ranks: the rows of the solid held
+    here, this rank's slab of the grid and its rows of the interface vector; the figures summed
+    (and the open cells labelled) over the ranks."""
+
+    rate_control = FlowRateControlRanks
 
     def local(self, outputs=None) -> dict:
         solid, fluid, cells = self.fs.solid_held, self.fs.fluid_held, self.fs.slab.ids
@@ -392,6 +420,7 @@ class FractureFiguresRanks(FractureFigures):
 #: the operators a coupler on several ranks has (the others refuse P > 1: coupler.run.ranks)
 OPERATORS_RANKS = {"pressure_trace": PressureTraceRanks, "open_pressure_trace": OpenPressureTraceRanks,
                    "solid_fraction": SolidFractionRanks, "solid_velocity": SolidVelocityRanks,
+                   "flow_rate_control": lambda ctx, exchange: ctx.shared("flow_rate_control", FlowRateControlRanks),
                    "l2": lambda ctx, exchange: ProjectionRanks(ctx, exchange, "l2"),
                    "pseudo_l2": lambda ctx, exchange: ProjectionRanks(ctx, exchange, "pseudo_l2")}
 

@@ -16,7 +16,9 @@ distributed ones of :mod:`coupler.fsi.ranks`. Whatever fails on one rank is rais
 rank (:func:`agree`).
 
 Nothing is gathered: each rank gives the accelerator and the loop its own rows of the interface
-vector and their weights (``comm``: docs/scaling.md, step 4), writes the piece of each
+vector and their weights (``comm``: docs/scaling.md, step 4; a flow rate's pressure difference is
+rank 0's row, and the inlet pressure it makes goes whole to each fluid part: :attr:`RanksRun.singles`,
+in no piece, as the serial run writes it in no VTU), writes the piece of each
 participant it works on (:meth:`RanksRun.piece`: a ``.pvtu`` of per-rank ``.vtu`` files, step
 5), and the summary's figures are reduced over the ranks (rank 0 writes it; the monitors of
 :data:`coupler.fsi.ranks.MONITORS_RANKS` reduce their own). A ``[check]`` of a distributed kind
@@ -216,6 +218,11 @@ class RanksRun(Run):
                                               for e in self.plan.exchanges])
         self.monitors = agree(comm, lambda: {name: MONITORS_RANKS[name][0](ranks_context)
                                              for name in self.plan.monitors})
+        #: (participant, field) -> operator of the inputs of one value for the whole participant (the
+        #: flow-rate control's inlet pressure): each part gets it whole, they are not rows; the
+        #: operator's ``delivered`` is the value, on every rank
+        self.singles = {(e.target_participant, e.target_field): op for e, op in zip(self.plan.exchanges, self.operators)
+                        if getattr(op, "single", False)}
         self.summary.update(self.context.summary())
         self.slabs = agree(comm, lambda: {name: GridSlab(comm, grid, f"{self.scene.path}: [geometry.{name}]")
                                           for name, grid in meshes.items()})
@@ -315,23 +322,32 @@ class RanksRun(Run):
         """Participant `name`'s latest outputs and inputs (and `accepted`, inputs per part) at the
         rows of this rank's piece (:meth:`piece`), each in its own dtype. Collective."""
         held, (_, ids) = self.held[name], self.pieces[name]
-        inputs = {**self.inputs.get(name, {}), **(accepted or {})}
         fields = {k: held.rows.move(held.out_ids, v, ids).astype(v.dtype) for k, v in held.fields.items()}
-        fields.update({k: held.rows.move(held.in_ids, _rows(v), ids) for k, v in inputs.items()})
+        fields.update({k: held.rows.move(held.in_ids, _rows(v), ids)
+                       for k, v in self._row_inputs(name, accepted).items()})
         return fields
+
+    def _row_inputs(self, name: str, accepted: dict | None = None) -> dict:
+        """Participant `name`'s latest inputs (and `accepted`) given by rows, per part; those of
+        one value (:attr:`singles`) left to the step's figures, as the serial run's
+        :func:`coupler.run.runner.mesh_fields` leaves them."""
+        inputs = {**self.inputs.get(name, {}), **(accepted or {})}
+        return {k: v for k, v in inputs.items() if (name, k) not in self.singles}
 
     def result(self) -> checks.Result:
         """Each participant's piece of this rank (:meth:`piece`) with its final fields, the rows
         held here (their coordinates, outputs and inputs moved to them), each grid's slab, the
         last figures and `comm`: what a distributed check kind sums over
-        (:class:`coupler.checks.Result`). Collective."""
+        (:class:`coupler.checks.Result`); an input of one value (:attr:`singles`) whole. Collective."""
         held = {}
         for name, h in self.held.items():
             if h.points is not None:
-                inputs = {k: h.rows.move(h.in_ids, _rows(v), h.out_ids) for k, v in self.inputs.get(name, {}).items()}
+                inputs = {k: h.rows.move(h.in_ids, _rows(v), h.out_ids) for k, v in self._row_inputs(name).items()}
                 held[name] = (h.points, {**inputs, **h.fields})
-        return checks.Result(meshes={name: mesh for name, (mesh, _) in self.pieces.items()},
-                             fields={name: self.piece_fields(name) for name in self.held},
+        fields = {name: self.piece_fields(name) for name in self.held}
+        for (name, k), op in self.singles.items():  # a check may read it (the pressure drop a flow rate found)
+            fields[name][k] = op.delivered
+        return checks.Result(meshes={name: mesh for name, (mesh, _) in self.pieces.items()}, fields=fields,
                              figures=dict(self.figures), comm=self.comm, held=held,
                              grids={name: (slab.G, slab.block) for name, slab in self.slabs.items()})
 

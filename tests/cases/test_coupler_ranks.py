@@ -4,9 +4,10 @@ ranks, each coupler rank holding a slab of the grid and the solid parts of its s
 the whole solid); the transfer effect (mesh files served in parts, the l2 and pseudo_l2
 projections distributed, the exact_transfer check from sums over the ranks' pieces) gives the
 one-rank run's fields, figures and check to 1e-10, and so do the fixed solid served in parts with
-its checks cubic_law and lubrication (parallel_plates, lubrication on 2 and 3 ranks) and the
-fraction sampled at the cell centres; what still needs a whole field on one process refuses P > 1
-with one line naming the scene file, the key and the reason."""
+its checks cubic_law and lubrication (parallel_plates, lubrication on 2 and 3 ranks), the
+fraction sampled at the cell centres and hm_fracture driven by a flow rate (the control's errors
+stop every rank together); what still needs a whole field on one process refuses P > 1 with one
+line naming the scene file, the key and the reason."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import meshio
 import numpy as np
 import pytest
 
+from case_figures import _numbers
 from cli_helpers import CHECK, transfer_case, write_mesh
 from coupler import scene as scenes
 from coupler.cli import main
@@ -316,7 +318,9 @@ def test_a_solid_without_boundary_triangles_on_two_coupler_ranks(tmp_path):
 #: figures that are round-off where the serial run has them 0 or near it, compared absolutely: the solid's
 #: volume outside the grid (0 or one ulp of 1: its volume and the fluid cells' sums in another order) and
 #: the spread of the sections' flow rates (3e-13 with OpenFOAM: its mass balance to the solver's tolerance)
-ROUND_OFF = {"/geometry_update/solid_volume_outside_grid", "/check/Q_spread"}
+#: and how far a flow rate is from its target (a Stokes flow reaches it to round-off)
+ROUND_OFF = {"/geometry_update/solid_volume_outside_grid", "/check/Q_spread",
+             "/steps/0/flow_rate_control/relative_error"}
 
 
 def assert_same_but_round_off(serial, ranks, label: str) -> dict:
@@ -326,7 +330,7 @@ def assert_same_but_round_off(serial, ranks, label: str) -> dict:
     for key in ROUND_OFF:
         figures = [summary(d) for d in (serial, ranks)]
         for part in key.strip("/").split("/"):
-            figures = [f.get(part, {}) for f in figures]
+            figures = [f[int(part)] if isinstance(f, list) else f.get(part, {}) for f in figures]
         if figures != [{}, {}]:
             assert abs(figures[0] - figures[1]) < 1e-15 and max(figures) < 1e-12, (label, key, figures)
     worst = max((k for k in found if k.removeprefix("summary ") not in ROUND_OFF), key=found.get)
@@ -336,12 +340,13 @@ def assert_same_but_round_off(serial, ranks, label: str) -> dict:
 
 
 #: the shipped fixed-solid cases, pictures off; parallel_plates with the Chorin fluid, its fraction exact and
-#: at the cell centres
+#: at the cell centres, and driven by a flow rate (its check compares with the pressure drop the control found)
 NO_PICTURES = {"steps = 1\n": "steps = 1\n\n[output]\npictures = false\n"}
 PLATES = {**NO_PICTURES, 'participant = "openfoam"': 'participant = "chorin"  #', "max_iterations = 5000\n": ""}
 FIXED_SOLID = {"parallel_plates": ("parallel_plates", PLATES),
                "parallel_plates, cell centres": ("parallel_plates", {
                    **PLATES, 'solid_fraction = "exact" ': 'solid_fraction = "cell_centre" '}),
+               "parallel_plates, flow rate": ("parallel_plates", {**PLATES, "inlet_pressure = 1.0e-2 ": "flow_rate = 5.0e-11 #"}),
                "lubrication": ("lubrication", NO_PICTURES)}
 
 
@@ -415,25 +420,32 @@ def test_sneddon_check_on_two_coupler_ranks(tmp_path):
     assert reports[1]["kind"] == "sneddon" and reports[1]["vertices"] == reports[0]["vertices"] == 25
 
 
-def hm_fracture(tmp_path, coupler: int, participants: int):
+def hm_fracture(tmp_path, coupler: int, participants: int, replace: dict | None = None, code: int = 0):
     """cases/hm_fracture shortened (8 x 8 x 53 fluid cells, the first stress alone) with the
-    coupler on `coupler` ranks and the solid and the Chorin fluid on `participants` ranks."""
+    coupler on `coupler` ranks and the solid and the Chorin fluid on `participants` ranks, and the
+    text replacements `replace`, run to the exit `code`; its output directory."""
     ranks = f"\nranks = {participants}" if participants > 1 else ""
     case = copy_case(CASES / "hm_fracture", tmp_path / f"hm{coupler}{participants}", {
         "shape = [16, 16, 53]": "shape = [8, 8, 53]", "stress = [1.0e6, 2.0e6, 4.0e6]": "stress = [1.0e6]",
         "steps = 3": "steps = 1", 'participant = "chorin"': f'participant = "chorin"{ranks}',
-        "max_iterations = 30": "max_iterations = 30" + (f"\nranks = {coupler}" if coupler > 1 else "")})
+        "max_iterations = 30": "max_iterations = 30" + (f"\nranks = {coupler}" if coupler > 1 else ""),
+        **(replace or {})})
     with open(case / "scene.toml", "a") as f:
         f.write(f"\n[output]\npictures = false\n" + (f"\n[solvers.solid]{ranks}\n" if ranks else ""))
     out = tmp_path / f"hm{coupler}{participants}" / "out"
-    assert main(["run", str(case), "--output", str(out)]) == 0
+    assert main(["run", str(case), "--output", str(out)]) == code
     return out
 
 
-def assert_same_fracture(serial, ranks, label: str) -> None:
+def assert_same_fracture(serial, ranks, label: str, cancelled: tuple[str, ...] = ()) -> dict:
     """The fields of every VTU file and every summary figure to 1e-10, but the smallest gap of a
-    closed contact (round-off, about 1e-18 m: below 1e-15 m on both)."""
+    closed contact (round-off, about 1e-18 m: below 1e-15 m on both) and the figures `cancelled`
+    (differences of nearly equal numbers: to 1e-10 absolutely, as the coupling residuals); what
+    :func:`differences` found."""
     found = differences(serial, ranks)
+    reference = dict(_numbers(summary(serial)))
+    for key in cancelled:
+        found[f"summary {key}"] *= abs(reference[key])
     gaps = [k for k in found if k.endswith("/min_gap")]
     assert gaps and all(abs(json.loads((d / "summary.json").read_text())["steps"][0]["figures"]["solid"]["min_gap"])
                         < 1e-15 for d in (serial, ranks))
@@ -442,6 +454,7 @@ def assert_same_fracture(serial, ranks, label: str) -> None:
     figures = [json.loads((d / "summary.json").read_text())["steps"][0]["fracture"] for d in (serial, ranks)]
     assert figures[0]["percolating"] is figures[1]["percolating"] is True
     assert 0 < figures[1]["contact_area_fraction"] < 1 and "summary /steps/0/fracture/flow_rate" in found
+    return found
 
 
 @needs_mpi
@@ -465,6 +478,68 @@ def test_hm_fracture_on_two_coupler_ranks_with_participant_ranks(tmp_path):
     held = holdings(ranks)
     assert all(0 < h["interface_triangles"] < 160 for h in held)
     assert sum(h["interface_triangles"] for h in held) == 160
+
+
+#: hm_fracture driven by a flow rate (tests/cases/test_flow_rate.py): dp about 1.4e5 Pa at 1 MPa
+RATE = {"inlet_pressure = 3.0e5 ": "flow_rate = 5.0e-9 #"}
+
+
+def assert_same_rate(serial, ranks, label: str) -> None:
+    """The fracture's fields and figures as :func:`assert_same_fracture`, the control's among them
+    (its relative error |Q / Q_target - 1|, about 6e-6, absolutely), the same iterations; the rate
+    reached, the inlet pressure in no VTU (it is a figure)."""
+    found = assert_same_fracture(serial, ranks, label, cancelled=("/steps/0/flow_rate_control/relative_error",))
+    assert {"summary /steps/0/flow_rate_control/pressure_drop", "summary /steps/0/flow_rate_control/flow_rate",
+            "summary /steps/0/flow_rate_control/relative_error"} <= set(found)
+    runs = [summary(d) for d in (serial, ranks)]
+    assert runs[0]["iterations"] == runs[1]["iterations"]
+    control = runs[1]["steps"][0]["flow_rate_control"]
+    assert control["relative_error"] <= 1e-5
+    assert runs[1]["steps"][0]["fracture"]["pressure_drop"] == control["pressure_drop"]
+    for piece in map(meshio.read, ranks.glob("fluid_0000_p*.vtu")):
+        assert "inlet_pressure" not in piece.cell_data
+
+
+@needs_mpi
+def test_hm_fracture_driven_by_a_flow_rate_on_two_coupler_ranks(tmp_path):
+    """The flow-rate control on 2 coupler ranks, participants on one: dp's row of the interface
+    vector on rank 0, the flow rate and the percolation from both ranks' slabs; the one-rank
+    coupler's fields, figures (flow_rate_control, fracture) and iterations."""
+    serial, ranks = hm_fracture(tmp_path, 1, 1, RATE), hm_fracture(tmp_path, 2, 1, RATE)
+    assert_same_rate(serial, ranks, "hm_fracture driven by a flow rate, coupler on 2 ranks")
+
+
+@pytest.mark.slow
+@needs_mpi
+def test_hm_fracture_driven_by_a_flow_rate_on_two_coupler_ranks_with_participant_ranks(tmp_path):
+    """The same with the solid and the Chorin fluid on 2 ranks each: each coupler rank gives the
+    inlet pressure to its fluid rank's part."""
+    serial, ranks = hm_fracture(tmp_path, 1, 2, RATE), hm_fracture(tmp_path, 2, 2, RATE)
+    assert_same_rate(serial, ranks, "hm_fracture driven by a flow rate, coupler on 2 ranks, participants on 2")
+
+
+@needs_mpi
+@pytest.mark.parametrize("replace, reason", [
+    ({"inlet_pressure = 3.0e5 ": "flow_rate = 5.0e-8 #"},
+     ", iteration 1: {scene}: [flow] flow_rate: the inlet pressure 1.26383e+06 Pa (pressure difference 1.06383e+06 "
+     "Pa) reaches the confining stress 1e+06 Pa of [loads.2] stress at this step"),
+    ({"E = 1.0e10": "E = 3.0e8", "shape = [16, 16, 53]": "shape = [8, 8, 27]",
+      "upper = [0.02, 0.02, 0.00031]": "upper = [0.02, 0.02, 0.00032]",
+      "inlet_pressure = 3.0e5 ": "flow_rate = 1.0e-11 #"},
+     ": {scene}: [flow] flow_rate: no open path connects the inlet (xmin) with the outlet (xmax)"),
+], ids=["confining_stress", "closed"])
+def test_the_rate_control_stops_two_coupler_ranks_together(tmp_path, capfd, replace, reason):
+    """An error the control decides (as tests/cases/test_flow_rate.py: ten times the rate needs an
+    inlet pressure above the 1 MPa stress, found as dp is delivered; the soft rock closes, found
+    as the step converges) is decided alike on both coupler ranks: one line, exit 4 on every rank,
+    no rank left waiting for the other (no abort), nothing claimed."""
+    out = hm_fracture(tmp_path, 2, 1, replace, code=EXIT_CODES["failed"])
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("varcouple: error")]
+    expected = "time step 0 (t = 0 .. 1)" + reason.format(scene=out.parent / "case" / "scene.toml")
+    assert len(lines) == 1 and expected in lines[0], err
+    s = summary(out)
+    assert "went on without it" not in err + s["error"] and s["status"] == "failed" and s["steps"] == []
 
 
 # -- refusals: what needs a whole field on one process ------------------------------------
