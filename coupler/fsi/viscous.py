@@ -26,6 +26,10 @@ tests/test_viscous_traction.py against plane Poiseuille flow):
     traced to the pressure's surface. ``tau`` there is the stress half a cell or more
     from the wall: first order in the cell size (``1 - 2 d / w`` of the wall shear in a
     channel of aperture w).
+
+On a coupler of P ranks (:class:`coupler.fsi.ranks.SolidOnSlabs`, docs/scaling.md step 3) the
+``"wall"`` method runs on each rank's rows of the interface, the fits and figures summed over the
+ranks; ``"stress"``, which differentiates the velocity across the grid, is refused there.
 """
 
 from __future__ import annotations
@@ -142,7 +146,9 @@ def wall_shear(samples, normals, mu: float, spacing: float | np.ndarray, comm=No
 
 class FluidTraction:
     """``t = -p n + tau n`` at the interface vertices of a :class:`coupler.interface.SolidOnGrid`
-    built with ``traction="full"`` (its ``interface`` and the ``deeper`` sampling surfaces)."""
+    built with ``traction="full"`` (its ``interface`` and the ``deeper`` sampling surfaces); of a
+    :class:`coupler.fsi.ranks.SolidOnSlabs` (its ``comm``) at this rank's rows of the interface, the
+    fluid's fields given at its grid slab and ``fits`` counted over the ranks."""
 
     def __init__(self, mu: float, method: str = "wall"):
         if method not in METHODS:
@@ -155,6 +161,9 @@ class FluidTraction:
         near, n = on_grid.interface, on_grid.interface.normals
         p = near.from_fluid(pressure)
         if self.method == "stress":
+            if on_grid.comm is not None:
+                raise CouplerError("viscous traction: method 'stress' differentiates the velocity on the whole "
+                                   "grid: not on several coupler ranks; use 'wall'")
             G = on_grid.G
             tau = viscous_stress(velocity, G.shape, G.spacing, self.mu, on_grid.fraction)
             tau_n = np.einsum("vij,vj->vi", near.from_fluid(tau.reshape(-1, 9)).reshape(-1, 3, 3), n)

@@ -20,7 +20,9 @@ from cli_helpers import CHECK, transfer_case, write_mesh
 from coupler import scene as scenes
 from coupler.cli import main
 from coupler.errors import EXIT_CODES, SceneError
+from coupler.fsi.ranks import OPERATORS_RANKS
 from coupler.plan.plan import make_plan
+from coupler.run import ranks as ranks_run
 from coupler.run.execute import coupler_ranks
 from coupler.run.ranks import RanksRun
 from test_rank_independence import TOLERANCE, assert_same, differences, run
@@ -432,10 +434,23 @@ def test_a_rigid_solid_is_refused(tmp_path):
     assert "[solvers.solid]: 'rigid_solid' is served whole in the coupler's process" in text
 
 
-def test_an_operator_without_ranks_is_refused(tmp_path):
-    text = refusal(tmp_path, "small_fracture", {'acceleration = "iqn-ils"': 'acceleration = "iqn-ils"\ntraction = "full"'},
-                   append="\n[output]\npictures = false\n")
-    assert "the operator 'viscous_traction', which needs whole fields on one process" in text
+def test_full_traction_is_admitted(tmp_path):
+    scene_dir = copy_case(CASES / "small_fracture", tmp_path / "full",
+                          {'acceleration = "iqn-ils"': 'acceleration = "iqn-ils"\ntraction = "full"'})
+    scene = scenes.load(scene_dir)
+    plan = make_plan(scene)
+    assert "viscous_traction" in [e.operator for e in plan.exchanges]
+    RanksRun.admit(scene, plan, SimpleNamespace(size=2))
+
+
+def test_an_operator_without_ranks_is_refused(tmp_path, monkeypatch):
+    """The refusal's line for an operator that has no distributed variant (the table without the
+    pressure trace's)."""
+    monkeypatch.setattr(ranks_run, "OPERATORS_RANKS",
+                        {k: v for k, v in OPERATORS_RANKS.items() if k != "pressure_trace"})
+    text = refusal(tmp_path, "small_fracture", append="\n[output]\npictures = false\n")
+    assert "the exchange to solid.pressure uses the operator 'pressure_trace', which needs whole fields on one " \
+           "process" in text and "viscous_traction" in text
 
 
 def test_cell_centre_fractions_are_refused(tmp_path):
