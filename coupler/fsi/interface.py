@@ -59,11 +59,7 @@ class WettedInterface:
                 first = f"; first at {np.array2string(moved[self.transfer.uncovered[0]], precision=6)}"
         except NoOverlapError:
             pass
-        # partial (the deeper velocity samples of coupler/viscous.py): vertices outside the grid read NaN
-        if uncovered == len(self.vertices) or (uncovered and not partial):
-            raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled "
-                               f"up to {self.offset:.3g} m outside the solid ({uncovered} of {len(self.vertices)} "
-                               f"vertices outside the grid{first}): extend the grid beyond the wetted boundary")
+        check_covered(where, self.offset, uncovered, len(self.vertices), partial, first)
         self.weights = np.asarray(self.transfer.D.sum(axis=1)).ravel()  # lumped surface mass
         self.area = float(self.surface.cell_measures().sum())
 
@@ -98,6 +94,17 @@ def area_normals(points, triangles) -> np.ndarray:
     """Each triangle's normal times its area (outward in boundary_triangles' orientation)."""
     a, b, c = (points[triangles[:, i]] for i in range(3))
     return 0.5 * np.cross(b - a, c - a)
+
+
+def check_covered(where: str, offset: float, uncovered: int, count: int, partial: bool = False,
+                  first: str = "") -> None:
+    """CouplerError unless the fluid grid covers the interface sampled `offset` outside the solid:
+    `uncovered` of its `count` vertices outside the grid; with `partial` (the deeper velocity
+    samples of :mod:`coupler.fsi.viscous`, whose vertices outside the grid read NaN) all of them."""
+    if uncovered == count or (uncovered and not partial):
+        raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled "
+                           f"up to {offset:.3g} m outside the solid ({uncovered} of {count} "
+                           f"vertices outside the grid{first}): extend the grid beyond the wetted boundary")
 
 
 def folded_surface(where: str) -> CouplerError:
@@ -184,18 +191,25 @@ class SolidOnGrid:
     ``deeper`` sample the fluid further from the wall (``DEPTHS`` times the pressure's offset).
     """
 
+    #: the coupler's ranks the rows are split over (:class:`coupler.fsi.ranks.SolidOnSlabs`); None: one process
+    comm = None
+
     def __init__(self, S, G: StructuredGrid, triangles, where: str, deform: bool = True,
                  traction: str = "pressure", wetted: bool = True):
         self.S, self.G, self.where, self.wetted = S, G, where, wetted
         self.triangles = None if triangles is None or not len(triangles) else np.asarray(triangles)
-        if traction == "full" and self.triangles is None:
-            raise CouplerError(f"{where}: [coupling] traction = 'full' needs the solid's wetted boundary "
-                               f"triangles (the viscous stress acts on a surface); this solid gives none")
-        self.traction = traction
-        self.deeper = []
+        self._set_traction(traction, self.triangles is not None)
         self.deform = bool(deform) and self.triangles is not None
         self.num_vertices = len(S.points)
         self._first_build(G)
+
+    def _set_traction(self, traction: str, triangles: bool) -> None:
+        """``traction`` and the ``deeper`` surfaces it samples (none yet); 'full' needs the solid's wetted
+        `triangles` (CouplerError)."""
+        if traction == "full" and not triangles:
+            raise CouplerError(f"{self.where}: [coupling] traction = 'full' needs the solid's wetted boundary "
+                               f"triangles (the viscous stress acts on a surface); this solid gives none")
+        self.traction, self.deeper = traction, []
 
     def _first_build(self, G: StructuredGrid) -> None:
         """The undeformed build and the bookkeeping of :meth:`update`."""
@@ -221,10 +235,7 @@ class SolidOnGrid:
         self.outside = max(1.0 - float(volumes.sum()) / float(S.cell_measures().sum()), 0.0)
         interface = None  # a solid the fluid does not load has none
         if self.wetted and self.triangles is not None:
-            interface = WettedInterface(self.S, self.triangles, self.G, self.where,
-                                        points=None if u is None else S.points)
-            if self.traction == "full":
-                self.deeper = [self._deeper(depth, None if u is None else S.points) for depth in DEPTHS]
+            interface = self._wetted(None if u is None else S.points)
         elif self.wetted:
             self._check_inside()
             interface = VolumeInterface(S, self.G, self.where)
@@ -249,13 +260,28 @@ class SolidOnGrid:
             raise CouplerError(f"{self.where}: the fluid grid does not cover the solid "
                                f"({self.outside:.3g} of the solid's volume lies outside it)")
 
+    def _wetted(self, points):
+        """The wetted surface with the solid's vertices at `points` (None: undeformed) and, with traction
+        'full', the ``deeper`` ones."""
+        interface = self._surface(points)
+        if self.traction == "full":
+            self.deeper = [self._deeper(depth, points) for depth in DEPTHS]
+        return interface
+
+    def _surface(self, points, depth: float = 1.0, partial: bool = False) -> WettedInterface:
+        return WettedInterface(self.S, self.triangles, self.G, self.where, points=points, depth=depth,
+                               partial=partial)
+
     def _deeper(self, depth: float, points):
         """A deeper sampling surface, or None where it leaves the grid entirely (a thin channel)."""
         try:
-            return WettedInterface(self.S, self.triangles, self.G, self.where, points=points, depth=depth,
-                                   partial=True)
+            return self._surface(points, depth, partial=True)
         except CouplerError:
             return None
+
+    def cell_centres(self) -> np.ndarray:
+        """The centres of the grid cells ``fraction`` is given on."""
+        return self.G.cell_centers()
 
     def update(self, u) -> bool:
         """Rebuild from the displacement u (num_vertices, 3) if it changed; True if rebuilt."""

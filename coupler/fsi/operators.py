@@ -76,20 +76,26 @@ class ViscousTraction:
     (:mod:`coupler.fsi.viscous`); its pressure and viscous forces are the step's figures."""
 
     units = "Pa"
+    #: the solid as the grid sees it, shared with the other operators (on the coupler's ranks: theirs)
+    _fluid_solid = staticmethod(fluid_solid)
 
     def __init__(self, ctx: OperatorContext, exchange=None):
-        self.fs = fluid_solid(ctx)
+        self.fs = self._fluid_solid(ctx)
         self.traction = FluidTraction(ctx.scene.fluid_material["viscosity"])
-        interface = self.fs.on_grid.interface
-        self.size, self.weights = 3 * interface.size, np.repeat(self.fs.on_grid.reference_weights, 3)
+        self.weights = np.repeat(self.fs.on_grid.reference_weights, 3)
+        self.size = len(self.weights)
         self.last: dict = {}
 
     def evaluate(self, outputs) -> np.ndarray:
         g = self.fs.on_grid
-        wall = outputs["solid"]["velocity"][g.interface.vertices]
-        parts = self.traction.parts(g, outputs["fluid"]["pressure"], outputs["fluid"]["velocity"], wall)
-        self.last = {**traction_figures(g.interface.weights, *parts), "fits": self.traction.fits}
+        parts = self.traction.parts(g, *self.fields(outputs))
+        self.last = {**traction_figures(g.interface.weights, *parts, g.comm), "fits": self.traction.fits}
         return (parts[0] + parts[1]).ravel()
+
+    def fields(self, outputs) -> tuple:
+        """(the fluid's cell pressure, its cell velocity, the solid's velocity at the interface vertices)."""
+        wall = outputs["solid"]["velocity"][self.fs.on_grid.interface.vertices]
+        return outputs["fluid"]["pressure"], outputs["fluid"]["velocity"], wall
 
     def deliver(self, x) -> np.ndarray:
         return self.fs.on_grid.interface.to_solid_vertices(np.asarray(x).reshape(-1, 3))

@@ -4,18 +4,19 @@ and shape) and the solid parts assigned to it (:class:`SolidPart`), and the oper
 distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the deformed solid
 (:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3; on
 the open faces of a fracture in contact; onto every solid vertex for a solid without boundary
-triangles, :class:`VolumeSlabs`; none for a fixed solid the fluid does not load), the solid
-fraction (exact, or at the cell centres: :func:`slab_centres`) and the solid velocity on the
-grid (Step 6, before Step 1); the projections between two participants' meshes (``l2``,
-``pseudo_l2``: :class:`coupler.fsi.projection.ProjectionRanks`); the pressure difference of a
-flow rate (:class:`FlowRateControlRanks`); and the fracture's figures per step
-(:class:`FractureFiguresRanks`).
+triangles, :class:`VolumeSlabs`; none for a fixed solid the fluid does not load) or the traction
+with its viscous part (``traction = "full"``, :class:`ViscousTractionRanks`: the deeper sampling
+surfaces traced from the slabs too), the solid fraction (exact, or at the cell centres:
+:func:`slab_centres`) and the solid velocity on the grid (Step 6, before Step 1); the projections
+between two participants' meshes (``l2``, ``pseudo_l2``:
+:class:`coupler.fsi.projection.ProjectionRanks`); the pressure difference of a flow rate
+(:class:`FlowRateControlRanks`); and the fracture's figures per step (:class:`FractureFiguresRanks`).
 
-The interface vector of the fixed point (one pressure per interface vertex, numbered as the
-serial run numbers them: by increasing solid vertex id) is split by rows over the ranks
-(:class:`transfer.rows.Rows`' blocks): each rank gives the accelerator and the loop its own
-rows and their weights (docs/scaling.md, step 4), nothing is gathered. The flow-rate control's
-one unknown, dp, is rank 0's row; every rank knows it once delivered."""
+The interface vector of the fixed point (one pressure, or three traction values, per interface
+vertex, numbered as the serial run numbers them: by increasing solid vertex id) is split by rows
+over the ranks (:class:`transfer.rows.Rows`' blocks): each rank gives the accelerator and the
+loop its own rows and their weights (docs/scaling.md, step 4), nothing is gathered. The flow-rate
+control's one unknown, dp, is rank 0's row; every rank knows it once delivered."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ from mpi4py import MPI
 
 from coupler.errors import CouplerError
 from coupler.protocol.slabs import slab_bounds
-from transfer import Mesh, StructuredGrid
+from transfer import Mesh, NoOverlapError, StructuredGrid
 from transfer.distributed import Part, assemble
 from transfer.rows import Rows
 
@@ -37,10 +38,10 @@ from .context import described, loaded
 from .held import Held
 from .projection import ProjectionRanks
 from .rate_control import FlowRateControl
-from .interface import (SolidOnGrid, VolumeInterface, WettedInterface, area_normals, folded_surface,
+from .interface import (SolidOnGrid, VolumeInterface, WettedInterface, area_normals, check_covered, folded_surface,
                         invalid_deformation, sampling_points)
 from .open_gap import open_share
-from .operators import OpenShare, SolidFraction, sampled_at_centres
+from .operators import OpenShare, SolidFraction, ViscousTraction, sampled_at_centres
 
 
 class GridSlab:
@@ -105,13 +106,16 @@ class SolidPart:
 
 class WettedSlabs:
     """:class:`coupler.fsi.interface.WettedInterface` on several ranks: this rank's wetted
-    triangles moved into the fluid (normals summed over every rank's triangles), the pressure
-    traced from the grid slabs (distributed pseudo-L2); the interface vector and its weights (the
-    lumped surface mass) at this rank's rows ``block`` of the interface numbering."""
+    triangles moved into the fluid by `depth` (normals summed over every rank's triangles), the
+    pressure traced from the grid slabs (distributed pseudo-L2; with `partial`, vertices outside
+    the grid read NaN); the interface vector and its weights (the lumped surface mass), the wall
+    (``points``), its unit ``normals`` and the sampling ``offsets`` at this rank's rows ``block`` of
+    the interface numbering."""
 
     method = "surface trace"
 
-    def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, points=None):
+    def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, points=None, depth: float = 1.0,
+                 partial: bool = False):
         self.comm, self.solid = comm, solid
         self.rows = Rows(comm, solid.interface_count)
         self.block = self.rows.own
@@ -127,29 +131,42 @@ class WettedSlabs:
         if comm.allreduce(bool(np.any(length <= 0)), op=MPI.LOR):
             raise folded_surface(where)
         normals = normals.reshape(-1, 3) / length[:, None]
-        moved, offsets = sampling_points(here, normals, solid.reference[at], slab.G)
+        moved, offsets = sampling_points(here, normals, solid.reference[at], slab.G, depth)
         self.offset = comm.allreduce(float(offsets.max()) if len(offsets) else 0.0, op=MPI.MAX)
         surface = (Mesh(moved, triangles, "triangle", name="interface") if len(triangles)
                    else Mesh.empty("triangle", "interface"))
-        self.transfer = assemble(slab.part, Part(surface, "P1", ids), "pseudo_l2", comm)
-        uncovered = solid.interface_count - self.transfer.num_covered
-        if uncovered:
-            raise CouplerError(f"{where}: the fluid grid does not cover the interface sampled up to "
-                               f"{self.offset:.3g} m outside the solid ({uncovered} of {solid.interface_count} "
-                               f"vertices outside the grid): extend the grid beyond the wetted boundary")
+        uncovered = solid.interface_count
+        try:
+            self.transfer = assemble(slab.part, Part(surface, "P1", ids), "pseudo_l2", comm)
+            uncovered -= self.transfer.num_covered
+        except NoOverlapError:  # on every rank
+            pass
+        check_covered(where, self.offset, uncovered, solid.interface_count, partial)
+        self.points, self.normals, self.offsets = (self.at_block(a) for a in (here, normals, offsets))
         self.weights = self.transfer.row_sums()  # the lumped surface mass at `block`
         self.area = comm.allreduce(float(surface.cell_measures().sum()) if len(triangles) else 0.0)
         self.size = solid.interface_count
         self.num_triangles = comm.allreduce(len(triangles))
 
-    def from_fluid(self, pressure) -> np.ndarray:
-        """The interface vector at `block` from the cell pressure at this rank's slab. Collective."""
-        return self.rows.block(self.solid.interface_ids, self.transfer.apply(pressure))
+    def from_fluid(self, values) -> np.ndarray:
+        """The trace at `block` of the cell values (n,) or (n, k) at this rank's slab (the pressure: the
+        interface vector). Collective."""
+        return self.at_block(self.transfer.apply(values))
+
+    def from_solid(self, held: Held, name: str) -> np.ndarray:
+        """The solid's latest output `name` (`held`) at `block`. Collective."""
+        return self.at_block(held.fetch(name, self.solid.interface_vertices))
+
+    def at_block(self, values) -> np.ndarray:
+        """`values` (n,) or (n, k) at this rank's interface vertices at `block`. Collective."""
+        ids = self.solid.interface_ids
+        return self.rows.block(ids, values) if np.ndim(values) == 1 else self.rows.move(ids, values, self.block)
 
     def to_solid_parts(self, x) -> list[np.ndarray]:
-        """The interface pressure `x` (at `block`, on every rank) at the input rows of each solid
-        part held here (zero off the interface). Collective."""
-        values = np.where(self.solid.input_interface >= 0, self.rows.move(self.block, x, self._inputs), 0.0)
+        """The interface pressure or traction `x` ((n,) or (n, 3) at `block`, on every rank) at the input
+        rows of each solid part held here (zero off the interface). Collective."""
+        values = self.rows.move(self.block, x, self._inputs)
+        values[self.solid.input_interface < 0] = 0.0
         held = self.solid.held
         return np.split(values, np.cumsum([len(i) for i in held.input_rows])[:-1]) if held.ranks else []
 
@@ -194,15 +211,17 @@ class VolumeSlabs:
 
 
 class SolidOnSlabs(SolidOnGrid):
-    """:class:`coupler.fsi.interface.SolidOnGrid` on several ranks (pressure traction): ``fraction``
-    and ``to_fluid`` on this rank's slab, ``interface`` (:class:`WettedSlabs`, or :class:`VolumeSlabs`
-    when no rank has a boundary triangle), rebuilt from the deformed solid by the same rules
-    (:meth:`update`, its reductions over the ranks)."""
+    """:class:`coupler.fsi.interface.SolidOnGrid` on several ranks: ``fraction`` and ``to_fluid`` on
+    this rank's slab, ``interface`` (:class:`WettedSlabs`, or :class:`VolumeSlabs` when no rank has a
+    boundary triangle) and with ``traction="full"`` the ``deeper`` sampling surfaces (:class:`WettedSlabs`,
+    partial; None where one leaves the grid on every rank), rebuilt from the deformed solid by the same
+    rules (:meth:`update`, its reductions over the ranks)."""
 
     def __init__(self, comm, solid: SolidPart, slab: GridSlab, where: str, deform: bool = True,
-                 wetted: bool = True):
+                 traction: str = "pressure", wetted: bool = True):
         self.comm, self.solid, self.slab, self.where = comm, solid, slab, where
         self.wetted = wetted
+        self._set_traction(traction, solid.wetted)
         self.deform = bool(deform) and solid.wetted
         self.num_vertices = len(solid.vertices)
         self._first_build(slab.G)
@@ -229,7 +248,7 @@ class SolidOnSlabs(SolidOnGrid):
         self.current, self._centres = part.mesh, None
         self.interface = None  # a solid the fluid does not load has none
         if self.wetted and solid.wetted:
-            self.interface = WettedSlabs(comm, solid, self.slab, self.where, points)
+            self.interface = self._wetted(points)
         elif self.wetted:
             self._check_inside()
             self.interface = VolumeSlabs(comm, solid, self.slab, self.where)
@@ -238,6 +257,12 @@ class SolidOnSlabs(SolidOnGrid):
 
     def _centres_inside(self) -> np.ndarray:
         return slab_centres(self.comm, self.current, self.slab)
+
+    def _surface(self, points, depth: float = 1.0, partial: bool = False) -> WettedSlabs:
+        return WettedSlabs(self.comm, self.solid, self.slab, self.where, points, depth, partial)
+
+    def cell_centres(self) -> np.ndarray:
+        return self.slab.part.mesh.cell_centers()
 
     def _largest(self, u: np.ndarray) -> float:
         return self.comm.allreduce(super()._largest(u), op=MPI.MAX)
@@ -285,7 +310,7 @@ class FluidSolidRanks:
         self.slab = GridSlab(comm, ctx.context.meshes["fluid"], where)
         self.solid = SolidPart(comm, self.solid_held, ctx.parts["solid"])
         self.on_grid = SolidOnSlabs(comm, self.solid, self.slab, where, deform=scene.coupling["deformation"],
-                                    wetted=loaded(scene))
+                                    wetted=loaded(scene), traction=scene.coupling["traction"])
         ctx.phases.add("transfer", time.perf_counter() - start)
         interface = self.on_grid.interface
         self.interface = described(interface, scene)
@@ -355,6 +380,23 @@ class OpenPressureTraceRanks(OpenShare, PressureTraceRanks):
         return self.fs.on_grid.interface.open_share(self.fs.solid_held)
 
 
+class ViscousTractionRanks(ViscousTraction):
+    """:class:`coupler.fsi.operators.ViscousTraction` on several ranks: the traction (three values) at
+    this rank's rows of the interface vector from the fluid at its grid slab and the solid's velocity
+    fetched at those rows, delivered at the input rows of the solid parts held here; its figures
+    reduced over the ranks."""
+
+    _fluid_solid = staticmethod(fluid_solid_ranks)
+
+    def fields(self, outputs=None) -> tuple:
+        fs, cells = self.fs, self.fs.slab.ids
+        return (fs.fluid_held.fetch("pressure", cells), fs.fluid_held.fetch("velocity", cells),
+                fs.on_grid.interface.from_solid(fs.solid_held, "velocity"))
+
+    def deliver(self, x) -> list[np.ndarray]:
+        return self.fs.on_grid.interface.to_solid_parts(np.asarray(x).reshape(-1, 3))
+
+
 class SolidFractionRanks(SolidFraction):
     """:class:`coupler.fsi.operators.SolidFraction` on this rank's slab (exact, or at the cell
     centres: :func:`slab_centres`), delivered at the input rows of the fluid parts held here."""
@@ -419,6 +461,7 @@ class FractureFiguresRanks(OnSlab, FractureFigures):
 
 #: the operators a coupler on several ranks has (the others refuse P > 1: coupler.run.ranks)
 OPERATORS_RANKS = {"pressure_trace": PressureTraceRanks, "open_pressure_trace": OpenPressureTraceRanks,
+                   "viscous_traction": ViscousTractionRanks,
                    "solid_fraction": SolidFractionRanks, "solid_velocity": SolidVelocityRanks,
                    "flow_rate_control": lambda ctx, exchange: ctx.shared("flow_rate_control", FlowRateControlRanks),
                    "l2": lambda ctx, exchange: ProjectionRanks(ctx, exchange, "l2"),

@@ -26,6 +26,10 @@ tests/test_viscous_traction.py against plane Poiseuille flow):
     traced to the pressure's surface. ``tau`` there is the stress half a cell or more
     from the wall: first order in the cell size (``1 - 2 d / w`` of the wall shear in a
     channel of aperture w).
+
+On a coupler of P ranks (:class:`coupler.fsi.ranks.SolidOnSlabs`, docs/scaling.md step 3) the
+``"wall"`` method runs on each rank's rows of the interface, the fits and figures summed over the
+ranks; ``"stress"``, which differentiates the velocity across the grid, is refused there.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import numpy as np
 
 from transfer.grid import wall_distance
 
+from coupler.coupling.row_sums import RowSums
 from coupler.errors import CouplerError
 from coupler.fsi.interface import DEPTHS
 
@@ -102,7 +107,7 @@ def _tangential(v: np.ndarray, n: np.ndarray) -> np.ndarray:
 FITS = ("three samples", "wall and two samples", "wall and one sample", "unresolved")
 
 
-def wall_shear(samples, normals, mu: float, spacing: float | np.ndarray) -> tuple[np.ndarray, dict]:
+def wall_shear(samples, normals, mu: float, spacing: float | np.ndarray, comm=None) -> tuple[np.ndarray, dict]:
     """``mu du_t/dn`` at the wall (nv, 3) from velocity samples ``[(v, d, valid), ...]`` in
     order of depth: velocities relative to the wall (nv, 3), their distances from the wall
     (nv,), whether each reads fluid cells only (nv,). Per vertex, the first that applies:
@@ -111,7 +116,8 @@ def wall_shear(samples, normals, mu: float, spacing: float | np.ndarray) -> tupl
     through the wall and the nearest sample (``unresolved``: no sample reads fluid
     alone, e.g. an aperture of about a cell). Samples count as separate when at least
     ``spacing / 2`` (nv,) apart, the nearest at least ``spacing / 4`` from the wall.
-    Returns the shear and how many vertices took each way (:data:`FITS`)."""
+    Returns the shear and how many vertices took each way (:data:`FITS`; with `comm`, the
+    vertices of the rows every rank gave)."""
     (v1, d1, ok1), (v2, d2, ok2), (v3, d3, ok3) = [
         (_tangential(np.asarray(v, float), normals), np.asarray(d, float), np.asarray(ok, bool))
         for v, d, ok in samples]
@@ -133,13 +139,16 @@ def wall_shear(samples, normals, mu: float, spacing: float | np.ndarray) -> tupl
     nearest = (near | ~linear)[:, None]
     slope1 = np.where(nearest, v1 / np.maximum(d1, h / 4)[:, None], v2 / np.maximum(d2, h / 4)[:, None])
     slope = np.where(three[:, None], slope3, np.where(two[:, None], slope2, slope1))
-    counts = [three, two & ~three, linear & ~two, ~linear]
-    return mu * slope, dict(zip(FITS, (int(np.count_nonzero(c)) for c in counts)))
+    counts = RowSums(comm).sum(np.array([np.count_nonzero(c) for c in (three, two & ~three, linear & ~two, ~linear)],
+                                        float))
+    return mu * slope, dict(zip(FITS, (int(c) for c in counts)))
 
 
 class FluidTraction:
     """``t = -p n + tau n`` at the interface vertices of a :class:`coupler.interface.SolidOnGrid`
-    built with ``traction="full"`` (its ``interface`` and the ``deeper`` sampling surfaces)."""
+    built with ``traction="full"`` (its ``interface`` and the ``deeper`` sampling surfaces); of a
+    :class:`coupler.fsi.ranks.SolidOnSlabs` (its ``comm``) at this rank's rows of the interface, the
+    fluid's fields given at its grid slab and ``fits`` counted over the ranks."""
 
     def __init__(self, mu: float, method: str = "wall"):
         if method not in METHODS:
@@ -152,6 +161,9 @@ class FluidTraction:
         near, n = on_grid.interface, on_grid.interface.normals
         p = near.from_fluid(pressure)
         if self.method == "stress":
+            if on_grid.comm is not None:
+                raise CouplerError("viscous traction: method 'stress' differentiates the velocity on the whole "
+                                   "grid: not on several coupler ranks; use 'wall'")
             G = on_grid.G
             tau = viscous_stress(velocity, G.shape, G.spacing, self.mu, on_grid.fraction)
             tau_n = np.einsum("vij,vj->vi", near.from_fluid(tau.reshape(-1, 9)).reshape(-1, 3, 3), n)
@@ -159,7 +171,7 @@ class FluidTraction:
         if len(on_grid.deeper) != 2:
             raise CouplerError("viscous traction 'wall' needs the deeper sampling surfaces "
                                "(SolidOnGrid(..., traction='full'))")
-        centres, fluid = on_grid.G.cell_centers(), (on_grid.fraction < 0.5).astype(float)
+        centres, fluid = on_grid.cell_centres(), (on_grid.fraction < 0.5).astype(float)
         wall = np.zeros_like(n) if wall_velocity is None else np.asarray(wall_velocity, float)
         samples = []
         for surface in (near, *on_grid.deeper):
@@ -171,7 +183,7 @@ class FluidTraction:
             samples.append((surface.from_fluid(velocity) - wall, distance,
                             np.abs(surface.from_fluid(fluid) - 1.0) < 1e-9))
         # the samples' intended spacing along the normal (DEPTHS in units of the pressure surface's offset)
-        shear, self.fits = wall_shear(samples, n, self.mu, (DEPTHS[1] - DEPTHS[0]) * near.offsets)
+        shear, self.fits = wall_shear(samples, n, self.mu, (DEPTHS[1] - DEPTHS[0]) * near.offsets, on_grid.comm)
         return -p[:, None] * n, shear
 
     def __call__(self, on_grid, pressure, velocity, wall_velocity=None) -> np.ndarray:
@@ -179,10 +191,13 @@ class FluidTraction:
         return t_p + t_v
 
 
-def traction_figures(weights, t_pressure, t_viscous) -> dict:
+def traction_figures(weights, t_pressure, t_viscous, comm=None) -> dict:
     """How much the viscous part matters: the forces of both parts on the interface
-    (lumped surface mass ``weights``) and the ratio of their L2 norms."""
+    (lumped surface mass ``weights``) and the ratio of their L2 norms; with `comm`, of the rows
+    every rank gives (the sums over the ranks, then the roots and the ratio: one allreduce)."""
     w = np.asarray(weights, float)
-    norm = [float(np.sqrt(w @ np.sum(t ** 2, axis=1))) for t in (t_pressure, t_viscous)]
-    return {"pressure_force": (w @ t_pressure).tolist(), "viscous_force": (w @ t_viscous).tolist(),
+    sums = RowSums(comm).sum(np.concatenate([w @ t_pressure, w @ t_viscous,
+                                             [w @ np.sum(t ** 2, axis=1) for t in (t_pressure, t_viscous)]]))
+    norm = [float(np.sqrt(s)) for s in sums[6:]]
+    return {"pressure_force": sums[:3].tolist(), "viscous_force": sums[3:6].tolist(),
             "shear_to_pressure": norm[1] / norm[0] if norm[0] > 0 else None}

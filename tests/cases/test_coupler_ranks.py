@@ -1,13 +1,14 @@
 """The coupler on P MPI ranks (docs/scaling.md, step 3; coupler/run/ranks.py): small_fracture with
-the Chorin fluid gives the one-rank coupler's fields and summary to 1e-10 with the coupler on 2
-ranks, each coupler rank holding a slab of the grid and the solid parts of its solid ranks (never
-the whole solid); the transfer effect (mesh files served in parts, the l2 and pseudo_l2
-projections distributed, the exact_transfer check from sums over the ranks' pieces) gives the
-one-rank run's fields, figures and check to 1e-10, and so do the fixed solid served in parts with
-its checks cubic_law and lubrication (parallel_plates, lubrication on 2 and 3 ranks), the
-fraction sampled at the cell centres and hm_fracture driven by a flow rate (the control's errors
-stop every rank together); what still needs a whole field on one process refuses P > 1 with one
-line naming the scene file, the key and the reason."""
+the Chorin fluid, with the pressure or the full traction on the rock, gives the one-rank coupler's
+fields and summary to 1e-10 with the coupler on 2 ranks, each coupler rank holding a slab of the
+grid and the solid parts of its solid ranks (never the whole solid); the transfer effect (mesh
+files served in parts, the l2 and pseudo_l2 projections distributed, the exact_transfer check
+from sums over the ranks' pieces) gives the one-rank run's fields, figures and check to 1e-10,
+and so do the fixed solid served in parts with its checks cubic_law and lubrication
+(parallel_plates, lubrication on 2 and 3 ranks), the fraction sampled at the cell centres and
+hm_fracture driven by a flow rate (the control's errors stop every rank together); what would
+need a whole field on one process refuses P > 1 with one line naming the scene file, the key and
+the reason."""
 
 from __future__ import annotations
 
@@ -25,7 +26,9 @@ from coupler import scene as scenes
 from coupler.cli import main
 from coupler.errors import EXIT_CODES, SceneError
 from coupler.fsi.centres import centres_inside
+from coupler.fsi.ranks import OPERATORS_RANKS
 from coupler.plan.plan import make_plan
+from coupler.run import ranks as ranks_run
 from coupler.run.execute import coupler_ranks
 from coupler.run.ranks import RanksRun
 from test_rank_independence import TOLERANCE, assert_same, differences, run
@@ -36,12 +39,13 @@ from vc_helpers import CASES, copy_case
 needs_mpi = pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not installed")
 
 
-def coupled(tmp_path, coupler: int, solid: int, fluid: int, pictures: bool = False):
+def coupled(tmp_path, coupler: int, solid: int, fluid: int, pictures: bool = False, traction: str = "pressure"):
     """small_fracture's first step, Chorin fluid, with the coupler on `coupler` ranks (the key
     ``[coupling] ranks``: varcouple run starts itself under mpirun), its pictures rendered when
-    `pictures`."""
+    `pictures`, the fluid's `traction` on the rock (``[coupling] traction``)."""
+    keys = [f"ranks = {coupler}"] * (coupler > 1) + [f'traction = "{traction}"'] * (traction != "pressure")
     out = run(tmp_path / f"p{coupler}", solid, fluid, steps=1, fluid="chorin", fluid_tolerance="1e-7",
-              coupling=f"ranks = {coupler}" if coupler > 1 else "", pictures=pictures)
+              coupling="\n".join(keys), pictures=pictures)
     return out
 
 
@@ -116,6 +120,44 @@ def test_a_coupler_rank_without_participant_ranks(tmp_path):
     assert [h["solid_rows"] > 0 for h in held] == [True, False]
     assert [h["fluid_rows"] > 0 for h in held] == [True, False]
     assert all(h["grid_cells"] > 0 for h in held)
+
+
+def assert_same_traction(serial, ranks, label: str) -> dict:
+    """The fields, the summary and the iterations of two runs with traction "full" equal to 1e-10,
+    the traction's figures among them (every one compared), the vertices' fits the same."""
+    found = assert_same(serial, ranks, label)
+    figures = [summary(d)["steps"][0]["traction"] for d in (serial, ranks)]
+    assert figures[0]["fits"] == figures[1]["fits"] and figures[0]["fits"]["three samples"] > 0
+    assert {f"summary /steps/0/traction/{k}" for k in ("shear_to_pressure", "viscous_force/0", "pressure_force/2")} \
+        <= set(found)
+    assert "solid_0000.vtu point:traction" in found
+    return found
+
+
+@needs_mpi
+def test_full_traction_on_two_coupler_ranks(tmp_path):
+    """traction = "full" (the traction (-p I + tau) n, three values per interface vertex, the wall
+    shear from three velocity samples along the normal) with the solid and the fluid on one rank:
+    coupler rank 1 holds none of their rows, only its slab of the grid and half the interface
+    vector's rows (the solid's velocity at them fetched from rank 0). The fields of every VTU file
+    (the solid's traction among them), every summary figure (the traction's forces, ratio and fits)
+    and the iterations equal the one-rank coupler's to 1e-10."""
+    serial, ranks = (coupled(tmp_path, p, 1, 1, traction="full") for p in (1, 2))
+    assert_same_traction(serial, ranks, "traction full, coupler on 2 ranks")
+    held = holdings(ranks)
+    assert [h["interface_triangles"] > 0 for h in held] == [True, False]
+    assert [h["interface_rows"] for h in held] == [231, 231]
+
+
+@pytest.mark.slow
+@needs_mpi
+def test_full_traction_on_two_coupler_ranks_with_participant_ranks(tmp_path):
+    """traction = "full" with the solid and the fluid on 2 ranks each: each coupler rank holds part
+    of the wetted triangles and traces their deeper sampling surfaces from both grid slabs; the
+    one-rank coupler's fields, figures and iterations to 1e-10."""
+    serial, ranks = (coupled(tmp_path, p, 2, 2, traction="full") for p in (1, 2))
+    assert_same_traction(serial, ranks, "traction full, coupler on 2 ranks, participants on 2")
+    assert all(0 < h["interface_triangles"] < 800 for h in holdings(ranks))
 
 
 @pytest.mark.slow
@@ -607,10 +649,23 @@ def test_a_participant_served_whole_is_refused(tmp_path, monkeypatch):
     assert "[solvers.solid]: 'rigid_solid' is served whole in the coupler's process" in text
 
 
-def test_an_operator_without_ranks_is_refused(tmp_path):
-    text = refusal(tmp_path, "small_fracture", {'acceleration = "iqn-ils"': 'acceleration = "iqn-ils"\ntraction = "full"'},
-                   append="\n[output]\npictures = false\n")
-    assert "the operator 'viscous_traction', which needs whole fields on one process" in text
+def test_full_traction_is_admitted(tmp_path):
+    scene_dir = copy_case(CASES / "small_fracture", tmp_path / "full",
+                          {'acceleration = "iqn-ils"': 'acceleration = "iqn-ils"\ntraction = "full"'})
+    scene = scenes.load(scene_dir)
+    plan = make_plan(scene)
+    assert "viscous_traction" in [e.operator for e in plan.exchanges]
+    RanksRun.admit(scene, plan, SimpleNamespace(size=2))
+
+
+def test_an_operator_without_ranks_is_refused(tmp_path, monkeypatch):
+    """The refusal's line for an operator that has no distributed variant (the table without the
+    pressure trace's)."""
+    monkeypatch.setattr(ranks_run, "OPERATORS_RANKS",
+                        {k: v for k, v in OPERATORS_RANKS.items() if k != "pressure_trace"})
+    text = refusal(tmp_path, "small_fracture", append="\n[output]\npictures = false\n")
+    assert "the exchange to solid.pressure uses the operator 'pressure_trace', which needs whole fields on one " \
+           "process" in text and "viscous_traction" in text
 
 
 def test_the_key_and_the_job_must_agree(tmp_path, monkeypatch):
