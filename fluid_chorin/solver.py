@@ -144,7 +144,7 @@ class ChorinSolver:
                 if face not in self.warned_faces and slabs.rank == 0:
                     log.warning("%s", dropped_velocity(face, value))
                 self.warned_faces.add(face)
-            velocity = rigid_velocity(bodies, f.size)
+            velocity = rigid_velocity(bodies, np.arange(f.size))
         T = drag_fraction(f, slabs.input_shape, spec.grid.spacing, spec.nu, self.d_max, spec.penalization,
                           spec.penalization_exponent)
         drag = slabs.from_inputs(T * self.d_max)

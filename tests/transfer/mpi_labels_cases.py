@@ -1,8 +1,9 @@
-"""Run under ``mpirun -n P`` (P = 2, 3, 4) by test_labels_ranks.py: connected components on a grid
-tiled by the ranks' index boxes (transfer/labels.py) against scipy's on the whole grid (every
-rank computes both). Rank 0 prints JSON: per tiling and mask the serial and the joined counts,
-each rank's own count of components in its box and whether every rank's labels equal the serial
-ones."""
+"""Run under ``mpirun -n P`` (P = 2, 3, 4) by test_labels_ranks.py: connected components and rigid
+bodies on a grid tiled by the ranks' index boxes (transfer/labels.py, transfer/bodies.py) against
+scipy's and the serial functions on the whole grid (every rank computes both). Rank 0 prints
+JSON: per tiling and mask the serial and the joined counts, each rank's own count of components
+in its box and whether every rank's labels equal the serial ones; per tiling and field the
+largest differences of the bodies."""
 
 from __future__ import annotations
 
@@ -12,7 +13,10 @@ import numpy as np
 from mpi4py import MPI
 from scipy import ndimage
 
-from transfer.labels import label_boxes
+from transfer.bodies import rigid_bodies
+from transfer.grid import BOX_FACES
+from transfer.labels import box_cells, label_boxes
+from transfer.penalization import reach
 
 comm = MPI.COMM_WORLD
 SHAPE = (8, 6, 5)  # nx, ny, nz
@@ -91,6 +95,65 @@ def labelling(tilings) -> dict:
     return out
 
 
+def fields(seed: int):
+    """Smooth solid fractions (bodies of a few cells, some at the grid's faces) and random velocities."""
+    rng = np.random.default_rng(seed)
+    f = ndimage.uniform_filter(rng.uniform(size=SHAPE[::-1]), 2)
+    f = np.clip((f - 0.5) * 6 + 0.5, 0.0, 1.0).ravel()
+    v = rng.normal(size=(f.size, 3))
+    if seed % 2:
+        v[:] = rng.normal(size=3)  # one velocity everywhere: every body moves with it
+    return f, v
+
+
+def relative(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return float(np.max(np.abs(a - b), initial=0.0) / max(np.max(np.abs(a), initial=0.0), 1e-300))
+
+
+def bodies(tilings) -> dict:
+    out = {}
+    closed_sets = {0: BOX_FACES, 1: ("xmin", "zmax"), 2: (), 3: ("ymin", "ymax", "zmin")}
+    for name, boxes in tilings.items():
+        lower, upper = (np.asarray(b) for b in boxes[comm.rank])
+        own = box_cells(lower, upper, SHAPE).ravel()
+        ids = reach(own, SHAPE, "wall")  # the box and its face neighbours, as the OpenFOAM fluid's inputs
+        out[name] = {}
+        for seed, closed in closed_sets.items():
+            f, v = fields(seed)
+            serial = rigid_bodies(f, v, SHAPE, closed)
+            mine = rigid_bodies(f[ids], v[ids], SHAPE, closed, (lower, upper), ids, comm)
+            joined = [np.sort(np.concatenate(comm.allgather(b.cells))) for b in mine]
+            everywhere = comm.allgather([(b.velocity.tobytes(), b.dropped) for b in mine])
+            held = np.sum(comm.allgather([len(b.cells) > 0 for b in mine]), axis=0)
+            out[name][seed] = {
+                "bodies": [len(serial), len(mine)], "dropped": sum(len(b.dropped) for b in serial),
+                "across boxes": int(np.count_nonzero(held > 1)),
+                "same on every rank": all(e == everywhere[0] for e in everywhere),
+                "cells": len(serial) == len(mine) and all(np.array_equal(a.cells, c) for a, c in zip(serial, joined)),
+                "in the box": all(comm.allgather(bool(np.all(np.isin(np.concatenate([own[:0]] + [b.cells for b in mine]),
+                                                                      own))))),
+                "velocity": max((relative(a.velocity, b.velocity) for a, b in zip(serial, mine)), default=0.0),
+                "drops": len(serial) == len(mine) and all(a.dropped.keys() == b.dropped.keys() and all(
+                    abs(a.dropped[k] - b.dropped[k]) <= 1e-14 * abs(a.dropped[k]) for k in a.dropped)
+                    for a, b in zip(serial, mine))}
+    return out
+
+
+def missing_rows() -> str:
+    """Rank 1 gives its box's cells without their face neighbours: every rank fails alike."""
+    lower, upper = (np.asarray(b) for b in slabs(0, comm.size)[comm.rank])
+    ids = box_cells(lower, upper, SHAPE).ravel()
+    if comm.rank != 1:
+        ids = reach(ids, SHAPE, "wall")
+    f, v = fields(0)
+    try:
+        rigid_bodies(f[ids], v[ids], SHAPE, (), (lower, upper), ids, comm)
+    except ValueError as exc:
+        return str(exc)
+    return ""
+
+
 def wrong_tilings() -> dict:
     """Boxes that overlap, or leave a gap: every rank fails alike."""
     out = {}
@@ -106,7 +169,8 @@ def wrong_tilings() -> dict:
 
 def main():
     tilings = TILINGS[comm.size]
-    result = {"ranks": comm.size, "labels": labelling(tilings), "wrong tilings": wrong_tilings()}
+    result = {"ranks": comm.size, "labels": labelling(tilings), "wrong tilings": wrong_tilings(), "bodies": bodies(tilings),
+              "missing": comm.allgather(missing_rows())}
     if comm.rank == 0:
         print(json.dumps(result))
 

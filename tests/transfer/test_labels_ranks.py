@@ -1,7 +1,9 @@
-"""Connected components on a grid tiled by the ranks' index boxes (transfer/labels.py):
-mpi_labels_cases.py under mpirun on 2, 3 and 4 ranks, slabs along each axis, decomposePar's
-blocks (2x2x1, 1x2x2, 2x1x2), a box whose face meets two boxes and an empty box. The joined
-labels equal scipy's on the whole grid exactly (the same numbering)."""
+"""Connected components and rigid bodies on a grid tiled by the ranks' index boxes
+(transfer/labels.py, transfer/bodies.py): mpi_labels_cases.py under mpirun on 2, 3 and 4 ranks,
+slabs along each axis, decomposePar's blocks (2x2x1, 1x2x2, 2x1x2), a box whose face meets two
+boxes and an empty box. The joined labels equal scipy's on the whole grid exactly (the same
+numbering); the bodies equal the serial ones: the same cells, velocities to 1e-14, the same
+dropped components, on every rank the same."""
 
 from __future__ import annotations
 
@@ -50,3 +52,21 @@ def test_boxes_that_do_not_tile_the_grid_fail_on_every_rank(result):
     assert result["wrong tilings"] == {
         "overlap": ["the boxes of ranks 0 and 1 overlap"] * result["ranks"],
         "gap": ["the boxes of the ranks do not cover the grid of [8, 6, 5] cells"] * result["ranks"]}
+
+
+def test_rigid_bodies_on_ranks_are_the_serial_bodies(result):
+    """Four solid fractions and velocities (closed faces: all six, two, none, three), each rank
+    given its box and the face neighbours (the OpenFOAM fluid's inputs): the serial bodies, some
+    held by several ranks, some velocity components dropped at closed faces."""
+    for tiling, fields in result["bodies"].items():
+        for seed, b in fields.items():
+            assert b["bodies"][0] == b["bodies"][1] > 0, (tiling, seed, b)
+            assert b["cells"] and b["in the box"] and b["drops"] and b["same on every rank"], (tiling, seed, b)
+            assert b["velocity"] < 1e-14, (tiling, seed, b)
+            assert b["across boxes"] >= 1, (tiling, seed)
+        assert sum(b["dropped"] for b in fields.values()) > 0
+
+
+def test_rows_without_the_face_neighbours_fail_on_every_rank(result):
+    assert result["missing"] == [f"rigid bodies: the rows given lack cells of the box or of their face neighbours "
+                                 f"(rank 1 misses {30 if result['ranks'] == 2 else 60})"] * result["ranks"]
