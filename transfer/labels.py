@@ -37,6 +37,17 @@ def box_cells(lower, upper, shape) -> np.ndarray:
     return (k[:, None, None] * ny + j[None, :, None]) * nx + i[None, None, :]
 
 
+def cell_box(cells, shape) -> tuple[np.ndarray, np.ndarray] | None:
+    """The index box ``(lower, upper)`` that the distinct grid ``cells`` fill, None when they fill none."""
+    cells = np.asarray(cells, np.int64).reshape(-1)
+    if cells.size == 0:
+        return None
+    nx, ny, _ = (int(s) for s in shape)
+    ijk = np.stack([cells % nx, cells // nx % ny, cells // (nx * ny)], axis=1)
+    lower, upper = ijk.min(axis=0), ijk.max(axis=0) + 1
+    return (lower, upper) if int(np.prod(upper - lower)) == len(np.unique(cells)) == cells.size else None
+
+
 def _faces(labels, lower, upper, shape) -> dict:
     """The box's label planes on its faces inside the grid: (axis, side) -> (z, y, x) minus axis."""
     if labels.size == 0:
