@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 
 def box_bounds(shape, box=None) -> tuple[np.ndarray, np.ndarray]:
@@ -116,9 +118,6 @@ def label_boxes(mask, shape, box=None, comm=None) -> tuple[np.ndarray, int]:
                 if a["upper"][d] == b["lower"][d] and (d, 1) in a["faces"] and (d, 0) in b["faces"]:
                     la, lb = _joins(a, b, d)
                     edges.append(np.stack([oa + la - 1, ob + lb - 1]))
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     edges = np.concatenate(edges, axis=1)
     n = int(offsets[-1])
     total, component = connected_components(coo_matrix((np.ones(edges.shape[1]), tuple(edges)), shape=(n, n)),
