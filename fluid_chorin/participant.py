@@ -9,10 +9,11 @@ face xmin (a flow driven by a rate: the coupler adjusts it each coupling iterati
 
 MPI: started on N ranks (``[solvers.fluid] ranks = N``), every rank receives the verbs and the
 rows of its input cells (``input_ids``: its slab, the ghost layer and the cells the drag of a
-ghost reads, one more plane on each side with the "wall" penalization; with rigid bodies,
-``solid_velocity = "bodies"``, the whole grid), steps its slab of the grid
-(:mod:`fluid_chorin.slabs`) and answers with its own cells' fields (``cell_ids``;
-docs/protocol.md, "Parts"): nothing is gathered.
+ghost reads, one more plane on each side with the "wall" penalization), steps its slab of the
+grid (:mod:`fluid_chorin.slabs`) and answers with its own cells' fields (``cell_ids``;
+docs/protocol.md, "Parts"): nothing is gathered. Rigid bodies (``solid_velocity = "bodies"``)
+are labelled across the slabs from those inputs (:func:`transfer.bodies.rigid_bodies`: one
+allgather of each slab's face planes and one of its bodies' sums).
 
 Steady (no ``transient``): each ``advance`` makes pseudo-time steps from the current state
 (a warm start) to the tolerance. Transient: from ``t`` over ``dt``. Both report the
@@ -57,7 +58,8 @@ class ChorinParticipant(Participant):
         slabs = self.solver.slabs
         log.info("fluid_chorin: grid %s (%d cells), nu %g, drag %g 1/s, %s%s", spec.grid.shape, spec.grid.num_cells,
                  spec.nu, self.solver.d_max, "transient" if spec.transient else "steady (pseudo-time)",
-                 f"; rank {self.rank} of {self.size}: cells {slabs.lo} to {slabs.hi - 1} along {'xyz'[slabs.d]}"
+                 f"; rank {self.rank} of {self.size}: cells {slabs.lo} to {slabs.hi - 1} along {'xyz'[slabs.d]}, "
+                 f"{int(np.prod(slabs.input_shape))} input cells"
                  if self.size > 1 else "")
 
     def geometry(self):

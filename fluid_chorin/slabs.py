@@ -16,8 +16,8 @@ are numbered rank by rank (:attr:`Slabs.numbering`), each slab's cells in the gr
 
 The inputs (the solid's fraction and velocity per cell) reach a rank for its *input cells*
 only: the planes ``[lo_r - L, hi_r + L)`` within the grid, ``L = input_layers`` (the ghost layer
-plus the reach of the drag's stencil: :data:`transfer.penalization.REACH`; None: the whole grid),
-numbered by :meth:`Slabs.input_ids`; :meth:`Slabs.from_inputs` cuts the local part out of them.
+plus the reach of the drag's stencil: :data:`transfer.penalization.REACH`), numbered by
+:meth:`Slabs.input_ids`; :meth:`Slabs.from_inputs` cuts the local part out of them.
 
 One rank (``comm`` None or of size 1) is the whole grid: no ghosts, every exchange and sum
 local.
@@ -36,9 +36,9 @@ from .staggered import AXIS, along
 class Slabs:
     """The slabs of a grid of ``shape`` with face conditions ``faces`` over the ranks of ``comm``,
     cut along ``slab_axis`` (:data:`coupler.protocol.slabs.SLAB_AXES`), each rank receiving its
-    inputs on ``input_layers`` planes beyond its slab (None: the whole grid)."""
+    inputs on ``input_layers`` planes beyond its slab."""
 
-    def __init__(self, shape, faces: dict, comm=None, slab_axis: str = "longest", input_layers: int | None = 1):
+    def __init__(self, shape, faces: dict, comm=None, slab_axis: str = "longest", input_layers: int = 1):
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
         self.rank = self.comm.Get_rank() if self.comm else 0
         self.size = self.comm.Get_size() if self.comm else 1
@@ -65,15 +65,21 @@ class Slabs:
         self.offset, self.count = layer * self.lo, layer * (self.hi - self.lo)
         #: the PETSc number of every local cell (ghosts: the neighbour's number)
         self.numbering = self.cells(self._numbers())
-        if input_layers is not None and input_layers < 1:
+        if input_layers < 1:
             raise ValueError(f"input_layers must reach the ghost layer (at least 1), got {input_layers}")
         #: the planes [first, end) along the slab direction of this rank's input cells
-        self.input_planes = (0, n) if input_layers is None else (max(0, self.lo - input_layers),
-                                                                 min(n, self.hi + input_layers))
+        self.input_planes = (max(0, self.lo - input_layers), min(n, self.hi + input_layers))
         inputs = list(self.shape)
         inputs[self.d] = self.input_planes[1] - self.input_planes[0]
         #: (nx, ny, nz) of the block of input cells
         self.input_shape = tuple(inputs)
+
+    @property
+    def box(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` cell indices (x, y, z) of the owned cells: this rank's box of the grid."""
+        lower, upper = np.zeros(3, np.int64), np.asarray(self.shape, np.int64)
+        lower[self.d], upper[self.d] = self.lo, self.hi
+        return lower, upper
 
     def _numbers(self) -> np.ndarray:
         cells = self.shape[::-1]

@@ -96,10 +96,9 @@ class ChorinSolver:
 
     def __init__(self, spec: ChorinSpec, comm=None):
         self.spec = spec
-        # the inputs of a rank: its cells, the ghost layer and the cells the drag of a ghost reads;
-        # rigid bodies (connected across the slabs) the whole grid
-        layers = None if spec.solid_velocity == "bodies" else 1 + REACH[spec.penalization]
-        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis, layers)
+        # the inputs of a rank: its cells, the ghost layer (which also holds the face neighbours a
+        # rigid body's interface layer reads) and the cells the drag of a ghost reads
+        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis, 1 + REACH[spec.penalization])
         #: this rank's part of the grid, ghosts included (the whole grid on one rank)
         self.grid = Staggered(self.slabs.local_shape, spec.grid.spacing, self.slabs.faces)
         self.state = State(self.grid.zeros(), np.zeros(self.grid.cells))
@@ -127,7 +126,8 @@ class ChorinSolver:
         the whole grid on one rank; x fastest, clipped to [0, 1]) and the solid's velocity there
         ((n, 3) m/s, None: at rest): drag, target velocity and dilatation on this rank's grid. The
         velocity as ``solid_velocity`` says: per cell, each body's rigid velocity
-        (:func:`transfer.bodies.rigid_bodies`, whose inputs are the whole grid), or none. The drag
+        (:func:`transfer.bodies.rigid_bodies`, bodies labelled across the slabs, each rank's
+        own cells' velocities and its ghosts' from the neighbours), or none. The drag
         of a cell reads the fractions :data:`transfer.penalization.REACH` cells away, all among
         the input cells for every local cell, so each equals the serial one bit for bit."""
         g, spec, slabs = self.grid, self.spec, self.slabs
@@ -138,13 +138,15 @@ class ChorinSolver:
                              f"{slabs.input_planes[0]} to {slabs.input_planes[1] - 1} along {'xyz'[slabs.d]})")
         if velocity is not None and spec.solid_velocity == "none":
             velocity = None
-        if velocity is not None and spec.solid_velocity == "bodies":
-            bodies = rigid_bodies(f, velocity, spec.grid.shape, closed_faces(spec.faces))
+        rigid = velocity is not None and spec.solid_velocity == "bodies"
+        if rigid:
+            ids = slabs.input_ids()
+            bodies = rigid_bodies(f, velocity, spec.grid.shape, closed_faces(spec.faces), slabs.box, ids, slabs.comm)
             for face, value in ((face, value) for b in bodies for face, value in b.dropped.items()):
                 if face not in self.warned_faces and slabs.rank == 0:
                     log.warning("%s", dropped_velocity(face, value))
                 self.warned_faces.add(face)
-            velocity = rigid_velocity(bodies, f.size)
+            velocity = rigid_velocity(bodies, ids)  # at the slab's own cells
         T = drag_fraction(f, slabs.input_shape, spec.grid.spacing, spec.nu, self.d_max, spec.penalization,
                           spec.penalization_exponent)
         drag = slabs.from_inputs(T * self.d_max)
@@ -158,6 +160,9 @@ class ChorinSolver:
             self.source = np.zeros(g.cells)
         else:
             v = slabs.from_inputs(np.asarray(velocity, dtype=float).reshape(n, 3))
+            if rigid:
+                for c in range(3):
+                    slabs.exchange(v[..., c])  # the ghosts' bodies: the neighbours' own cells
             weight = [to_faces(self.fraction, c) for c in range(3)]
             self.target = [np.divide(to_faces(self.fraction * v[..., c], c), weight[c],
                                      out=np.zeros(g.face_shape(c)), where=weight[c] > 0) for c in range(3)]

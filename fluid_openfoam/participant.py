@@ -47,9 +47,11 @@ participant's communicator; each rank writes the drag and inlet of its own cells
 with their pressure and velocity (``cell_ids``: ``cellProcAddressing``; docs/protocol.md,
 "Parts"). Its inputs (``input_ids``) are its cells and those the drag of its cells reads (one
 cell further along each axis with the "wall" penalization: :data:`transfer.penalization.REACH`);
-with rigid bodies (``solid_velocity = "bodies"`` and ``transient``) the whole grid (a body
-connects across the processors). The processes share the case directory: one host, or a shared
-file system.
+with rigid bodies (``solid_velocity = "bodies"`` and ``transient``) also its cells' face
+neighbours (the interface layer): the bodies are labelled across the processors
+(:func:`transfer.bodies.rigid_bodies`), each a box of the grid (``simple`` blocks whose axes'
+cells divide evenly; otherwise every rank receives the whole grid's inputs, logged). The
+processes share the case directory: one host, or a shared file system.
 
 State: the time directory the solver starts from. Each ``advance`` starts from the current
 one (a warm start) and makes its result current; ``save_state(w)`` remembers it,
@@ -132,15 +134,14 @@ class FluidParticipant(Participant):
         if self.solver is None:
             return "advance before configure"
         n = len(self.solver.input_ids)
-        if "solid_velocity" in inputs and self.spec.solid_velocity == "bodies" and not self.solver.whole_inputs:
-            return ("input 'solid_velocity' with solid_velocity 'bodies' needs every cell's inputs (a body connects "
-                    "across the processors): a steady fluid on several ranks receives its processor's cells only")
+        if "solid_velocity" in inputs and self.solver.bodies_refused:
+            return f"input 'solid_velocity': {self.solver.bodies_refused}"
         for name, f in inputs.items():
             want = (n,) if name == "solid_fraction" else (n, 3)
             if name in ("solid_fraction", "solid_velocity") and f.data.shape != want:
                 mine = "" if self.size == 1 else (f" (rank {self.rank}'s input_ids: " + (
                     "the whole grid)" if self.solver.whole_inputs else
-                    f"processor{self.rank}'s cells and those their drag reads)"))
+                    f"processor{self.rank}'s cells and those their drag and bodies read)"))
                 return f"input {name!r} has shape {f.data.shape}, expected {want}{mine}"
         return None
 

@@ -21,8 +21,12 @@ M ranks) rank 0 writes the case, runs blockMesh, topoSet, decomposePar and every
 job: :func:`openfoam_env`) while the other ranks wait, sleeping, on ``comm``; each rank writes the
 inputs of its own processor and reads its results (:mod:`fluid_openfoam.parallel`). Its arrays
 hold its processor's cells (:attr:`OpenFOAMSolver.cell_ids`), its inputs the cells the drag of
-those reads (:attr:`OpenFOAMSolver.input_ids`; the whole grid with rigid bodies). A failure on
-any rank is every rank's :class:`~coupler.protocol.errors.RanksError` naming it.
+those reads (:attr:`OpenFOAMSolver.input_ids`). With rigid bodies in a transient run its inputs
+also hold its cells' face neighbours and the bodies are labelled across the processors
+(:func:`transfer.bodies.rigid_bodies`), each an index box of the grid: decomposePar's ``simple``
+blocks are boxes when each axis's cells divide evenly among its blocks; where a processor is
+not one, every rank receives the whole grid's inputs (logged). A failure on any rank is every
+rank's :class:`~coupler.protocol.errors.RanksError` naming it.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ from . import case as _case
 from .errors import OpenFOAMError
 from .fields import read_internal_field
 from .parallel import Decomposition, patch_cells
+from transfer.labels import cell_box
 from transfer.penalization import drag_fraction, drag_fraction_of, reach
 from .zones import body_sources, write_cell_set
 
@@ -119,6 +124,8 @@ class OpenFOAMSolver:
         self.parallel: Decomposition | None = None  # ranks > 1: the processor directories
         #: the grid cell of each row of the arrays this process returns, and of its inputs (whole grid: arange)
         self.cell_ids = self.input_ids = np.arange(self.n)
+        #: this process's index box of the grid when the rigid bodies are labelled across the processors
+        self.box = None
         self.sources: list = []
         self.warned_faces: set[str] = set()
 
@@ -169,8 +176,32 @@ class OpenFOAMSolver:
             return
         on_each(self.comm, self.parallel.read_addressing)
         self.cell_ids = self.parallel.cell_ids
-        if self.comm is not None and not (self.spec.transient and self.spec.solid_velocity == "bodies"):
-            self.input_ids = reach(self.cell_ids, self.spec.grid.shape, self.spec.penalization)
+        if self.comm is not None:
+            self.input_ids = self.input_cells()
+
+    @property
+    def rigid_bodies(self) -> bool:
+        """The solid's velocity reaches this fluid as rigid bodies (a transient run: zones.py)."""
+        return self.spec.transient and self.spec.solid_velocity == "bodies"
+
+    def input_cells(self) -> np.ndarray:
+        """This process's input cells: its processor's cells and those their drag reads; with rigid
+        bodies also their face neighbours (the bodies' interface layer), the bodies labelled across
+        the processors (:attr:`box`) when every processor is an index box of the grid, else the
+        whole grid (logged once). Collective."""
+        shape, mode = self.spec.grid.shape, self.spec.penalization
+        if not self.rigid_bodies:
+            return reach(self.cell_ids, shape, mode)
+        box = cell_box(self.cell_ids, shape)
+        others = [r for r, boxed in enumerate(self.comm.allgather(box is not None)) if not boxed]
+        if not others:
+            self.box = box
+            return reach(self.cell_ids, shape, mode, at_least=1)
+        if self.rank == 0:
+            log.info("fluid_openfoam: %s of the %s decomposition not an index box of the grid %s: every rank "
+                     "receives the whole grid's inputs for the rigid bodies", ", ".join(f"processor{r}" for r in others),
+                     self.spec.decomposition, self.spec.grid.shape)
+        return np.arange(self.n)
 
     def _write_case(self) -> None:
         if self.case.exists():
@@ -192,10 +223,19 @@ class OpenFOAMSolver:
         """This process receives the inputs of every cell of the grid."""
         return len(self.input_ids) == self.n
 
+    @property
+    def bodies_refused(self) -> str | None:
+        """Why this process cannot take a solid velocity as rigid bodies (None: it can)."""
+        if self.spec.solid_velocity != "bodies" or self.whole_inputs or self.box is not None:
+            return None
+        return ("solid_velocity 'bodies' on several ranks needs a transient fluid, whose ranks label the bodies "
+                "across the processors: a steady fluid's ranks receive their processor's cells and those their "
+                "drag reads only")
+
     # ------------------------------------------------------------------ one solve
-    def write_solid(self, fraction) -> None:
+    def write_solid(self, fraction, velocity=None) -> None:
         """The drag field (and masked inlet) of this process's cells from the solid fraction of
-        its input cells (:attr:`input_ids`)."""
+        its input cells (:attr:`input_ids`), once it and the solid velocity there are checked."""
         frac = np.asarray(fraction, dtype=np.float64).reshape(-1)
         if frac.shape != self.input_ids.shape:
             raise ValueError(f"solid_fraction has {frac.size} values, expected {len(self.input_ids)} (one per "
@@ -203,6 +243,13 @@ class OpenFOAMSolver:
         if not np.all(np.isfinite(frac)):
             raise ValueError(f"solid_fraction holds NaN/inf at cell "
                              f"{int(self.input_ids[np.argmin(np.isfinite(frac))])}")
+        if velocity is not None and self.spec.solid_velocity == "bodies":
+            vel = np.asarray(velocity, dtype=np.float64).reshape(len(self.input_ids), 3)
+            if not np.all(np.isfinite(vel)):
+                raise ValueError(f"solid_velocity holds NaN/inf at cell "
+                                 f"{int(self.input_ids[np.argmin(np.isfinite(vel).all(1))])}")
+            if self.bodies_refused:
+                raise ValueError(self.bodies_refused)
         frac = np.clip(frac, 0.0, 1.0)
         args = (self.spec.grid.shape, self.spec.grid.spacing, self.spec.nu, self.spec.drag_value(),
                 self.spec.penalization, self.spec.penalization_exponent)
@@ -219,26 +266,27 @@ class OpenFOAMSolver:
 
     def write_sources(self, fraction, velocity) -> None:
         """constant/fvOptions with one velocity source per solid body (:mod:`zones`) when the
-        spec asks for it and the velocity is nonzero, and their cellSets (rank 0 the case's,
-        each rank its processor's)."""
+        spec asks for it and the velocity is nonzero (rank 0), and their cellSets: the case's when
+        it is not decomposed, else each rank its processor's (a decomposed run reads those only).
+        The bodies are labelled across the processors when this process has a :attr:`box`
+        (collective: every rank, inputs checked by :meth:`write_solid`)."""
         self.sources = []
         if velocity is not None and self.spec.solid_velocity == "bodies":
-            vel = np.asarray(velocity, dtype=np.float64).reshape(self.n, 3)
-            if not np.all(np.isfinite(vel)):
-                raise ValueError(f"solid_velocity holds NaN/inf at cell {int(np.argmin(np.isfinite(vel).all(1)))}")
+            vel = np.asarray(velocity, dtype=np.float64).reshape(len(self.input_ids), 3)
+            ranks = {} if self.box is None else {"box": self.box, "ids": self.input_ids, "comm": self.comm}
             self.sources = body_sources(np.clip(fraction, 0.0, 1.0), vel, self.spec.grid.shape,
-                                        self.spec.drag_value(), closed_faces(self.spec.faces))
+                                        self.spec.drag_value(), closed_faces(self.spec.faces), **ranks)
             for src in self.sources:
                 for face, value in src.dropped.items():
-                    if face not in self.warned_faces:
-                        self.warned_faces.add(face)
+                    if face not in self.warned_faces and self.rank == 0:
                         log.warning("%s", dropped_velocity(face, value))
+                    self.warned_faces.add(face)
         if self.parallel is not None:
             self.parallel.write_cell_sets({src.name: src.cells for src in self.sources})
         if self.rank == 0:
-            sets = self.case / "constant" / "polyMesh" / "sets"
-            for src in self.sources:
-                write_cell_set(sets / src.name, src.name, src.cells)
+            if self.parallel is None:
+                for src in self.sources:
+                    write_cell_set(self.case / "constant" / "polyMesh" / "sets" / src.name, src.name, src.cells)
             (self.case / "constant" / "fvOptions").write_text(_case.fv_options(self.spec.table(), self.sources))
 
     def control(self, t: float | None, dt: float | None) -> str:
@@ -265,7 +313,10 @@ class OpenFOAMSolver:
         makes the result the new start. Transient specs advance from ``t`` over ``dt``
         (:meth:`control`)."""
         t0 = float(self.start)
-        on_each(self.comm, self._prepare, solid_fraction, solid_velocity, t, dt)
+        fraction = np.asarray(solid_fraction, dtype=np.float64).reshape(-1)
+        on_each(self.comm, self.write_solid, fraction, solid_velocity)  # checked on every rank before
+        on_each(self.comm, self.write_sources, fraction, solid_velocity)  # the bodies' collectives
+        on_each(self.comm, self._prepare, t, dt)
         wall = on_root(self.comm, self.run, self.application)
         end, self.last_run = on_root(self.comm, self._ended, t0, wall)
         U, p = on_each(self.comm, self._results, end)
@@ -274,10 +325,8 @@ class OpenFOAMSolver:
                  end, self.last_run["iterations"], self.last_run["converged"], wall)
         return U, p
 
-    def _prepare(self, solid_fraction, solid_velocity, t, dt) -> None:
-        """The inputs of a run from the start time, its controlDict, no results after the start."""
-        self.write_solid(solid_fraction)
-        self.write_sources(np.asarray(solid_fraction, dtype=np.float64).reshape(-1), solid_velocity)
+    def _prepare(self, t, dt) -> None:
+        """The controlDict of a run from the start time, no results after the start."""
         if self.rank == 0:
             (self.case / "system" / "controlDict").write_text(self.control(t, dt))
         for t, name in time_dirs(self.time_root).items():

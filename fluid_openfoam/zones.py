@@ -29,18 +29,19 @@ from transfer.bodies import rigid_bodies
 @dataclass
 class BodySource:
     name: str            # cellSet and fvOption name
-    cells: np.ndarray    # cell labels (x fastest)
+    cells: np.ndarray    # cell labels (x fastest); on ranks those of this rank's box
     velocity: np.ndarray  # U_s (3,), m/s
     su: np.ndarray       # D_max U_s, m/s^2 (kinematic, per unit volume)
     dropped: dict        # closed face -> the velocity component normal to it that was dropped
 
 
-def body_sources(fraction, velocity, shape, d_max: float, closed=()) -> list[BodySource]:
+def body_sources(fraction, velocity, shape, d_max: float, closed=(), **ranks) -> list[BodySource]:
     """One :class:`BodySource` per body of :func:`transfer.bodies.rigid_bodies` (a nonzero
     interface velocity, or one dropped at a closed face: a zero source, so that the drop is
-    reported)."""
+    reported); ``ranks``: its ``box``, ``ids`` and ``comm`` on the ranks of a decomposed case
+    (every rank the same sources, each with its box's cells)."""
     return [BodySource(f"solidBody{i}", b.cells, b.velocity, d_max * b.velocity, b.dropped)
-            for i, b in enumerate(rigid_bodies(fraction, velocity, shape, closed))]
+            for i, b in enumerate(rigid_bodies(fraction, velocity, shape, closed, **ranks))]
 
 
 def write_cell_set(path, name: str, cells) -> None:

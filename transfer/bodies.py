@@ -15,6 +15,13 @@ imposing it anyway fills the body with pressures of order ``D_max U_s h`` (measu
 small_fracture with dynamics and slip faces inside the blocks: 8e5 Pa in the solid cells
 against 600 Pa of flow). So the velocity component normal to a closed face the body
 touches is dropped (the body slides along it), and reported.
+
+On MPI ranks each holding a box of the grid (a fluid's slab or processor) a body may cross the
+boxes: each rank labels its box (:func:`transfer.labels.label_boxes`: the labels of the whole
+grid, joined across the boxes' faces), sums each body's weighted velocity, weights and contacts
+with closed faces over its own cells, reading one layer of face neighbours beyond its box (the
+interface layer), and the sums are gathered and added in rank order, so every rank has the same
+bodies, velocities and drops; nothing of the whole grid is held on one rank.
 """
 
 from __future__ import annotations
@@ -25,51 +32,98 @@ import numpy as np
 from scipy import ndimage
 
 from .grid import BOX_FACES
+from .labels import box_bounds, box_cells, label_boxes
+
+CROSS = ndimage.generate_binary_structure(3, 1)  # face neighbours
 
 
 @dataclass
 class Body:
-    cells: np.ndarray    # cell labels (x fastest)
+    cells: np.ndarray    # cell labels (x fastest); on ranks those in this rank's box
     velocity: np.ndarray  # U_s (3,), m/s
     dropped: dict        # closed face -> the velocity component normal to it that was dropped
 
 
-def rigid_bodies(fraction, velocity, shape, closed=()) -> list[Body]:
+def _on_box(values, ids, lower, upper, shape) -> tuple[np.ndarray, np.ndarray]:
+    """The rows ``values`` ((n,) or (n, k)) of the grid cells ``ids`` (sorted) on the box ``[lower,
+    upper)``: a (z, y, x) or (z, y, x, k) array, zero at the cells not in ``ids``, and where the
+    cells are in ``ids``."""
+    cells = box_cells(lower, upper, shape)
+    if len(ids) == 0:
+        return np.zeros(cells.shape + values.shape[1:]), np.zeros(cells.shape, bool)
+    rows = np.minimum(np.searchsorted(ids, cells), len(ids) - 1)
+    found = ids[rows] == cells
+    return np.where(found.reshape(found.shape + (1,) * (values.ndim - 1)), values[rows], 0.0), found
+
+
+def rigid_bodies(fraction, velocity, shape, closed=(), box=None, ids=None, comm=None) -> list[Body]:
     """One :class:`Body` per solid body with a nonzero interface velocity; ``closed`` names
     the grid faces no flow may cross (see the module doc). A body whose velocity was dropped
-    entirely is kept (at rest), so that the drop is reported."""
-    nx, ny, nz = (int(s) for s in shape)
-    f = np.asarray(fraction, dtype=float).reshape(nz, ny, nx)
-    v = np.asarray(velocity, dtype=float).reshape(nz, ny, nx, 3)
+    entirely is kept (at rest), so that the drop is reported. ``fraction`` (n,) and ``velocity``
+    (n, 3) are the rows of the grid cells ``ids`` (sorted; None: the whole grid). On the ranks
+    of ``comm`` (collective) each gives its ``box`` ``(lower, upper)`` of a tiling of the grid
+    and rows that hold the box's cells and their face neighbours; every rank gets the same
+    bodies, each with its cells in the box (module doc). ``comm=None``: the box is the grid."""
+    shape = tuple(int(s) for s in shape)
+    lower, upper = box_bounds(shape, box)
+    ids = np.arange(int(np.prod(shape))) if ids is None else np.asarray(ids, np.int64).reshape(-1)
+    grown = np.maximum(lower - 1, 0), np.minimum(upper + 1, shape)  # the face neighbours' layer
+    f, found = _on_box(np.asarray(fraction, dtype=float).reshape(-1), ids, *grown, shape)
+    inner = tuple(slice(lo - g, hi - g) for lo, hi, g in zip(lower[::-1], upper[::-1], grown[0][::-1]))
+    needed = np.zeros(f.shape, bool)
+    needed[inner] = True
+    missing = int(np.count_nonzero(ndimage.binary_dilation(needed, structure=CROSS) & ~found))
     solid = f >= 0.5
-    labels, count = ndimage.label(solid)  # 6-connectivity (face neighbours)
-    layer = solid & ndimage.binary_dilation(~solid, structure=ndimage.generate_binary_structure(3, 1),
-                                            border_value=0)
-    out = []
-    flat = labels.reshape(-1)
-    for body in range(1, count + 1):
-        mine = labels == body
-        where = mine & layer
-        if not where.any():  # a body filling the grid: no wall to move
+    layer = (solid & ndimage.binary_dilation(~solid, structure=CROSS, border_value=0))[inner]
+    f, solid = f[inner], solid[inner]
+    v, _ = _on_box(np.asarray(velocity, dtype=float).reshape(-1, 3), ids, lower, upper, shape)
+    labels, count = label_boxes(solid, shape, (lower, upper), comm)
+    cells = box_cells(lower, upper, shape)
+    edges = [(axis, side, (upper if side else lower)[axis] == (shape[axis] if side else 0))
+             for axis, side in (divmod(BOX_FACES.index(face), 2) for face in closed)]
+    present, sums, members = [], [], {}
+    for body, box_of in enumerate(ndimage.find_objects(labels, count), start=1):
+        if box_of is None:
             continue
-        w = f[where]
-        us = (w[:, None] * v[where]).sum(axis=0) / w.sum()
+        mine = labels[box_of] == body
+        where = mine & layer[box_of]
+        w = f[box_of][where]
+        touch = [on and (box_of[2 - axis].stop == labels.shape[2 - axis] if side else box_of[2 - axis].start == 0)
+                 for axis, side, on in edges]  # its cells on that closed face of the grid
+        present.append(body - 1)
+        sums.append([*(w[:, None] * v[box_of][where]).sum(axis=0), w.sum(), *touch])
+        members[body] = cells[box_of][mine]
+    part = (missing, np.asarray(present, np.int64), np.asarray(sums, float).reshape(len(present), 4 + len(closed)))
+    parts = [part] if comm is None or comm.Get_size() == 1 else comm.allgather(part)
+    short = [f"rank {r} misses {m}" for r, (m, _, _) in enumerate(parts) if m]
+    if short:
+        raise ValueError(f"rigid bodies: the rows given lack cells of the box or of their face neighbours "
+                         f"({', '.join(short)})")
+    total = np.zeros((count, 4 + len(closed)))
+    for _, rows, sums in parts:  # in rank order: the same sums on every rank
+        total[rows] += sums
+    out = []
+    for body in range(1, count + 1):
+        s, weight, touches = total[body - 1, :3], total[body - 1, 3], total[body - 1, 4:]
+        if weight == 0:  # a body filling the grid: no wall to move
+            continue
+        us = s / weight
         dropped = {}
-        for face in closed:
-            axis, side = BOX_FACES.index(face) // 2, BOX_FACES.index(face) % 2
-            edge = np.take(mine, -1 if side else 0, axis=2 - axis)  # the body's cells on that face
-            if edge.any() and us[axis] != 0.0:
+        for face, (axis, _, _), touch in zip(closed, edges, touches):
+            if touch and us[axis] != 0.0:
                 dropped[face] = float(us[axis])
                 us[axis] = 0.0
         if not np.any(us) and not dropped:
             continue
-        out.append(Body(np.flatnonzero(flat == body), us, dropped))
+        out.append(Body(members.get(body, np.zeros(0, np.int64)), us, dropped))
     return out
 
 
-def rigid_velocity(bodies: list[Body], n_cells: int) -> np.ndarray:
-    """(n_cells, 3): each body's velocity in its cells, zero elsewhere."""
-    out = np.zeros((n_cells, 3))
+def rigid_velocity(bodies: list[Body], ids) -> np.ndarray:
+    """(len(ids), 3): the velocity of the body holding each of the grid cells ``ids`` (sorted,
+    holding every body's cells), zero elsewhere."""
+    ids = np.asarray(ids, np.int64)
+    out = np.zeros((len(ids), 3))
     for body in bodies:
-        out[body.cells] = body.velocity
+        out[np.searchsorted(ids, body.cells)] = body.velocity
     return out

@@ -89,14 +89,16 @@ def _ijk(cells: np.ndarray, shape) -> np.ndarray:
     return np.stack([cells % nx, cells // nx % ny, cells // (nx * ny)], axis=1)
 
 
-def reach(cells, shape, mode: str) -> np.ndarray:
+def reach(cells, shape, mode: str, at_least: int = 0) -> np.ndarray:
     """The cells whose fractions :func:`drag_fraction` of ``cells`` reads (grid indices, x fastest,
-    sorted): each cell and those within ``REACH[mode]`` cells of it along each axis."""
+    sorted): each cell and those within ``REACH[mode]`` cells of it along each axis, or within
+    ``at_least`` cells (another stencil read with it: a rigid body's interface layer, 1)."""
     cells = np.asarray(cells, dtype=np.int64).reshape(-1)
     ijk, found = _ijk(cells, shape), [cells]
     nx, ny, _ = (int(s) for s in shape)
+    layers = max(REACH[mode], at_least)
     for axis, n in enumerate(int(s) for s in shape):
-        for step in (s for s in range(-REACH[mode], REACH[mode] + 1) if s):
+        for step in (s for s in range(-layers, layers + 1) if s):
             moved = ijk[(ijk[:, axis] + step >= 0) & (ijk[:, axis] + step < n)].copy()
             moved[:, axis] += step
             found.append((moved[:, 2] * ny + moved[:, 1]) * nx + moved[:, 0])

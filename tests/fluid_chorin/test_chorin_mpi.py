@@ -52,7 +52,8 @@ def input_planes(bounds: list[int], layers: int | None) -> list[list[int]]:
     ("plates_power", "direct", "longest", 3, 1, 1),  # a cell's drag from its own fraction: the ghost layer alone
     ("box", "direct", "longest", 2, 2, 2),     # 3D, transient, a moving and turning block, the inlet cut in slabs
     ("box", "gamg", "x", 3, 0, 2),
-    ("bodies", "direct", "longest", 2, 2, None),  # a rigid body needs the whole grid
+    ("bodies", "direct", "x", 2, 0, 2),  # a rigid body across the slab cut, labelled on the ranks
+    ("bodies", "gamg", "y", 3, 1, 2),    # across both cuts
 ])
 def test_slabs_on_several_ranks_give_the_serial_fields(tmp_path, case, poisson, slab_axis, ranks, direction, layers):
     """Each rank is given the rows of its input cells only (the ghost layer and the wall drag's

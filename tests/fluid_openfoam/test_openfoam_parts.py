@@ -14,11 +14,15 @@ import shutil
 import numpy as np
 import pytest
 
+from coupler.plan.plan import make_plan
 from coupler.protocol.errors import ParticipantDied, ParticipantError
+from coupler.scene import load
 from fluid_openfoam.case import CaseSpec
 from fluid_openfoam.fields import read_label_list
 from fluid_openfoam.solver import OpenFOAMSolver
+from transfer.labels import cell_box
 from transfer.penalization import reach
+from vc_helpers import CASES
 
 pytestmark = pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil.which("mpirun") is None
                                 or shutil.which("decomposePar") is None,
@@ -122,17 +126,19 @@ def test_each_rank_publishes_its_processor_and_the_join_is_the_whole_arrays(flui
     assert whole.last_run["converged"], whole.last_run  # equal arrays of converged solves, not of two stalled ones
     assert np.array_equal(out["velocity"].data, U) and np.array_equal(out["pressure"].data, p * 1000.0)
     assert np.abs(U).max() > 1e-3 and np.ptp(p) > 0
-    # rigid bodies need every cell's velocity: a steady fluid's ranks refuse it before solving
-    with pytest.raises(ParticipantError, match=r"rank 0: input 'solid_velocity' with solid_velocity 'bodies' needs "
-                                               r"every cell's inputs .*; rank 1: varcouple/.*/fluid/advance/1: input"):
+    # rigid bodies are labelled across the processors by a transient fluid's ranks: a steady one refuses them
+    with pytest.raises(ParticipantError, match=r"rank 0: input 'solid_velocity': solid_velocity 'bodies' on several "
+                                               r"ranks needs a transient fluid.*; rank 1: varcouple/.*/fluid/advance/1"):
         client.advance(0, 1, 0.0, 1.0, {"solid_fraction": fraction, "solid_velocity": np.zeros((fraction.size, 3))})
 
 
-def test_rigid_bodies_take_every_cells_inputs_and_give_the_whole_arrays(fluid, tmp_path):
-    """Transient with a moving body (solid_velocity "bodies"): a body connects across the processors,
-    so each rank asks for every cell's inputs; rank 0 writes the velocity source, each rank its
-    processor's cellSet; the join is bitwise one process's arrays. The body spans z and moves in z:
-    those faces are open."""
+def test_rigid_bodies_are_labelled_across_the_processors(fluid, tmp_path):
+    """Transient with a moving body (solid_velocity "bodies") on both processors: each rank asks for
+    its cells and their face neighbours only (the wall drag's reach: 288 of the 512 cells, the whole
+    grid before) and the ranks label the body together; rank 0 writes the velocity source into
+    fvOptions, each rank its processor's cellSet: the files equal those of one process handling both
+    processors from the whole grid, the join its arrays. The body spans z and moves in z: those
+    faces are open."""
     cfg = {**config(tmp_path / "case"), "transient": True, "dt": 0.01,
            "boundaries": {"zmin": {"pressure": 0.0}, "zmax": {"pressure": 0.0}}}
     client = fluid()
@@ -142,14 +148,17 @@ def test_rigid_bodies_take_every_cells_inputs_and_give_the_whole_arrays(fluid, t
     velocity = np.where(fraction[:, None] > 0.5, [0.0, 0.0, 2e-3], 0.0)
     out = client.advance(0, 0, 0.0, 0.01, {"solid_fraction": fraction, "solid_velocity": velocity})
     for rank in (0, 1):
+        mine = read_label_list(tmp_path / "case" / f"processor{rank}" / "constant" / "polyMesh" / "cellProcAddressing")
         got = np.load(tmp_path / f"rank{rank}.npz")
-        assert np.array_equal(got["input_ids"], np.arange(fraction.size)) and len(got["cell_ids"]) == 256
-        assert np.array_equal(got["solid_velocity"], velocity)
+        assert np.array_equal(got["input_ids"], reach(mine, (16, 8, 4), "wall", at_least=1))
+        assert len(got["input_ids"]) == 288 and np.array_equal(got["solid_velocity"], velocity[got["input_ids"]])
     whole = OpenFOAMSolver(tmp_path / "whole", CaseSpec.from_config(cfg, ranks=2))
     whole.setup()
     U, p = whole.solve(fraction, velocity, 0.0, 0.01)
     assert whole.last_run["converged"], whole.last_run
     assert len(whole.sources) == 1 and np.mean(U[fraction > 0.99, 2]) > 1e-3  # the body moves the fluid
+    for name in ["constant/fvOptions"] + [f"processor{r}/constant/polyMesh/sets/solidBody0" for r in (0, 1)]:
+        assert (tmp_path / "case" / name).read_text() == (tmp_path / "whole" / name).read_text(), name
     assert np.array_equal(out["velocity"].data, U) and np.array_equal(out["pressure"].data, p * 1000.0)
 
 
@@ -198,3 +207,45 @@ def test_a_rank_that_dies_is_named_with_its_key(fluid, tmp_path):
     with pytest.raises(ParticipantDied) as info:
         client.advance(0, 0, 0.0, 1.0, {"solid_fraction": step_fraction()})
     assert f"participant 'fluid' died: rank 1 gave no reply on varcouple/{client.run_id}/fluid/advance/1" in str(info.value)
+
+
+def test_processors_that_are_not_boxes_take_the_whole_grid(launch_script, tmp_path):
+    """16 cells along x in 3 processors (simple: 171, 171 and 170 cells, not whole planes): every
+    rank asks for the whole grid's inputs and labels the bodies from them (logged once), and the
+    join equals one process's arrays."""
+    cfg = {**config(tmp_path / "case"), "transient": True, "dt": 0.01,
+           "boundaries": {"zmin": {"pressure": 0.0}, "zmax": {"pressure": 0.0}}}
+    client = launch_script("fluid", "recording_openfoam", RECORDING, [], {"RECORD_DIR": str(tmp_path), "FAULT": ""},
+                           ranks=3, timeout=120)
+    client.configure(cfg)
+    client.geometry()
+    fraction = step_fraction()
+    velocity = np.where(fraction[:, None] > 0.5, [0.0, 0.0, 2e-3], 0.0)
+    out = client.advance(0, 0, 0.0, 0.01, {"solid_fraction": fraction, "solid_velocity": velocity})
+    for rank in range(3):
+        assert np.array_equal(np.load(tmp_path / f"rank{rank}.npz")["input_ids"], np.arange(fraction.size))
+    log = (tmp_path / "logs" / "fluid.log").read_text()
+    assert log.count("processor0, processor1, processor2 of the simple decomposition not an index box of the grid "
+                     "(16, 8, 4): every rank receives the whole grid's inputs for the rigid bodies") == 1, log
+    whole = OpenFOAMSolver(tmp_path / "whole", CaseSpec.from_config(cfg, ranks=3))
+    whole.setup()
+    U, p = whole.solve(fraction, velocity, 0.0, 0.01)
+    assert whole.last_run["converged"] and len(whole.sources) == 1
+    assert np.array_equal(out["velocity"].data, U) and np.array_equal(out["pressure"].data, p * 1000.0)
+
+
+@pytest.mark.parametrize("ranks, boxes", [(2, True), (3, False), (4, True), (5, True), (6, False)])
+def test_the_shipped_rigid_body_scenes_processors_are_boxes_when_the_cells_divide(tmp_path, ranks, boxes):
+    """cases/added_mass_heavy and added_mass_light (the shipped scenes with rigid bodies in the
+    OpenFOAM fluid, 20 x 4 x 6 cells) with [solvers.fluid] ranks = 2 to 6: decomposePar's simple
+    blocks cut x only, into index boxes where 20 planes divide evenly (2, 4, 5 ranks); on 3 and 6
+    ranks they are not boxes, and the ranks take the whole grid's inputs
+    (test_processors_that_are_not_boxes_take_the_whole_grid)."""
+    config = make_plan(load(CASES / "added_mass_heavy")).participant("fluid").config
+    assert config["transient"] and config["solid_velocity"] == "bodies" and config["grid"]["shape"] == [20, 4, 6]
+    solver = OpenFOAMSolver(tmp_path / "case", CaseSpec.from_config(config, ranks=ranks))
+    solver.setup()  # one process handling every processor: decomposePar's cellProcAddressing
+    found = [cell_box(cells, (20, 4, 6)) for cells in solver.parallel.cells]
+    assert [b is not None for b in found] == [boxes] * ranks
+    if boxes:
+        assert [b[0].tolist() for b in found] == [[20 * r // ranks, 0, 0] for r in range(ranks)]
