@@ -240,6 +240,7 @@ class SolidOnSlabs(SolidOnGrid):
             raise invalid_deformation(self.max_displacement, failed)
         self.to_fluid = None  # the previous shape's operator goes before the new one is made (peak memory)
         to_fluid = assemble(part, self.slab.part, "pseudo_l2", comm)
+        self.received = to_fluid.stats["exchange"]  # the solid cells its assembly brought from other ranks
         volumes = to_fluid.diagonal()
         measure = float(part.mesh.cell_measures().sum()) if part.num_cells else 0.0
         inside, total = comm.allreduce(np.array([volumes.sum(), measure]))
@@ -325,13 +326,6 @@ class FluidSolidRanks:
             ctx.log(f"interface: no boundary triangles from the solid; pressure projected onto all {interface.size} "
                     f"solid vertices (volume projection; {ranks})")
         self._seen = None
-        #: what each coupler rank holds (summary.json "coupler_ranks")
-        self.holdings = comm.allgather({"grid_cells": len(self.slab.ids), "solid_cells": self.solid.mesh.num_cells,
-                                        "solid_vertices": len(self.solid.vertices),
-                                        "solid_rows": len(self.solid_held.out_ids),
-                                        "fluid_rows": len(self.fluid_held.out_ids),
-                                        "interface_triangles": len(self.solid.triangles),
-                                        "interface_rows": len(interface.block) if interface else 0})
 
     def update(self, outputs=None) -> SolidOnSlabs:
         """The solid on the slabs as the solid's latest displacement (held here, not `outputs`)
@@ -344,9 +338,21 @@ class FluidSolidRanks:
         self.ctx.phases.timed("geometry update", self.on_grid.update, local)
         return self.on_grid
 
+    def holdings(self) -> list[dict]:
+        """What each coupler rank holds (summary.json ``coupler_ranks``), and the solid cells and
+        bytes the latest build of the solid-to-grid transfer received from the other ranks
+        (:func:`transfer.distributed.gather_source`: those whose boxes meet its slab's). Collective."""
+        interface, received = self.on_grid.interface, self.on_grid.received
+        return self.ctx.comm.allgather({
+            "grid_cells": len(self.slab.ids), "solid_cells": self.solid.mesh.num_cells,
+            "solid_vertices": len(self.solid.vertices), "solid_rows": len(self.solid_held.out_ids),
+            "fluid_rows": len(self.fluid_held.out_ids), "interface_triangles": len(self.solid.triangles),
+            "interface_rows": len(interface.block) if interface else 0,
+            "solid_to_grid_received": {"cells": received.cells_received, "bytes": received.bytes_received}})
+
     def summary(self) -> dict:
         return {"interface": self.interface, "geometry_update": self.on_grid.describe(),
-                "coupler_ranks": self.holdings}
+                "coupler_ranks": self.holdings()}
 
 
 def fluid_solid_ranks(ctx: RanksContext) -> FluidSolidRanks:
