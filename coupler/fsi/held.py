@@ -1,9 +1,11 @@
 """What one rank of a coupler on several ranks holds of a participant (docs/scaling.md, step 3):
 the parts of the participant's ranks assigned to it (round-robin: participant rank r to coupler
 rank r mod P), their rows of every output field and the rows of every input they need, in the
-participant's input numbering. :meth:`Held.fetch` carries output rows to whatever rows a coupler
-rank works on (its slab of the grid, the vertices of its solid cells) and :meth:`Held.inputs`
-the values a coupler rank computed to the input rows of its parts, through
+participant's input numbering. The cells a coupler rank works on (:meth:`Held.mesh`) are those
+of its parts, or any others :meth:`Held.place` gives (in a flow scene the solid cells over its
+grid slab: :func:`coupler.fsi.ranks.on_slabs`). :meth:`Held.fetch` carries output rows to whatever
+rows a coupler rank works on (its slab of the grid, the vertices of its solid cells) and
+:meth:`Held.inputs` the values a coupler rank computed to the input rows of its parts, through
 :class:`transfer.rows.Rows`: nothing is gathered."""
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ class Held:
             raise CouplerError(f"participant {name!r}: its parts do not number each of its {self.count} rows once")
         self.fields: dict[str, np.ndarray] = {}
         self.points: np.ndarray | None = None
-        self._mesh = None
+        self._mesh = self._cells = None
 
     def fetch(self, field: str, wanted: np.ndarray) -> np.ndarray:
         """The output `field` at the rows `wanted` (any rows of the whole). Collective."""
@@ -65,33 +67,55 @@ class Held:
         return float(np.max(np.linalg.norm(a.reshape(len(a), -1), axis=1))) if a is not None and len(a) else 0.0
 
     def mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
-        """(rows, mesh): the cells of the parts held here (their `geometry`) on the global vertices
-        they use, with the coordinates of those owned elsewhere fetched, and the global ids of the
-        mesh's rows (its vertices; with ``location`` cells its cells, ``out_ids``); made once (the
-        operators and the output share it). Collective the first time."""
+        """(rows, mesh): the cells of the parts held here (their `geometry`), or those :meth:`place`
+        gave, on the global vertices they use, with the coordinates of those owned elsewhere
+        fetched, and the global ids of the mesh's rows (its vertices; with ``location`` cells its
+        cells, ``out_ids``); made once (the operators and the output share it). Collective the
+        first time."""
         if self._mesh is None:
             self._mesh = self._made_mesh(geometry)
         return self._mesh
 
-    def _made_mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
+    def part_cells(self, geometry: list[dict]) -> np.ndarray:
+        """The cells of the parts held here (global vertex ids, one row each)."""
         k = CELL_TYPES[self.cell_type][1]
-        points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
         cells = [np.asarray(g["cells"], np.int64).reshape(-1, k) for g in geometry]
-        cells = np.concatenate(cells) if cells else np.zeros((0, k), np.int64)
-        vertices, local = np.unique(cells, return_inverse=True)
+        return np.concatenate(cells) if cells else np.zeros((0, k), np.int64)
+
+    def place(self, cells: np.ndarray) -> None:
+        """Work on `cells` (global vertex ids, one row each; over the ranks each of the
+        participant's cells once) instead of the cells of the parts held here: :meth:`mesh` is
+        made of them from now on."""
+        self._cells, self._mesh = cells, None
+
+    def coordinates(self, geometry: list[dict], wanted: np.ndarray, axis: int | None = None) -> np.ndarray:
+        """The coordinates (n, 3), or those along `axis` (n,), of the points `wanted` (global point
+        ids) from the parts' `geometry`, wherever they are held. Collective."""
+        points = [np.asarray(g["points"]).reshape(-1, 3) for g in geometry]
         if self.location == "points":
             rows, ids = self.rows, self.out_ids
         else:  # the coordinates are rows of the points, not of the fields
             ids = [np.asarray(g.get("point_ids", np.arange(len(p))), np.int64) for g, p in zip(geometry, points)]
             ids = np.concatenate(ids) if ids else np.zeros(0, np.int64)
             rows = Rows(self.comm, self.comm.allreduce(len(ids)))
-        points = np.concatenate(points) if points else np.zeros((0, 3))
-        reference = rows.move(ids, points, vertices).reshape(-1, 3)
+        points = _joined(points)
+        if axis is not None:
+            return rows.move(ids, points[:, axis], wanted, keep=False)
+        return rows.move(ids, points, wanted).reshape(-1, 3)
+
+    def _made_mesh(self, geometry: list[dict]) -> tuple[np.ndarray, Mesh]:
+        cells = self.part_cells(geometry) if self._cells is None else self._cells
+        vertices, local = np.unique(cells, return_inverse=True)
+        reference = self.coordinates(geometry, vertices)
         name = f"{self.name} part"
-        mesh = (Mesh(reference, local.reshape(-1, k), self.cell_type, name=name, reorient=True) if len(cells)
+        mesh = (Mesh(reference, local.reshape(cells.shape), self.cell_type, name=name, reorient=True) if len(cells)
                 else Mesh.empty(self.cell_type, name))
         if self.location == "points":
-            self.points = points
+            self.points = _joined([np.asarray(g["points"]).reshape(-1, 3) for g in geometry])
             return vertices, mesh
         self.points = mesh.points[mesh.cells].mean(axis=1)  # the cells' centroids (their P0 dofs)
         return self.out_ids, mesh
+
+
+def _joined(points: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(points) if points else np.zeros((0, 3))

@@ -1,6 +1,8 @@
 """The exchanges of a flow scene on a coupler of P ranks (docs/scaling.md, step 3): every rank
 holds a slab of the fluid grid (:class:`GridSlab`: every rank knows the grid by origin, spacing
-and shape) and the solid parts assigned to it (:class:`SolidPart`), and the operators are the
+and shape) and works on the solid cells over it (:class:`SolidPart`: each cell, with the wetted
+triangles it bounds, sent to the rank whose slab holds its centroid, :func:`on_slabs`; the rows
+of the solid stay with the ranks that talk to its parts), and the operators are the
 distributed ones of :func:`transfer.distributed.assemble`, rebuilt from the deformed solid
 (:class:`SolidOnSlabs`): the pressure trace on the wetted interface (paper 2.3, Steps 2-3; on
 the open faces of a fracture in contact; onto every solid vertex for a solid without boundary
@@ -29,7 +31,7 @@ from coupler.errors import CouplerError
 from coupler.protocol.slabs import slab_bounds
 from transfer import Mesh, NoOverlapError, StructuredGrid
 from transfer.distributed import Part, assemble
-from transfer.rows import Rows
+from transfer.rows import Rows, to_ranks
 
 from . import fracture
 from .centres import centre_cells
@@ -46,7 +48,7 @@ from .operators import OpenShare, SolidFraction, ViscousTraction, sampled_at_cen
 
 class GridSlab:
     """This coupler rank's slab of the grid `G` along its longest axis: ``part`` (Q0 cells, global
-    ids ``ids``)."""
+    ids ``ids``); :meth:`rank_of` the rank whose slab holds a coordinate along the axis."""
 
     def __init__(self, comm, G: StructuredGrid, where: str):
         try:
@@ -59,6 +61,13 @@ class GridSlab:
         self.block = (lower, upper)  # the cells lower <= (i, j, k) < upper
         self.ids = self.part.global_dofs
         self.cell_volume = float(np.prod(G.spacing))
+        #: the slab axis and where along it the slabs meet (slab r between cuts r - 1 and r)
+        self.axis, self.cuts = d, G.origin[d] + G.spacing[d] * np.asarray(bounds[1:-1], float)
+
+    def rank_of(self, x) -> np.ndarray:
+        """The rank whose slab holds each coordinate `x` along the slab axis (before the grid's
+        start the first, beyond its end the last)."""
+        return np.searchsorted(self.cuts, x, side="right")
 
 
 def slab_centres(comm, S: Mesh, slab: GridSlab) -> np.ndarray:
@@ -71,19 +80,58 @@ def slab_centres(comm, S: Mesh, slab: GridSlab) -> np.ndarray:
     return Rows(comm, slab.G.num_cells).move(found, np.ones(len(found)), slab.ids, add=True) > 0
 
 
-class SolidPart:
-    """The solid cells of this coupler rank's solid parts (``geometry`` of each), with the
-    coordinates of every vertex they use (owned here or fetched from the rank holding it):
-    ``vertices`` (global ids), ``reference`` (their coordinates), ``cells`` (local), the wetted
-    ``triangles`` of these cells (global ids) and the numbering of the interface vertices."""
+#: the faces of a tetrahedron (its local vertices)
+FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
 
-    def __init__(self, comm, held: Held, geometry: list[dict]):
+
+def bounded(cells: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """The index of the tetrahedron of `cells` (n, 4) that each of `triangles` (m, 3) is a face
+    of, -1 where none is (global vertex ids both)."""
+    near = np.flatnonzero(np.count_nonzero(np.isin(cells, triangles), axis=1) >= 3)
+    faces = np.sort(cells[near][:, FACES].reshape(-1, 3), axis=1)
+    _, key = np.unique(np.concatenate([faces, np.sort(triangles, axis=1)]), axis=0, return_inverse=True)
+    face = np.full(len(faces) + len(triangles), -1)
+    face[key[:len(faces)]] = np.arange(len(faces))
+    found = face[key[len(faces):]]
+    parent = np.full(len(triangles), -1)
+    parent[found >= 0] = near[found[found >= 0] // 4]
+    return parent
+
+
+def on_slabs(comm, held: Held, geometry: list[dict], triangles: np.ndarray, slab: GridSlab):
+    """(cells, triangles): the solid cells (global vertex ids) whose centroid along the slab axis
+    lies in this rank's `slab` (before or beyond the grid: the first or last slab) and the wetted
+    `triangles` that bound them, from the parts held here (`geometry`; each triangle a face of one
+    of their cells) on every rank, in one alltoallv; nothing gathered. Collective."""
+    cells = held.part_cells(geometry)
+    vertices, local = np.unique(cells, return_inverse=True)
+    x = held.coordinates(geometry, vertices, axis=slab.axis)
+    rank = slab.rank_of(x[local.reshape(cells.shape)].mean(axis=1))
+    parent = bounded(cells, triangles) if len(triangles) else np.zeros(0, np.int64)
+    if comm.allreduce(int(np.count_nonzero(parent < 0))):
+        raise CouplerError(f"participant {held.name!r}: a wetted triangle of its parts is a face of none of their "
+                           f"cells: the coupler's ranks cannot place it with its cell")
+    return to_ranks(comm, [cells, triangles], [rank, rank[parent]])
+
+
+class SolidPart:
+    """The solid cells this coupler rank works on, with the coordinates of every vertex they use
+    (owned here or fetched from the rank holding it): ``vertices`` (global ids), ``reference``
+    (their coordinates), ``cells`` (local), the wetted ``triangles`` of these cells (global ids)
+    and the numbering of the interface vertices. The cells of this rank's solid parts
+    (``geometry`` of each), or with a `slab` those over it from every rank's parts
+    (:func:`on_slabs`), which ``held`` then works on (:meth:`coupler.fsi.held.Held.place`)."""
+
+    def __init__(self, comm, held: Held, geometry: list[dict], slab: GridSlab | None = None):
         self.comm, self.held = comm, held
         triangles = [np.asarray(g["interface_triangles"], np.int64).reshape(-1, 3)
                      for g in geometry if "interface_triangles" in g]
+        self.triangles = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
+        if slab is not None:
+            cells, self.triangles = on_slabs(comm, held, geometry, self.triangles, slab)
+            held.place(cells)
         self.vertices, self.mesh = held.mesh(geometry)
         self.reference, self.cells = self.mesh.points, self.mesh.cells
-        self.triangles = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
         self.wetted = comm.allreduce(len(self.triangles)) > 0
         self._interface_numbering()
 
@@ -240,6 +288,7 @@ class SolidOnSlabs(SolidOnGrid):
             raise invalid_deformation(self.max_displacement, failed)
         self.to_fluid = None  # the previous shape's operator goes before the new one is made (peak memory)
         to_fluid = assemble(part, self.slab.part, "pseudo_l2", comm)
+        self.received = to_fluid.stats["exchange"]  # the solid cells its assembly brought from other ranks
         volumes = to_fluid.diagonal()
         measure = float(part.mesh.cell_measures().sum()) if part.num_cells else 0.0
         inside, total = comm.allreduce(np.array([volumes.sum(), measure]))
@@ -299,8 +348,9 @@ class RanksContext:
 
 
 class FluidSolidRanks:
-    """:class:`coupler.fsi.context.FluidSolid` on several ranks: the solid as this rank's grid slab
-    sees it, updated from the solid's latest displacement whenever an operator asks."""
+    """:class:`coupler.fsi.context.FluidSolid` on several ranks: the solid cells over this rank's
+    grid slab (their vertices' rows fetched from the ranks that hold them), updated from the solid's
+    latest displacement whenever an operator asks."""
 
     def __init__(self, ctx: RanksContext):
         scene, comm = ctx.scene, ctx.comm
@@ -308,7 +358,7 @@ class FluidSolidRanks:
         where = f"{scene.path}: [geometry.fluid]"
         self.ctx, self.solid_held, self.fluid_held = ctx, ctx.held["solid"], ctx.held["fluid"]
         self.slab = GridSlab(comm, ctx.context.meshes["fluid"], where)
-        self.solid = SolidPart(comm, self.solid_held, ctx.parts["solid"])
+        self.solid = SolidPart(comm, self.solid_held, ctx.parts["solid"], self.slab)
         self.on_grid = SolidOnSlabs(comm, self.solid, self.slab, where, deform=scene.coupling["deformation"],
                                     wetted=loaded(scene), traction=scene.coupling["traction"])
         ctx.phases.add("transfer", time.perf_counter() - start)
@@ -325,13 +375,6 @@ class FluidSolidRanks:
             ctx.log(f"interface: no boundary triangles from the solid; pressure projected onto all {interface.size} "
                     f"solid vertices (volume projection; {ranks})")
         self._seen = None
-        #: what each coupler rank holds (summary.json "coupler_ranks")
-        self.holdings = comm.allgather({"grid_cells": len(self.slab.ids), "solid_cells": self.solid.mesh.num_cells,
-                                        "solid_vertices": len(self.solid.vertices),
-                                        "solid_rows": len(self.solid_held.out_ids),
-                                        "fluid_rows": len(self.fluid_held.out_ids),
-                                        "interface_triangles": len(self.solid.triangles),
-                                        "interface_rows": len(interface.block) if interface else 0})
 
     def update(self, outputs=None) -> SolidOnSlabs:
         """The solid on the slabs as the solid's latest displacement (held here, not `outputs`)
@@ -344,9 +387,21 @@ class FluidSolidRanks:
         self.ctx.phases.timed("geometry update", self.on_grid.update, local)
         return self.on_grid
 
+    def holdings(self) -> list[dict]:
+        """What each coupler rank holds (summary.json ``coupler_ranks``), and the solid cells and
+        bytes the latest build of the solid-to-grid transfer received from the other ranks
+        (:func:`transfer.distributed.gather_source`: those whose boxes meet its slab's). Collective."""
+        interface, received = self.on_grid.interface, self.on_grid.received
+        return self.ctx.comm.allgather({
+            "grid_cells": len(self.slab.ids), "solid_cells": self.solid.mesh.num_cells,
+            "solid_vertices": len(self.solid.vertices), "solid_rows": len(self.solid_held.out_ids),
+            "fluid_rows": len(self.fluid_held.out_ids), "interface_triangles": len(self.solid.triangles),
+            "interface_rows": len(interface.block) if interface else 0,
+            "solid_to_grid_received": {"cells": received.cells_received, "bytes": received.bytes_received}})
+
     def summary(self) -> dict:
         return {"interface": self.interface, "geometry_update": self.on_grid.describe(),
-                "coupler_ranks": self.holdings}
+                "coupler_ranks": self.holdings()}
 
 
 def fluid_solid_ranks(ctx: RanksContext) -> FluidSolidRanks:

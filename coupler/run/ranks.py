@@ -8,7 +8,9 @@ own zenoh session, a peer, to which the participant ranks it talks to link direc
 (:meth:`RanksRun.processes`). Each coupler rank talks to the participant ranks assigned to it
 (round-robin, :func:`coupler.fsi.held.assigned`): it sends their requests and receives their
 parts directly, no other process routing them, and holds their rows
-(:class:`coupler.fsi.held.Held`). A participant served in the coupler's process (a ``mesh_file``,
+(:class:`coupler.fsi.held.Held`); the cells it works on are its parts', but in a flow scene
+the solid's: those over its grid slab (:func:`coupler.fsi.ranks.on_slabs`), whatever rank
+they came from. A participant served in the coupler's process (a ``mesh_file``,
 the fixed solid ``rigid_solid``: :data:`SERVED_IN_PARTS`) is served on every coupler rank, each its
 own part of it (:meth:`coupler.run.local.LocalClient.exchange`): to the run, a participant of P
 parts, coupler rank r holding part r. The operators are the
@@ -25,8 +27,8 @@ participant it works on (:meth:`RanksRun.piece`: a ``.pvtu`` of per-rank ``.vtu`
 (``DISTRIBUTED``) is evaluated from each rank's pieces and rows (:meth:`RanksRun.result`); the
 pictures are drawn after the run by rank 0 from the written pieces
 (:func:`coupler.output.publish.publish`). Operators, check kinds and monitors that need a whole
-field on one process refuse P > 1 (:meth:`RanksRun.admit`: ``traction = "full"`` and the flow-rate
-control)."""
+field on one process refuse P > 1 (:meth:`RanksRun.admit`; those a scene reaches all have a
+distributed variant now)."""
 
 from __future__ import annotations
 
@@ -231,8 +233,9 @@ class RanksRun(Run):
 
     def piece(self, name: str, geometry: list[dict]):
         """(mesh, row ids): what this rank writes of participant `name`: its slab of a grid
-        (:attr:`slabs`, cell rows), or the tetrahedra of the parts held here on the vertices they
-        use (point rows). Collective."""
+        (:attr:`slabs`, cell rows), or the cells it works on (:meth:`coupler.fsi.held.Held.mesh`:
+        its parts', in a flow scene the solid cells over its grid slab; each cell in one piece)
+        on the vertices they use (point rows). Collective."""
         if name in self.slabs:
             return self.slabs[name].part.mesh, self.slabs[name].ids
         vertices, mesh = self.held[name].mesh(geometry)

@@ -1,7 +1,8 @@
 """The coupler on P MPI ranks (docs/scaling.md, step 3; coupler/run/ranks.py): small_fracture with
 the Chorin fluid, with the pressure or the full traction on the rock, gives the one-rank coupler's
 fields and summary to 1e-10 with the coupler on 2 ranks, each coupler rank holding a slab of the
-grid and the solid parts of its solid ranks (never the whole solid); the transfer effect (mesh
+grid and the solid cells over it (never the whole solid, whatever rank the solid's parts come
+from); the transfer effect (mesh
 files served in parts, the l2 and pseudo_l2 projections distributed, the exact_transfer check
 from sums over the ranks' pieces) gives the one-rank run's fields, figures and check to 1e-10,
 and so do the fixed solid served in parts with its checks cubic_law and lubrication
@@ -53,12 +54,16 @@ def holdings(out) -> list[dict]:
     return json.loads((out / "summary.json").read_text())["coupler_ranks"]
 
 
+#: small_fracture's grid: slabs along x, cut at x = 10 cells on 2 coupler ranks
+SMALL_GRID = StructuredGrid.from_bounds([0, 0, -6e-4], [0.05, 0.025, 1.6e-3], [21, 11, 11])
+
+
 @needs_mpi
 def test_two_coupler_ranks_give_the_serial_run(tmp_path):
     """Solid and fluid on 2 ranks each: coupler ranks 0 and 1 each talk to one rank of each; the
     fields of every VTU file (joined from each rank's piece) and every summary figure equal the
-    one-rank coupler's to 1e-10, with the same iterations; each rank holds half the grid, its
-    solid rank's cells and a part of the interface vector only, and writes its pieces. The pictures,
+    one-rank coupler's to 1e-10, with the same iterations; each rank holds half the grid, the
+    solid cells over it and a part of the interface vector only, and writes its pieces. The pictures,
     drawn after the run from the pieces, are the same files, and the figures they print (summary.json
     ``picture_figures``: largest displacement, largest von Mises on the cut, largest speed, the
     wetted faces' pressures and vertices) equal the one-rank coupler's to 1e-10 (with the rest of
@@ -102,8 +107,7 @@ def test_cell_centre_fractions_on_two_coupler_ranks(tmp_path):
                          scene=CELL_CENTRES, coupling=f"ranks = {p}" if p > 1 else "") for p in (1, 2))
     assert_same(serial, ranks, "cell-centre fractions, coupler on 2 ranks")
     solid, fluid = (meshio.read(serial / f"{name}_0000.vtu") for name in ("solid", "fluid"))
-    G = StructuredGrid.from_bounds([0, 0, -6e-4], [0.05, 0.025, 1.6e-3], [21, 11, 11])
-    masks = [centres_inside(Mesh(solid.points + u, solid.cells_dict["tetra"], "tetra", reorient=True), G)
+    masks = [centres_inside(Mesh(solid.points + u, solid.cells_dict["tetra"], "tetra", reorient=True), SMALL_GRID)
              for u in (0.0, solid.point_data["displacement"])]
     mask = fluid.cell_data["solid_fraction"][0]
     assert set(np.unique(mask)) == {0.0, 1.0} and np.array_equal(mask, masks[1]) and np.any(masks[0] != masks[1])
@@ -113,13 +117,36 @@ def test_cell_centre_fractions_on_two_coupler_ranks(tmp_path):
 @needs_mpi
 def test_a_coupler_rank_without_participant_ranks(tmp_path):
     """Solid and fluid on one rank each: coupler rank 1 talks to none (it holds no rows of either)
-    and still works its slab of the grid: the serial run to 1e-10."""
+    and still works its slab of the grid and the solid cells over it: the serial run to 1e-10."""
     serial, ranks = coupled(tmp_path, 1, 1, 1), coupled(tmp_path, 2, 1, 1)
     assert_same(serial, ranks, "coupler on 2 ranks, participants on 1")
     held = holdings(ranks)
     assert [h["solid_rows"] > 0 for h in held] == [True, False]
     assert [h["fluid_rows"] > 0 for h in held] == [True, False]
-    assert all(h["grid_cells"] > 0 for h in held)
+    assert all(h["grid_cells"] > 0 and h["solid_cells"] > 0 and h["interface_triangles"] > 0 for h in held)
+
+
+@needs_mpi
+def test_each_coupler_rank_works_on_the_solid_cells_over_its_slab(tmp_path):
+    """The solid on one rank, the fluid on 2: coupler rank 1 talks to no solid rank (it holds none
+    of the solid's rows) but works on the solid cells whose centroid lies over its grid slab (x
+    beyond the cut; rank 0 those before it) and the wetted triangles that bound them, each cell in
+    one rank's piece; the coordinates and fields of their vertices come from rank 0's rows, and a
+    rebuild of the solid-to-grid transfer takes from the other rank only the cells near the cut
+    (measured 40 and 80 of 4,800; 1,320 when rank 0 held every cell). The fields, every summary
+    figure and the iterations equal the one-rank coupler's to 1e-10."""
+    serial, ranks = coupled(tmp_path, 1, 1, 2), coupled(tmp_path, 2, 1, 2)
+    assert_same(serial, ranks, "coupler on 2 ranks, solid on 1, fluid on 2")
+    held = holdings(ranks)
+    assert [h["solid_rows"] > 0 for h in held] == [True, False] and all(h["fluid_rows"] > 0 for h in held)
+    assert sum(h["solid_cells"] for h in held) == 4800 and all(h["solid_cells"] > 0 for h in held)
+    assert sum(h["interface_triangles"] for h in held) == 800 and all(h["interface_triangles"] > 0 for h in held)
+    cut = SMALL_GRID.origin[0] + 10 * SMALL_GRID.spacing[0]
+    for r, h in enumerate(held):
+        piece = meshio.read(ranks / f"solid_0000_p{r}.vtu")
+        x = piece.points[piece.cells_dict["tetra"]].mean(axis=1)[:, 0]
+        assert len(x) == h["solid_cells"] and np.all(x < cut if r == 0 else x >= cut)
+    assert sum(h["solid_to_grid_received"]["cells"] for h in held) < 4800 // 20
 
 
 def assert_same_traction(serial, ranks, label: str) -> dict:
@@ -138,14 +165,15 @@ def assert_same_traction(serial, ranks, label: str) -> dict:
 def test_full_traction_on_two_coupler_ranks(tmp_path):
     """traction = "full" (the traction (-p I + tau) n, three values per interface vertex, the wall
     shear from three velocity samples along the normal) with the solid and the fluid on one rank:
-    coupler rank 1 holds none of their rows, only its slab of the grid and half the interface
-    vector's rows (the solid's velocity at them fetched from rank 0). The fields of every VTU file
+    coupler rank 1 holds none of their rows, only its slab of the grid, the solid cells and wetted
+    triangles over it and half the interface vector's rows (the solid's velocity at them fetched
+    from rank 0). The fields of every VTU file
     (the solid's traction among them), every summary figure (the traction's forces, ratio and fits)
     and the iterations equal the one-rank coupler's to 1e-10."""
     serial, ranks = (coupled(tmp_path, p, 1, 1, traction="full") for p in (1, 2))
     assert_same_traction(serial, ranks, "traction full, coupler on 2 ranks")
     held = holdings(ranks)
-    assert [h["interface_triangles"] > 0 for h in held] == [True, False]
+    assert all(h["interface_triangles"] > 0 for h in held) and sum(h["interface_triangles"] for h in held) == 800
     assert [h["interface_rows"] for h in held] == [231, 231]
 
 
@@ -424,7 +452,9 @@ FIXED_SOLID = {"parallel_plates": ("parallel_plates", PLATES),
 @pytest.mark.parametrize("label", FIXED_SOLID)
 def test_a_fixed_solid_and_its_check_on_two_and_three_coupler_ranks(tmp_path, label):
     """The fixed solid (rigid_solid, served in the coupler's process) in parts, coupler rank r its part
-    r of the generated mesh, and the one-way plan (the solid fraction only): on 2 and 3 coupler ranks
+    r of the generated mesh, each rank working on the cells over its grid slab (parallel_plates's
+    slabs cut across the gap: on 3 ranks the middle one holds none and writes no solid piece), and
+    the one-way plan (the solid fraction only): on 2 and 3 coupler ranks
     every field (the pieces joined), every figure and the check's report (flow rates through the
     sections x = const summed from each rank's grid slab) equal the one-rank coupler's to 1e-10, the
     check passing as serially."""
@@ -442,10 +472,12 @@ def test_a_fixed_solid_and_its_check_on_two_and_three_coupler_ranks(tmp_path, la
         assert reports[0].keys() == reports[1].keys() and all(f"summary /check/{k}" in found
                                                               for k, v in reports[0].items() if type(v) is float)
         held = holdings(ranks)
-        assert len(held) == p and all(h["solid_cells"] > 0 and h["interface_rows"] == 0 for h in held)
+        between = case == "parallel_plates" and p == 3  # the middle slab (y, across the gap) is fluid only
+        assert [h["solid_cells"] > 0 for h in held] == [True] + [not between] * (p - 2) + [True]
+        assert all(h["interface_rows"] == 0 for h in held)
         assert sum(h["solid_cells"] for h in held) == summary(serial)["sizes"]["solid"]["cells"]
         assert sorted(f.name for f in ranks.glob("solid_0000*")) == ["solid_0000.pvtu"] + [
-            f"solid_0000_p{r}.vtu" for r in range(p)]
+            f"solid_0000_p{r}.vtu" for r in range(p) if held[r]["solid_cells"]]
 
 
 @needs_mpi
@@ -531,11 +563,14 @@ def assert_same_fracture(serial, ranks, label: str, cancelled: tuple[str, ...] =
 def test_hm_fracture_on_two_coupler_ranks(tmp_path):
     """The hydro-mechanical fracture (open pressure trace, fracture monitor) with the coupler on 2
     ranks, participants on one: coupler rank 1 holds no solid or fluid rows, only its slab of the
-    grid, across whose cut (slabs along z, through the fracture) the open space percolates."""
+    grid, across whose cut (slabs along z, through the fracture) the open space percolates, and the
+    solid cells over it (the upper block's: the contact share's mortar projection crosses the
+    ranks)."""
     serial, ranks = hm_fracture(tmp_path, 1, 1), hm_fracture(tmp_path, 2, 1)
     assert_same_fracture(serial, ranks, "hm_fracture, coupler on 2 ranks")
     held = holdings(ranks)
-    assert [h["interface_triangles"] > 0 for h in held] == [True, False] and all(h["grid_cells"] for h in held)
+    assert [h["solid_rows"] > 0 for h in held] == [True, False] and all(h["grid_cells"] for h in held)
+    assert all(h["interface_triangles"] > 0 for h in held) and sum(h["interface_triangles"] for h in held) == 160
 
 
 @pytest.mark.slow

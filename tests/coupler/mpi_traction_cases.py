@@ -1,7 +1,7 @@
 """Run under ``mpirun -n P`` by test_traction_ranks.py: the traction ``(-p I + tau) n`` with the
 wall shear from three samples (coupler/fsi/viscous.py) on P coupler ranks (coupler/fsi/ranks.py:
-the solid's cells and wetted triangles dealt out round-robin, its vertex rows too, the fluid in
-grid slabs) against the serial :class:`SolidOnGrid` on the whole arrays (every rank computes
+the solid's cells and wetted triangles dealt out round-robin, its vertex rows too, or the cells
+placed on the slabs, the fluid in grid slabs) against the serial :class:`SolidOnGrid` on the whole arrays (every rank computes
 both). Rank 0 prints JSON per case: the largest difference of each part at the interface rows
 relative to its largest value, the fits and the figures of both, the slab cuts and where the walls and
 the samples lie along the slab axis (the cuts pass through the sampled region), which deeper
@@ -32,25 +32,28 @@ comm = MPI.COMM_WORLD
 warnings.simplefilter("ignore", OverlapWarning)  # the deeper surfaces reach beyond the grid on purpose
 
 
-def dealt(S: Mesh, triangles: np.ndarray) -> SolidPart:
+def dealt(S: Mesh, triangles: np.ndarray, slab: GridSlab | None = None, shift: int = 0) -> SolidPart:
     """This rank's share of the solid `S`: cells and vertex rows round-robin, each wetted triangle
-    with the cell it bounds."""
+    with the cell it bounds (`shift` ranks further on); with a `slab`, the coupler's ranks then work
+    on the cells over their slabs (SolidPart's placement)."""
     size, rank = comm.size, comm.rank
     cell_of = {}
     for c, cell in enumerate(S.cells):
         for face in ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)):
             cell_of[tuple(sorted(cell[list(face)]))] = c
-    owner = np.array([cell_of[tuple(sorted(t))] % size for t in triangles])
+    owner = np.array([(cell_of[tuple(sorted(t))] + shift) % size for t in triangles])
     rows = np.flatnonzero(np.arange(S.num_points) % size == rank)
     part = {"points": S.points[rows], "cells": S.cells[np.arange(len(S.cells)) % size == rank],
             "interface_triangles": triangles[owner == rank]}
-    return SolidPart(comm, Held(comm, "solid", [rank], [rows], [rows]), [part])
+    return SolidPart(comm, Held(comm, "solid", [rank], [rows], [rows]), [part], slab)
 
 
-def compare(serial: SolidOnGrid, pressure, velocity, wall, deform=None) -> dict:
-    """The traction of `serial` and of its solid on the ranks (deformed by `deform` when given)."""
+def compare(serial: SolidOnGrid, pressure, velocity, wall, deform=None, on_slabs: bool = False) -> dict:
+    """The traction of `serial` and of its solid on the ranks (deformed by `deform` when given; the
+    cells placed on the slabs with `on_slabs`)."""
     G, S = serial.G, serial.S
-    solid, slab = dealt(S, serial.triangles), GridSlab(comm, G, "test")
+    slab = GridSlab(comm, G, "test")
+    solid = dealt(S, serial.triangles, slab if on_slabs else None)
     ranks = SolidOnSlabs(comm, solid, slab, "test", deform=deform is not None, traction="full")
     if deform is not None:
         serial.update(deform)
@@ -70,7 +73,10 @@ def compare(serial: SolidOnGrid, pressure, velocity, wall, deform=None) -> dict:
            "rows": comm.allreduce(len(block)), "vertices": serial.interface.size,
            "deeper_none": [[d is None for d in on.deeper] for on in (serial, ranks)],
            "outside": [0 if d is None else int(d.transfer.uncovered.size) for d in serial.deeper],
-           "cuts": sorted({int(lower[axis]) for lower, _ in comm.allgather(slab.block)} - {0})}
+           "cuts": sorted({int(lower[axis]) for lower, _ in comm.allgather(slab.block)} - {0}),
+           "cells": comm.allgather(solid.mesh.num_cells), "solid_cells": S.num_cells,
+           "off_slab": comm.allreduce(off_slab(solid.mesh, slab, axis)),
+           "misplaced": misplaced(S, serial.triangles, slab) if on_slabs else ""}
     for name, a, b in (("pressure", t_serial[0], t_ranks[0]), ("viscous", t_serial[1], t_ranks[1])):
         local = float(np.max(np.abs(a[block] - b), initial=0.0))
         out[name] = comm.allreduce(local, op=MPI.MAX) / float(np.max(np.abs(a)))
@@ -79,6 +85,26 @@ def compare(serial: SolidOnGrid, pressure, velocity, wall, deform=None) -> dict:
     points = [serial.interface.points] + [s.surface.points for s in (serial.interface, *serial.deeper) if s]
     out["sampled"] = sorted({round(float(x) / G.spacing[axis], 6) for p in points for x in p[:, axis]})
     return out
+
+
+def off_slab(mesh: Mesh, slab: GridSlab, axis: int) -> int:
+    """The cells of `mesh` whose centroid lies off this rank's slab along `axis` (the first slab
+    reaching back to -inf, the last on to +inf)."""
+    G, (lower, upper) = slab.G, slab.block
+    lo = G.origin[axis] + G.spacing[axis] * lower[axis] if lower[axis] > 0 else -np.inf
+    hi = G.origin[axis] + G.spacing[axis] * upper[axis] if upper[axis] < G.shape[axis] else np.inf
+    x = mesh.points[mesh.cells].mean(axis=1)[:, axis] if mesh.num_cells else np.zeros(0)
+    return int(np.count_nonzero((x < lo) | (x >= hi)))
+
+
+def misplaced(S: Mesh, triangles: np.ndarray, slab: GridSlab) -> str:
+    """The error of placing on the slabs a solid whose parts' wetted triangles lie one rank off the
+    cells they bound ('' if none)."""
+    try:
+        dealt(S, triangles, slab, shift=1)
+    except CouplerError as exc:
+        return str(exc)
+    return ""
 
 
 def refused(ranks: SolidOnSlabs, pressure, velocity) -> str:
@@ -105,10 +131,11 @@ def plates(n: int, columns: int | None = None) -> dict:
     return compare(serial, p, u, wall)
 
 
-def thin(tilt: float, deform: bool = False) -> dict:
+def thin(tilt: float, deform: bool = False, on_slabs: bool = False) -> dict:
     """test_viscous_traction.py's block under a thin channel (top at z = 0.37, the grid to 0.6) with
     its top tilted by `tilt` over x (the deepest samples partly outside the grid: NaN there), and
-    deformed (rebuilt on the ranks) when `deform`: a shear flow u_x = 2 z, u_y = z^2."""
+    deformed (rebuilt on the ranks) when `deform`, its cells placed on the slabs with `on_slabs`: a
+    shear flow u_x = 2 z, u_y = z^2."""
     G = StructuredGrid.from_bounds((0, 0, 0), (1, 1, 0.6), (10, 10, 6))
     m = box_tetrahedra((4, 4, 2), (0.0, 0.0, 0.0), (1.0, 1.0, 0.37))
     points = m.points.copy()
@@ -124,7 +151,7 @@ def thin(tilt: float, deform: bool = False) -> dict:
     if deform:
         u_solid = np.zeros((S.num_points, 3))
         u_solid[:, 2] = 0.02 * np.sin(3 * S.points[:, 0]) * S.points[:, 2]
-    return compare(serial, c[:, 0] * 10.0, u, wall, u_solid)
+    return compare(serial, c[:, 0] * 10.0, u, wall, u_solid, on_slabs)
 
 
 def top_triangles(S: Mesh) -> np.ndarray:
@@ -147,7 +174,8 @@ def top_triangles(S: Mesh) -> np.ndarray:
 
 def main():
     cases = {"plates, cuts across the gap": plates(4), "plates, cuts along the flow": plates(4, columns=12),
-             "thin channel": thin(0.0), "tilted thin channel": thin(0.4), "deformed tilted channel": thin(0.4, True)}
+             "thin channel": thin(0.0), "tilted thin channel": thin(0.4), "deformed tilted channel": thin(0.4, True),
+             "deformed tilted channel on slabs": thin(0.4, True, on_slabs=True)}
     if comm.rank == 0:
         print(json.dumps({"ranks": comm.size, "cases": cases}, default=lambda a: np.asarray(a).tolist()))
 

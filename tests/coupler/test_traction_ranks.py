@@ -6,8 +6,9 @@ serial code on the whole arrays. Plane Poiseuille flow between the plates (test_
 with the slab cuts across the gap (between a wall and its samples, or between the samples) and
 along the flow (through every sampling surface); the block under a thin channel whose deepest
 surface leaves the grid on every rank (None, as serially), tilted so that it leaves the grid at
-some vertices only (NaN there), and deformed (rebuilt on the ranks). The grid-stress method is
-refused on ranks."""
+some vertices only (NaN there), and deformed (rebuilt on the ranks), its cells dealt out
+round-robin or placed on the slabs (each rank the cells whose centroid lies over its slab, with the
+wetted triangles they bound). The grid-stress method is refused on ranks."""
 
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from vc_helpers import run_mpi
 HERE = Path(__file__).resolve().parent
 pytestmark = pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not installed")
 CASES = ("plates, cuts across the gap", "plates, cuts along the flow", "thin channel", "tilted thin channel",
-         "deformed tilted channel")
+         "deformed tilted channel", "deformed tilted channel on slabs")
 
 
 @pytest.fixture(scope="module", params=[2, 3])
@@ -62,7 +63,7 @@ def test_a_surface_beyond_the_grid_is_none_and_one_partly_beyond_reads_nan(resul
     thin = result["thin channel"]
     assert thin["deeper_none"] == [[False, True], [False, True]]
     assert thin["fits"][1]["wall and two samples"] == thin["vertices"]
-    for case in ("tilted thin channel", "deformed tilted channel"):
+    for case in CASES[3:]:
         tilted = result[case]
         assert tilted["deeper_none"] == [[False, False], [False, False]]
         assert 0 < tilted["outside"][1] < tilted["vertices"]
@@ -74,3 +75,13 @@ def test_the_grid_stress_method_is_refused_on_ranks(result):
     for case in CASES:
         assert result[case]["stress"] == ("viscous traction: method 'stress' differentiates the velocity on the "
                                           "whole grid: not on several coupler ranks; use 'wall'")
+
+
+def test_the_cells_placed_on_the_slabs(result):
+    """Every cell on one rank, each over that rank's slab (the block reaching x = 0 and 1, the
+    grid's ends); every rank has some. A part whose wetted triangles are no faces of its cells
+    cannot be placed: one line, on every rank."""
+    found = result["deformed tilted channel on slabs"]
+    assert found["off_slab"] == 0 and sum(found["cells"]) == found["solid_cells"] and all(found["cells"])
+    assert found["misplaced"] == ("participant 'solid': a wetted triangle of its parts is a face of none of their "
+                                  "cells: the coupler's ranks cannot place it with its cell")
