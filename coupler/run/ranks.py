@@ -73,7 +73,11 @@ def agree(comm, fn, *args, **kwargs):
 
 def vote(comm, failure: Exception | None) -> None:
     """Raise `failure` (this rank's) or, when it is None, the failure of the lowest rank that
-    has one; return when no rank has one. Collective."""
+    has one; return when no rank has one. Collective: the ranks that come first sleep until the
+    last comes (:func:`coupler.protocol.participant.idle_barrier`; in Open MPI's allgather they
+    would spin, a rank without participant parts taking a core for the whole of the participants'
+    solves)."""
+    idle_barrier(comm)
     sent = failure
     if failure is not None:
         try:

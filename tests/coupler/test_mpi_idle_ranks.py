@@ -52,3 +52,31 @@ def test_waiting_ranks_sleep_and_get_every_verb(tmp_path):
     assert worker["wall"] > 2.9
     # spinning in MPI_Bcast took a whole core: about 3 s of CPU in these 3 s (less on a loaded machine)
     assert worker["cpu"] < 0.3, worker
+
+
+AGREE = '''
+import json, sys, time
+from mpi4py import MPI
+from coupler.run.ranks import agree
+
+comm, idle = MPI.COMM_WORLD, float(sys.argv[1])
+cpu, wall = time.process_time(), time.perf_counter()
+for _ in range(2):  # rank 0 waits for its participant's reply; rank 1 has no participant part
+    agree(comm, time.sleep, idle if comm.rank == 0 else 0.0)
+found = comm.gather({"cpu": time.process_time() - cpu, "wall": time.perf_counter() - wall})
+if comm.rank == 0:
+    print(json.dumps(found))
+'''
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not installed")
+def test_a_coupler_rank_waiting_for_the_others_sleeps(tmp_path):
+    """The coupler on several ranks: a rank whose work is done (no participant part to wait for)
+    sleeps in the vote of coupler.run.ranks.agree until the others come, instead of spinning in
+    Open MPI's allgather (measured before: 2.9 s of CPU in 3 s; with the xlarge scene's coupler
+    on 4 ranks its ranks 2 and 3 took 65 % of a core each while the participants solved)."""
+    script = tmp_path / "agree.py"
+    script.write_text(AGREE)
+    ranks = run_mpi(script, 2, 1.5)
+    assert ranks[1]["wall"] > 2.9
+    assert ranks[1]["cpu"] < 0.3, ranks[1]
