@@ -145,7 +145,7 @@ def test_sigusr1_shows_where_a_run_is_and_the_run_goes_on(tmp_path):
     assert len(summary(out)["steps"]) > steps  # still stepping
     proc.send_signal(signal.SIGINT)
     err = _finish(proc)
-    assert proc.returncode == EXIT_CODES["interrupted"]
+    assert proc.returncode == EXIT_CODES["interrupted"], err
     assert "most recent call first" in err and "coupler/cli.py" in err
 
 
