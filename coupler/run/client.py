@@ -186,8 +186,8 @@ class ParticipantClient:
         calls = dict(sorted(calls.items()))
         deadline = time.monotonic() + timeout
         try:
-            while not all(c.done.is_set() for c in calls.values()):
-                if next(c for c in calls.values() if not c.done.is_set()).done.wait(self.poll):
+            while pending := [c for c in calls.values() if not c.done.is_set()]:  # one look at each
+                if pending[0].done.wait(self.poll):
                     continue
                 for r, c in calls.items():  # a rank that died first is named (mpirun then ends the others)
                     if r and ((c.done.is_set() and not c.replies) or r in self._ranks_lost):

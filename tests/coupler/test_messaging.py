@@ -198,6 +198,38 @@ def test_100mb_field_over_tcp_without_shared_memory(tmp_path):
         assert echo.stats["shm_in"] == 0 and echo.stats["shm_out"] == 0
 
 
+class _LateEvent(threading.Event):
+    """An event whose first look after it is set still says unset: a reply that lands between two
+    looks of the loop that waits for it."""
+
+    def __init__(self):
+        super().__init__()
+        self.late = True
+
+    def is_set(self):
+        if super().is_set() and self.late:
+            self.late = False
+            return False
+        return super().is_set()
+
+
+def test_a_reply_landing_between_two_looks_is_taken(run, monkeypatch):
+    """The wait for the replies looked at the calls twice (all done? then which one is not?): a
+    reply that landed between the two looks ended a run with StopIteration (standin_flow, after 90
+    steps, twice in a row under a /proc sampler)."""
+    import coupler.run.client as client_module
+
+    class LateCall(client_module._Call):
+        def __init__(self, query_key):
+            super().__init__(query_key)
+            self.done = _LateEvent()
+
+    echo = run.start("echo", "echo")
+    monkeypatch.setattr(client_module, "_Call", LateCall)
+    out = echo.advance(0, 0, 0.0, 1.0, {"x": np.arange(3.0)})
+    assert np.array_equal(out["x"].data, np.arange(3.0))
+
+
 def test_sigkill_during_a_call_is_detected(run):
     echo = run.start("victim", "echo", {"delay": 30})
     pid = run.launcher.processes["victim"].pid
