@@ -33,6 +33,9 @@ CELL_TYPES = {
     "quad": (2, 4),
 }
 
+#: the faces of a tet opposite vertex 0, 1, 2, 3, ordered so their normal points out of a positive tet
+TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
 #: tetrahedra splitting a hexahedron along its 0-6 diagonal (same as the kernels)
 HEX_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])
 

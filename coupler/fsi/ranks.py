@@ -31,6 +31,7 @@ from coupler.errors import CouplerError
 from coupler.protocol.slabs import slab_bounds
 from transfer import Mesh, NoOverlapError, StructuredGrid
 from transfer.distributed import Part, assemble
+from transfer.mesh import TET_FACES
 from transfer.rows import Rows, to_ranks
 
 from . import fracture
@@ -80,15 +81,11 @@ def slab_centres(comm, S: Mesh, slab: GridSlab) -> np.ndarray:
     return Rows(comm, slab.G.num_cells).move(found, np.ones(len(found)), slab.ids, add=True) > 0
 
 
-#: the faces of a tetrahedron (its local vertices)
-FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
-
-
 def bounded(cells: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """The index of the tetrahedron of `cells` (n, 4) that each of `triangles` (m, 3) is a face
     of, -1 where none is (global vertex ids both)."""
     near = np.flatnonzero(np.count_nonzero(np.isin(cells, triangles), axis=1) >= 3)
-    faces = np.sort(cells[near][:, FACES].reshape(-1, 3), axis=1)
+    faces = np.sort(cells[near][:, TET_FACES].reshape(-1, 3), axis=1)
     _, key = np.unique(np.concatenate([faces, np.sort(triangles, axis=1)]), axis=0, return_inverse=True)
     face = np.full(len(faces) + len(triangles), -1)
     face[key[:len(faces)]] = np.arange(len(faces))

@@ -18,10 +18,7 @@ from typing import Callable
 import numpy as np
 
 from ..generate import jitter_moves
-from ..mesh import lattice_tetrahedra
-
-#: the faces of a tet opposite vertex 0, 1, 2, 3, ordered so their normal points out of a positive tet
-TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+from ..mesh import TET_FACES, lattice_tetrahedra
 
 
 @dataclass(frozen=True)
