@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from .grid import BOX_FACES
-from .labels import box_bounds, box_cells, label_boxes
+from .grid import BOX_FACES, box_cells
+from .labels import box_bounds, label_boxes
 
 CROSS = ndimage.generate_binary_structure(3, 1)  # face neighbours
 
@@ -44,16 +44,12 @@ class Body:
     dropped: dict        # closed face -> the velocity component normal to it that was dropped
 
 
-def _on_box(values, ids, lower, upper, shape) -> tuple[np.ndarray, np.ndarray]:
-    """The rows ``values`` ((n,) or (n, k)) of the grid cells ``ids`` (sorted) on the box ``[lower,
-    upper)``: a (z, y, x) or (z, y, x, k) array, zero at the cells not in ``ids``, and where the
-    cells are in ``ids``."""
-    cells = box_cells(lower, upper, shape)
+def _rows(ids, cells) -> tuple[np.ndarray, np.ndarray]:
+    """The row of ``ids`` (sorted grid cells) of each of ``cells``, and whether ``ids`` holds it."""
     if len(ids) == 0:
-        return np.zeros(cells.shape + values.shape[1:]), np.zeros(cells.shape, bool)
+        return np.zeros(cells.shape, np.int64), np.zeros(cells.shape, bool)
     rows = np.minimum(np.searchsorted(ids, cells), len(ids) - 1)
-    found = ids[rows] == cells
-    return np.where(found.reshape(found.shape + (1,) * (values.ndim - 1)), values[rows], 0.0), found
+    return rows, ids[rows] == cells
 
 
 def rigid_bodies(fraction, velocity, shape, closed=(), box=None, ids=None, comm=None) -> list[Body]:
@@ -68,17 +64,20 @@ def rigid_bodies(fraction, velocity, shape, closed=(), box=None, ids=None, comm=
     lower, upper = box_bounds(shape, box)
     ids = np.arange(int(np.prod(shape))) if ids is None else np.asarray(ids, np.int64).reshape(-1)
     grown = np.maximum(lower - 1, 0), np.minimum(upper + 1, shape)  # the face neighbours' layer
-    f, found = _on_box(np.asarray(fraction, dtype=float).reshape(-1), ids, *grown, shape)
+    around = box_cells(*grown, shape)  # the grid cells of the grown box, (z, y, x)
+    rows, found = _rows(ids, around)
+    f = np.zeros(around.shape)  # zero (fluid) at the cells ids lacks
+    f[found] = np.asarray(fraction, dtype=float).reshape(-1)[rows[found]]
     inner = tuple(slice(lo - g, hi - g) for lo, hi, g in zip(lower[::-1], upper[::-1], grown[0][::-1]))
     needed = np.zeros(f.shape, bool)
     needed[inner] = True
     missing = int(np.count_nonzero(ndimage.binary_dilation(needed, structure=CROSS) & ~found))
     solid = f >= 0.5
     layer = (solid & ndimage.binary_dilation(~solid, structure=CROSS, border_value=0))[inner]
-    f, solid = f[inner], solid[inner]
-    v, _ = _on_box(np.asarray(velocity, dtype=float).reshape(-1, 3), ids, lower, upper, shape)
+    f, solid, cells, rows, found = f[inner], solid[inner], around[inner], rows[inner], found[inner]
+    v = np.zeros(f.shape + (3,))
+    v[found] = np.asarray(velocity, dtype=float).reshape(-1, 3)[rows[found]]
     labels, count = label_boxes(solid, shape, (lower, upper), comm)
-    cells = box_cells(lower, upper, shape)
     edges = [(axis, side, (upper if side else lower)[axis] == (shape[axis] if side else 0))
              for axis, side in (divmod(BOX_FACES.index(face), 2) for face in closed)]
     present, sums, members = [], [], {}

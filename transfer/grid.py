@@ -20,6 +20,20 @@ from .mesh import Mesh, lattice_hexahedra
 BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 
 
+def cell_ijk(cells, shape) -> np.ndarray:
+    """(n, 3): the indices (i, j, k) of the grid `cells` (numbered x fastest) of a grid of `shape`."""
+    cells = np.asarray(cells, np.int64).reshape(-1)
+    nx, ny, _ = (int(s) for s in shape)
+    return np.stack([cells % nx, cells // nx % ny, cells // (nx * ny)], axis=1)
+
+
+def box_cells(lower, upper, shape) -> np.ndarray:
+    """The grid index (x fastest) of each cell of the box ``[lower, upper)``, as a (z, y, x) array."""
+    i, j, k = (np.arange(lo, hi, dtype=np.int64) for lo, hi in zip(lower, upper))
+    nx, ny, _ = (int(s) for s in shape)
+    return (k[:, None, None] * ny + j[None, :, None]) * nx + i[None, None, :]
+
+
 class StructuredGrid:
     """Boxes ``origin + spacing * [i, i+1] x [j, j+1] x [k, k+1]`` for ``0 <= (i, j, k) < shape``."""
 

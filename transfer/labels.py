@@ -24,6 +24,8 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .grid import box_cells, cell_ijk
+
 
 def box_bounds(shape, box=None) -> tuple[np.ndarray, np.ndarray]:
     """``(lower, upper)`` cell indices of ``box``, the whole grid of ``shape`` when None."""
@@ -32,20 +34,12 @@ def box_bounds(shape, box=None) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(box[0], np.int64).reshape(3), np.asarray(box[1], np.int64).reshape(3)
 
 
-def box_cells(lower, upper, shape) -> np.ndarray:
-    """The grid index (x fastest) of each cell of the box ``[lower, upper)``, as a (z, y, x) array."""
-    i, j, k = (np.arange(lo, hi, dtype=np.int64) for lo, hi in zip(lower, upper))
-    nx, ny, _ = (int(s) for s in shape)
-    return (k[:, None, None] * ny + j[None, :, None]) * nx + i[None, None, :]
-
-
 def cell_box(cells, shape) -> tuple[np.ndarray, np.ndarray] | None:
     """The index box ``(lower, upper)`` that the distinct grid ``cells`` fill, None when they fill none."""
     cells = np.asarray(cells, np.int64).reshape(-1)
     if cells.size == 0:
         return None
-    nx, ny, _ = (int(s) for s in shape)
-    ijk = np.stack([cells % nx, cells // nx % ny, cells // (nx * ny)], axis=1)
+    ijk = cell_ijk(cells, shape)
     lower, upper = ijk.min(axis=0), ijk.max(axis=0) + 1
     return (lower, upper) if int(np.prod(upper - lower)) == len(np.unique(cells)) == cells.size else None
 

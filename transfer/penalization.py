@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .grid import wall_distance
+from .grid import cell_ijk, wall_distance
 
 #: how solid volume fractions become drag (the modes above)
 PENALIZATIONS = ("wall", "linear", "power")
@@ -84,17 +84,12 @@ def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str,
     return T.reshape(-1)
 
 
-def _ijk(cells: np.ndarray, shape) -> np.ndarray:
-    nx, ny, _ = (int(s) for s in shape)
-    return np.stack([cells % nx, cells // nx % ny, cells // (nx * ny)], axis=1)
-
-
 def reach(cells, shape, mode: str, at_least: int = 0) -> np.ndarray:
     """The cells whose fractions :func:`drag_fraction` of ``cells`` reads (grid indices, x fastest,
     sorted): each cell and those within ``REACH[mode]`` cells of it along each axis, or within
     ``at_least`` cells (another stencil read with it: a rigid body's interface layer, 1)."""
     cells = np.asarray(cells, dtype=np.int64).reshape(-1)
-    ijk, found = _ijk(cells, shape), [cells]
+    ijk, found = cell_ijk(cells, shape), [cells]
     nx, ny, _ = (int(s) for s in shape)
     layers = max(REACH[mode], at_least)
     for axis, n in enumerate(int(s) for s in shape):
@@ -113,7 +108,7 @@ def drag_fraction_of(cells, ids, fraction, shape, spacing, nu: float, d_max: flo
     are read as fluid; none is within reach of ``cells``)."""
     ids = np.asarray(ids, dtype=np.int64).reshape(-1)
     cells = np.asarray(cells, dtype=np.int64).reshape(-1)
-    at = _ijk(ids, shape)
+    at = cell_ijk(ids, shape)
     lo = at.min(axis=0) if len(ids) else np.zeros(3, np.int64)
     box = (at.max(axis=0) + 1 - lo) if len(ids) else np.ones(3, np.int64)
 
@@ -123,4 +118,4 @@ def drag_fraction_of(cells, ids, fraction, shape, spacing, nu: float, d_max: flo
 
     F = np.zeros(int(np.prod(box)))
     F[local(at)] = np.asarray(fraction, dtype=np.float64).reshape(-1)
-    return drag_fraction(F, box, spacing, nu, d_max, mode, exponent)[local(_ijk(cells, shape))]
+    return drag_fraction(F, box, spacing, nu, d_max, mode, exponent)[local(cell_ijk(cells, shape))]

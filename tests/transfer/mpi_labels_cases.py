@@ -15,7 +15,8 @@ from scipy import ndimage
 
 from transfer.bodies import rigid_bodies
 from transfer.grid import BOX_FACES
-from transfer.labels import box_cells, label_boxes
+from transfer.grid import box_cells
+from transfer.labels import label_boxes
 from transfer.penalization import reach
 
 comm = MPI.COMM_WORLD
