@@ -122,10 +122,11 @@ def test_varcouple_run_refuses_a_load_on_an_empty_boundary(tmp_path, boundary, l
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
                          capture_output=True, text=True, timeout=300)
-    assert run.returncode == 4, run.stderr  # a participant's error
+    assert run.returncode == 2, run.stderr  # bad input, found by the participant (before: 4, a failed run)
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["status"] == "failed"
+    assert summary["status"] == "invalid"
     expression = boundary.split(" = ")[1].strip('"')
     message = (f"[loads.{load}] boundary '{name}': selects no facet of the mesh (expression '{expression}' is false "
                f"on every boundary facet midpoint; the mesh spans z in [0, 1])")
     assert message in summary["error"] and message in run.stderr, run.stderr
+    assert f"varcouple: error: {case / 'scene.toml'}: participant 'solid' refused its input: " in run.stderr
