@@ -12,11 +12,12 @@ import json
 import numpy as np
 import pytest
 
-from cli_helpers import assert_clean_error, run_cli, transfer_case
+from cli_helpers import assert_clean_error, run_cli, transfer_case, write_mesh
 from coupler.errors import SceneError
 from coupler.protocol.errors import InputError, ParticipantInputError
 from coupler.protocol.expressions import MAX_NODES, check_expression, evaluate_expression
 from coupler.run.local import LocalClient
+from transfer.generate import box_hexahedra
 from transfer.generators.height_maps import read_npz, write_xyz
 from vc_helpers import CASES, copy_case
 
@@ -237,6 +238,24 @@ def test_an_in_process_participant_refusing_its_input_is_bad_input():
         LocalClient("solid", _Refusing()).configure({})
     assert isinstance(info.value, SceneError)  # status invalid, exit 2
     assert str(info.value) == "participant 'solid' refused its input: InputError: [geometry.solid] mesh: no tetrahedra"
+
+
+@pytest.mark.parametrize("config, words", [
+    (lambda d: {"mesh": str(write_mesh(d / "hex.vtu", box_hexahedra((2, 2, 2))))},
+     "rigid_solid needs a tetrahedral mesh, got hexahedron cells from "),
+    (lambda d: {"generator": {"name": "rough_fracture", "parameters": dict(
+        shape=[4, 4, 2], size=[0.05, 0.025], height=0.0001, aperture=0.001, min_aperture=0.0005, rms=0.0015,
+        hurst=0.8, mismatch_length=0.0125, seed=4)}},
+     "rigid_solid: generator 'rough_fracture': the lower surface reaches below the bottom"),
+    (lambda d: {"mesh": str(d / "none.vtu")}, "rigid_solid: "),
+], ids=["hexahedra", "generator_cannot_mesh", "no_file"])
+def test_a_fixed_solid_that_cannot_be_made_is_bad_input(tmp_path, config, words):
+    """The fixed solid (served in the coupler's process): before, a ParticipantError (exit 4)."""
+    from coupler.standins import RigidSolid
+
+    with pytest.raises(ParticipantInputError, match="^participant 'solid' refused its input: InputError: "
+                                                    + words.replace("(", r"\(")):
+        LocalClient("solid", RigidSolid()).configure(config(tmp_path))
 
 
 def test_a_participant_input_error_travels_between_coupler_ranks():
