@@ -309,6 +309,8 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
         if box_keys:
             raise t.error("mesh", "give either a mesh file or the box keys (lower, upper, shape), not both")
         mesh = t.file("mesh", case_dir)
+        if mesh.suffix.lower() == ".xdmf":  # dolfinx reads the .h5 of its name beside it
+            in_case(case_dir, str(Path(t.string("mesh")).with_suffix(".h5")), t.where("mesh"))
     else:
         if "lower" not in t.data and "upper" not in t.data:
             raise t.error("mesh", "missing: give a mesh file, or a box with lower, upper and shape")

@@ -82,6 +82,17 @@ def test_an_input_file_outside_the_case_is_refused_unread(tmp_path, capsys, name
     assert not (tmp_path / "out").exists()
 
 
+def test_the_hdf5_file_of_an_xdmf_mesh_is_read_in_the_case(tmp_path, capsys):
+    """dolfinx reads solid.h5 beside solid.xdmf: a link from there out of the case is refused."""
+    case = copy_case(BLOCK, tmp_path, {"lower = [0.0, 0.0, 0.0]\nupper = [1.0, 1.0, 1.0]\nshape = [4, 4, 4]\n"
+                                       "jitter = 0.2": 'mesh = "solid.xdmf"'})
+    (case / "solid.xdmf").write_text("<Xdmf><Domain/></Xdmf>")
+    (tmp_path / "outside.h5").write_bytes(b"\x89HDF\r\n\x1a\n")
+    (case / "solid.h5").symlink_to(tmp_path / "outside.h5")
+    code, _, err = run_cli(capsys, "check", "--quick", case)
+    assert_clean_error(code, err, "[geometry.solid] mesh", "'solid.h5' is outside the case directory")
+
+
 @pytest.mark.parametrize("key", ["lower", "upper"])
 def test_a_generator_reads_its_files_in_the_case(tmp_path, capsys, key):
     case = xyz_case(tmp_path)
