@@ -130,6 +130,28 @@ def test_an_xyz_read_error_quotes_no_content(tmp_path, capsys, content, words):
     assert "secret-content" not in err and "bin/bash" not in err
 
 
+@pytest.mark.parametrize("name", ["src.stl", "src.vtk", "src.off", "src.msh"])
+def test_a_mesh_read_error_quotes_no_content(tmp_path, capsys, name):
+    """Before: meshio's STL reader said 'could not convert string to float: '<the line>''."""
+    transfer_case(tmp_path)
+    (tmp_path / name).write_text(f"{SECRET}\n{SECRET}\n")
+    (tmp_path / "scene.toml").write_text((tmp_path / "scene.toml").read_text().replace("src.vtu", name))
+    code, _, err = run_cli(capsys, "check", "--quick", tmp_path)
+    assert_clean_error(code, err, "[transfer] source", f"{name}: cannot read the mesh with meshio")
+    assert "secret-content" not in err and "bin/bash" not in err
+
+
+def test_an_npz_read_error_quotes_no_content(tmp_path):
+    """numpy's .npy header error quotes the header (before: in the message)."""
+    from transfer.generators.height_maps import read_npz
+
+    path = tmp_path / "faces.npz"
+    path.write_bytes(b"\x93NUMPY\x01\x00\x20\x00{'secret-content': (1 2 3)}     \n")
+    with pytest.raises(ValueError) as info:
+        read_npz(path)
+    assert "is not a readable .npz file" in str(info.value) and "secret-content" not in str(info.value)
+
+
 # -- scene files that are not text ---------------------------------------------------------
 @pytest.mark.parametrize("content", [b'[physics]\neffects = ["tr\xc3\x28nsfer"]\n', bytes(range(256)) * 4,
                                      b"\x89PNG\r\n\x1a\n" + b"\x00" * 64])

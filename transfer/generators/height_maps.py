@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from transfer.errors import without_content
+
 #: how far a point of an XYZ grid may lie from its grid position, a fraction of the spacing
 GRID_TOLERANCE = 1e-6
 
@@ -46,7 +48,7 @@ def read_npz(path) -> tuple[tuple[np.ndarray, np.ndarray], tuple[float, float]]:
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as exc:  # noqa: BLE001 - any reader error means the file is not an .npz
-        raise ValueError(f"{path} is not a readable .npz file ({exc})") from None
+        raise ValueError(f"{path} is not a readable .npz file ({without_content(str(exc))})") from None
     with data:
         for name in ("lower", "upper", "spacing"):
             if name not in data.files:
