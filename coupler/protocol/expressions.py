@@ -59,7 +59,8 @@ def _fold(node: ast.AST, text: str, where: str):
     """The value of `node` as a float when it holds no name (its constants folded), else None;
     SceneError naming the part whose value is not a finite number. Recursive: called only on
     trees at most :data:`MAX_DEPTH` deep."""
-    children = [_fold(child, text, where) for child in ast.iter_child_nodes(node) if isinstance(child, ast.expr)]
+    children = [_fold(child.value if isinstance(child, ast.keyword) else child, text, where)
+                for child in ast.iter_child_nodes(node) if isinstance(child, (ast.expr, ast.keyword))]
     if isinstance(node, (ast.BinOp, ast.UnaryOp)) and type(node.op) in (ast.BitAnd, ast.BitOr, ast.BitXor, ast.Invert) \
             and any(child is not None for child in children):
         raise SceneError(f"{where}: & | ^ ~ combine conditions (comparisons), not numbers, in {_shown(text)}")

@@ -175,6 +175,7 @@ def test_a_scene_file_that_is_not_utf8_text_is_one_line(tmp_path, capsys, conten
     ("(" * 250 + "x" + ")" * 250, ["too many nested parentheses"]),
     ("x < 10**10**10", ["'10**10**10' is not a finite number"]),
     ("x < 1e308 * 10", ["'1e308 * 10' is not a finite number"]),
+    ("clip(x, a_min=0, a_max=9**9**9) > 0", ["'9**9**9' is not a finite number"]),
     ("x > 1 / (2 - 2)", ["divides by zero"]),
     ("(x > 0) & 1", ["& | ^ ~ combine conditions"]),
     ("(x > 0) and (y > 0)", ["BoolOp is not allowed", "not and, or, not"]),
