@@ -81,6 +81,7 @@ import time
 
 import numpy as np
 
+from coupler.protocol.errors import InputError
 from coupler.protocol.participant import Participant, main
 from coupler.protocol.settings import ParticipantSpec, Setting, Settings
 from coupler.protocol.wire import Field
@@ -357,29 +358,42 @@ class RigidSolid(MeshParts, Participant):
         return {"kind": self.kind, "provides": ["displacement", "velocity"], "accepts": []}
 
     def configure(self, config: dict) -> None:
-        if "mesh" in config:
-            from transfer.meshfile import MeshFile
+        """The mesh of the file, box or generator of `config`; a file or generator that gives none,
+        or cells other than tetrahedra, is bad input (:class:`InputError`)."""
+        from transfer import TransferError
 
-            mesh, made = MeshFile.read(config["mesh"]).mesh, config["mesh"]
-        elif "box" in config:
-            from transfer.generate import box_tetrahedra
-
-            b = config["box"]
-            mesh = box_tetrahedra(b["shape"], b["lower"], b["upper"], jitter=float(b.get("jitter", 0.0)),
-                                  seed=int(b.get("seed", 0)))
-            made = "its box"
-        elif "generator" in config:
-            from transfer.generators import generate
-
-            g = config["generator"]
-            mesh, made = generate(g["name"], g.get("parameters")).mesh, f"the generator {g['name']!r}"
-        else:
-            raise ValueError("rigid_solid needs config 'mesh', 'box' or 'generator'")
+        try:
+            mesh, made = self._made(config)
+        except (TransferError, ValueError) as exc:
+            raise InputError(f"rigid_solid: {exc}") from None
         if mesh.cell_type != "tetra":
-            raise ValueError(f"rigid_solid needs a tetrahedral mesh, got {mesh.cell_type} cells")
+            raise InputError(f"rigid_solid needs a tetrahedral mesh, got {mesh.cell_type} cells from {made}")
         self.cut(mesh, f"rigid_solid ({made})")
         self.mesh = mesh
         log.info("rigid_solid: %d tetrahedra, %d points", mesh.num_cells, mesh.num_points)
+
+    @staticmethod
+    def _made(config: dict):
+        """(mesh, what made it) of `config`."""
+        if "mesh" in config:
+            from transfer.meshfile import MeshFile
+
+            return MeshFile.read(config["mesh"]).mesh, config["mesh"]
+        if "box" in config:
+            from transfer.generate import box_tetrahedra
+
+            b = config["box"]
+            return box_tetrahedra(b["shape"], b["lower"], b["upper"], jitter=float(b.get("jitter", 0.0)),
+                                  seed=int(b.get("seed", 0))), "its box"
+        if "generator" in config:
+            from transfer.generators import generate
+
+            g = config["generator"]
+            try:
+                return generate(g["name"], g.get("parameters")).mesh, f"the generator {g['name']!r}"
+            except ValueError as exc:
+                raise ValueError(f"generator {g['name']!r}: {exc}") from None
+        raise ValueError("needs config 'mesh', 'box' or 'generator'")
 
     def geometry(self):
         if self.mesh is None:

@@ -43,6 +43,7 @@ from mpi4py import MPI
 
 import dolfinx
 import dolfinx.cpp
+from coupler.protocol.errors import InputError
 from transfer.generators.lattices import Lattices, axes_lattice
 from transfer.grid import BOX_FACES
 from transfer.mesh import Mesh
@@ -56,8 +57,9 @@ Predicate = Callable[[np.ndarray], np.ndarray]
 VALIDATE_CELLS = 1 << 15
 
 
-class SolidMeshError(ValueError):
-    """A mesh that cannot be used by the solid (no tetrahedra, bad tags, ...)."""
+class SolidMeshError(InputError):
+    """A mesh that cannot be used by the solid (no tetrahedra, bad tags, a boundary selecting
+    nothing, a generator's parameters it cannot mesh): bad input (exit 2)."""
 
 
 @dataclass

@@ -74,7 +74,8 @@ def _why_empty(solid, name, spec, predicate) -> str:
         return (f"the {count} facets {what} selects all carry boundar{'ies' if len(owners) > 1 else 'y'} "
                 f"{', '.join(map(repr, owners))}, given after it (a facet has one tag)")
     x = solid.mesh.geometry.x
-    lower, upper = comm.allreduce(x.min(axis=0), op=MPI.MIN), comm.allreduce(x.max(axis=0), op=MPI.MAX)
+    # (the pickled allreduce's MIN compares whole arrays: it fails on 3 coordinates)
+    lower, upper = np.min(comm.allgather(x.min(axis=0)), axis=0), np.max(comm.allgather(x.max(axis=0)), axis=0)
     axes = sorted(set(re.findall(r"\b[xyz]\b", str(spec)))) or list(_AXES)
     spans = ", ".join(f"{a} in [{lower[_AXES[a]]:g}, {upper[_AXES[a]]:g}]" for a in axes)
     return f"{what} is false on every boundary facet midpoint; the mesh spans {spans}"

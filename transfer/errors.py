@@ -4,6 +4,18 @@ Every error names what was wrong with which input, so that command-line tools
 can print it as one line instead of a traceback.
 """
 
+import re
+
+#: a quoted fragment of a message: 'text', "text", b'bytes'
+QUOTED = re.compile(r"b?'(?:[^'\\]|\\.)*'" + r'|b?"(?:[^"\\]|\\.)*"')
+
+
+def without_content(message: str) -> str:
+    """A file reader's message (numpy, meshio: ``could not convert string to float: '<a line>'``)
+    with its quoted fragments, which are the file's content, shown as ``'...'``: no error
+    quotes a file."""
+    return QUOTED.sub("'...'", message)
+
 
 class TransferError(Exception):
     """Base class of all errors raised by :mod:`transfer`."""

@@ -25,7 +25,7 @@ import numpy as np
 from .mesh import CELL_TYPES, Mesh
 from .spaces import FunctionSpace
 
-from .errors import MeshFileError
+from .errors import MeshFileError, without_content
 
 #: meshio cell-type prefix -> topological dimension ("tetra10" is a "tetra", ...)
 _DIMENSIONS = (("vertex", 0), ("line", 1), ("triangle", 2), ("quad", 2), ("polygon", 2),
@@ -118,8 +118,8 @@ def _meshio_read(path: Path, name: str):
     except SystemExit:
         failure = ""
     except Exception as exc:  # noqa: BLE001 - any reader error is a bad input file
-        failure = one_line(exc)
-    said = [" ".join(line.split()) for line in captured.getvalue().splitlines() if line.strip()]
+        failure = without_content(one_line(exc))
+    said = [" ".join(without_content(line).split()) for line in captured.getvalue().splitlines() if line.strip()]
     said = [line.removeprefix("Error:").strip() for line in said]
     if failure is not None:
         reason = "; ".join(dict.fromkeys([*said, failure] if failure else said)) or "unknown reason"

@@ -3,7 +3,7 @@ and participants that fail, die or do not answer. Each is a :class:`coupler.erro
 the CLI prints it as one line. A field that cannot travel (NaN/inf, dtype, name) is the
 project's one :class:`transfer.errors.FieldError`."""
 
-from coupler.errors import CouplerError
+from coupler.errors import CouplerError, SceneError
 
 
 class ProtocolError(CouplerError):
@@ -32,6 +32,24 @@ class ParticipantError(ParticipantFailure):
     def __init__(self, name: str, message: str):
         self.message = message
         super().__init__(name, f"participant {name!r} failed: {message}")
+
+
+class InputError(ValueError):
+    """Bad input a participant finds in what it was given at set-up (a boundary that selects no
+    facet, a tag its mesh file lacks, a mesh or generator parameters it cannot use): its error
+    reply is marked ``"input": true`` and the coupler raises :class:`ParticipantInputError`."""
+
+
+class ParticipantInputError(ParticipantError, SceneError):
+    """A participant refused its input (:class:`InputError`): bad input like a scene error,
+    status ``invalid`` and exit code 2 wherever it is found."""
+
+    def __init__(self, name: str, message: str):
+        self.message = message
+        ParticipantFailure.__init__(self, name, f"participant {name!r} refused its input: {message}")
+
+    def __reduce__(self):  # travels between the coupler's ranks as it was raised
+        return type(self), (self.name, self.message)
 
 
 class ParticipantDied(ParticipantFailure):

@@ -13,7 +13,7 @@ from typing import Mapping
 
 import zenoh
 
-from .errors import ProtocolError
+from .errors import InputError, ProtocolError
 from .transport import (COUPLER, PART_VERBS, SHM_THRESHOLD, VERBS, alive_key, callback, check_name, is_shm, key,
                         part_key, payload_bytes, rank_alive_key, warm_up_shm, zbytes)
 from .wire import Field, as_fields, decode, encode, json_number
@@ -68,7 +68,8 @@ def send_reply(query, reply_key: str, base: dict, shared_memory: bool, t0: float
     if error is not None:
         log.error("%s: %s failed: %s: %s", base["participant"], reply_key, type(error).__name__, error,
                   exc_info=error)
-        payload = encode({**base, "elapsed": time.perf_counter() - t0, "error": f"{type(error).__name__}: {error}"})
+        payload = encode({**base, "elapsed": time.perf_counter() - t0, "error": f"{type(error).__name__}: {error}",
+                          **({"input": True} if isinstance(error, InputError) else {})})
     try:
         query.reply(reply_key, zbytes(payload, shared_memory))
     finally:

@@ -18,7 +18,8 @@ from typing import Callable, Iterable, Mapping
 
 import zenoh
 
-from coupler.protocol.errors import ParticipantDied, ParticipantError, ParticipantTimeout, ProtocolError
+from coupler.protocol.errors import (ParticipantDied, ParticipantError, ParticipantInputError, ParticipantTimeout,
+                                     ProtocolError)
 from coupler.protocol.parts import Layout, Part
 from coupler.protocol.transport import (COUPLER, DEFAULT_TIMEOUT, SHM_THRESHOLD, VERBS, alive_key, callback,
                                         check_name, is_shm, key, new_run_id, open_listening_session,
@@ -273,7 +274,8 @@ class ParticipantClient:
         except ProtocolError as exc:
             raise ProtocolError(f"participant {self.name!r}, {where}: {exc}") from None
         if "error" in rheader:
-            raise ParticipantError(self.name, str(rheader["error"]) if not rank else f"{where}: {rheader['error']}")
+            error = ParticipantInputError if rheader.get("input") is True else ParticipantError
+            raise error(self.name, str(rheader["error"]) if not rank else f"{where}: {rheader['error']}")
         try:
             check_reply(req, rheader)
         except ProtocolError as exc:

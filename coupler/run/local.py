@@ -23,7 +23,7 @@ import json
 import os
 import time
 
-from coupler.protocol.errors import ParticipantError
+from coupler.protocol.errors import InputError, ParticipantError, ParticipantInputError
 from coupler.protocol.parts import Layout, Part
 from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite
 from transfer.errors import FieldError
@@ -46,7 +46,8 @@ class LocalClient:
         try:
             return getattr(self.handler, verb)(*args)
         except Exception as exc:  # noqa: BLE001 - a participant's failure is its error reply, as over the wire
-            raise ParticipantError(self.name, f"{type(exc).__name__}: {exc}") from exc
+            error = ParticipantInputError if isinstance(exc, InputError) else ParticipantError
+            raise error(self.name, f"{type(exc).__name__}: {exc}") from exc
         finally:
             elapsed = time.perf_counter() - start
             self.stats["calls"] += 1

@@ -45,6 +45,7 @@ from coupler.output.publish import publish
 from coupler.output.report import PAGE
 from coupler.output.results import SUMMARY, Series, write_summary
 from coupler.plan.plan import Plan, make_plan
+from coupler.protocol.errors import ParticipantInputError
 from coupler.protocol.transport import new_run_id
 from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession
@@ -128,7 +129,7 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
         write_summary(out, summary)
     start = time.perf_counter()
     try:
-        with run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
+        with scene_input(scene), run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
             result = run_class(scene, plan, session, launcher, out, phases, summary, log, run_id,
                                **({"comm": comm} if comm is not None else {})).execute(progress)
         summary.update(result, status="completed")
@@ -154,12 +155,22 @@ def rehearse(scene, plan: Plan, log=print) -> dict:
     quiet = Phases()
     plan = replace(plan, participants=[replace(p, config={k: v for k, v in p.config.items() if k != "case_dir"})
                                        for p in plan.participants])  # a check keeps nothing
-    with tempfile.TemporaryDirectory(prefix=f"varcouple-{run_id}-check-") as logs, \
+    with scene_input(scene), tempfile.TemporaryDirectory(prefix=f"varcouple-{run_id}-check-") as logs, \
             processes(scene, plan, run_id, logs) as (session, launcher):
         rehearsal = Run(scene, plan, session, launcher, Path(logs), quiet, {}, lambda line: None, run_id)
         rehearsal.start()
         rehearsal.finish()
     return rehearsal.meshes
+
+
+@contextmanager
+def scene_input(scene):
+    """A participant's refusal of its input (:class:`ParticipantInputError`: a boundary selecting
+    nothing, an unknown tag, a generator's parameters) as what it is, an error of the scene file."""
+    try:
+        yield
+    except ParticipantInputError as exc:
+        raise SceneError(f"{scene.path}: {exc}") from None
 
 
 def check_inputs_kept(scene, plan: Plan, out: Path) -> None:

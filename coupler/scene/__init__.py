@@ -26,6 +26,8 @@ def load(case, output: str | Path | None = None, overrides: dict | None = None):
             data = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{path}: invalid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:  # binary content: its bytes are not shown
+        raise SceneError(f"{path}: not a TOML text file: byte {exc.start} is not UTF-8") from None
     except OSError as exc:
         raise SceneError(f"{path}: cannot read: {exc.strerror or exc}") from None
     for key, value in (overrides or {}).items():

@@ -19,7 +19,7 @@ from coupler.errors import SceneError
 from coupler.protocol.transport import check_endpoint
 from coupler.protocol.settings import REQUIRED
 from coupler.scene.participants import Solver, read_solver
-from coupler.scene.tables import Table, output_directory
+from coupler.scene.tables import Table, in_case, output_directory
 from coupler.protocol.expressions import check_expression
 from transfer.generators import GENERATORS, parameters
 from transfer.grid import BOX_FACES
@@ -125,13 +125,14 @@ TABLES = {
     "resources": {"memory_limit": "memory this run may use [bytes] (default: what the machine has available)",
                   "check_memory": "refuse a scene whose estimated memory exceeds what is available (default "
                                   "true; false runs it anyway)"},
-    "output": {"directory": "output directory, relative to the case (default 'results')",
+    "output": {"directory": "output directory inside the case, relative to it (default 'results'; the command "
+                            "line's --output DIR may be anywhere)",
                "every": "write fields every N steps (default 1)",
                "pictures": "render PNG pictures of what the scene simulated (default true; the environment "
                            "variable VARCOUPLE_PICTURES=0 makes false the default)"},
     "check": {"kind": "the known solution compared with the result (coupler/checks: one module per kind)"},
 }
-SOLID_KEYS = {"mesh": "mesh file (any format meshio reads), relative to the case",
+SOLID_KEYS = {"mesh": "mesh file (any format meshio reads) inside the case, relative to it",
               "generator": "a geometry generator of transfer.generators (its faces are named boundaries)",
               "parameters": "table: the generator's parameters",
               "lower": "box generator: lower corner", "upper": "box generator: upper corner",
@@ -308,6 +309,8 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
         if box_keys:
             raise t.error("mesh", "give either a mesh file or the box keys (lower, upper, shape), not both")
         mesh = t.file("mesh", case_dir)
+        if mesh.suffix.lower() == ".xdmf":  # dolfinx reads the .h5 of its name beside it
+            in_case(case_dir, str(Path(t.string("mesh")).with_suffix(".h5")), t.where("mesh"))
     else:
         if "lower" not in t.data and "upper" not in t.data:
             raise t.error("mesh", "missing: give a mesh file, or a box with lower, upper and shape")
@@ -325,14 +328,14 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
 
 def _generator(t: Table, case_dir) -> dict:
     """``[geometry.solid] generator`` and its checked ``parameters`` (transfer.generators); the
-    parameters its module lists in ``FILES`` name files relative to the case directory."""
+    parameters its module lists in ``FILES`` name files relative to the case directory, inside it."""
     name = t.string("generator", choices=tuple(GENERATORS))
     values = t.data.get("parameters", {})
     if not isinstance(values, dict):
         raise t.error("parameters", f"must be a table of the generator's parameters, got {values!r}")
     files = getattr(GENERATORS[name], "FILES", ())
-    values = {k: str((Path(case_dir) / v).resolve()) if k in files and isinstance(v, str) and v else v
-              for k, v in values.items()}
+    values = {k: str(in_case(case_dir, v, f"{t.path}: [geometry.solid.parameters] {k}").resolve())
+              if k in files and isinstance(v, str) and v else v for k, v in values.items()}
     try:
         return {"name": name, "parameters": parameters(name, values)}
     except ValueError as exc:

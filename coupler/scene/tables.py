@@ -85,9 +85,9 @@ class Table:
         return self._checked(key, default, check_numbers, integer, positive, minimum, below, increasing, within)
 
     def file(self, key, case_dir: Path) -> Path:
-        """A file named relative to the case directory, which must exist."""
+        """A file named relative to the case directory, which must exist inside it (:func:`in_case`)."""
         name = self.string(key)
-        file = Path(case_dir) / name
+        file = in_case(case_dir, name, self.where(key))
         if not file.exists():
             raise self.error(key, f"file {name!r} not found")
         if not file.is_file():
@@ -101,10 +101,29 @@ class Table:
         return self._checked(key, default, check_boolean)
 
 
+def in_case(case_dir: Path, name: str, where: str, written: bool = False) -> Path:
+    """``case_dir / name``, SceneError naming `where` unless it lies inside the case directory
+    once resolved (``..``, an absolute name and symbolic links followed): a scene reads its
+    inputs and writes its outputs (`written`) only in its case directory, whoever wrote it
+    (cases/README.md). Checked before anything looks at the file, so the error says nothing
+    of the files outside."""
+    case, path = Path(case_dir).resolve(), Path(case_dir) / name
+    try:
+        resolved = path.resolve()
+    except (OSError, RuntimeError, ValueError) as exc:  # a loop of links, a NUL in the name
+        raise SceneError(f"{where}: {name!r} is not a usable file name ({exc})") from None
+    if not resolved.is_relative_to(case):
+        how = "writes only inside it; write elsewhere with --output DIR" if written else \
+            "reads input files only from inside it; copy the file into it"
+        raise SceneError(f"{where}: {name!r} is outside the case directory {case} (links followed): a scene {how}")
+    return path
+
+
 def output_directory(case_dir: Path, out: Table, output) -> Path:
-    """``--output`` (relative to the working directory) or ``[output] directory``
-    (relative to the case, default ``results``); it must not be a file."""
-    output_dir = Path(output) if output is not None else Path(case_dir) / out.string("directory", "results")
+    """``--output`` (relative to the working directory, anywhere) or ``[output] directory``
+    (relative to the case, default ``results``, inside it: :func:`in_case`); it must not be a file."""
+    output_dir = Path(output) if output is not None else \
+        in_case(case_dir, out.string("directory", "results"), out.where("directory"), written=True)
     if output_dir.exists() and not output_dir.is_dir():
         origin = "--output" if output is not None else out.where("directory")
         raise SceneError(f"{origin}: {str(output_dir)!r} exists and is not a directory")

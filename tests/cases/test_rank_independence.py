@@ -52,13 +52,13 @@ needs_mpi_foam = pytest.mark.skipif(shutil.which("simpleFoam") is None or shutil
 
 def run(tmp_path, solid_ranks: int, fluid_ranks: int, steps: int = 2, fluid: str = "openfoam",
         fluid_tolerance: str = "1e-12", scene: dict | None = None, label: str = "", coupling: str = "",
-        pictures: bool = False):
-    """small_fracture on these ranks, its solid solved by LU and simpleFoam stopped at
-    `fluid_tolerance` (module docstring), with `scene`'s text replacements, `coupling` a line
-    added to [coupling] and its pictures rendered when `pictures`; its output directory."""
+        pictures: bool = False, source=CASE):
+    """small_fracture (or its copy `source`) on these ranks, its solid solved by LU and simpleFoam
+    stopped at `fluid_tolerance` (module docstring), with `scene`'s text replacements, `coupling` a
+    line added to [coupling] and its pictures rendered when `pictures`; its output directory."""
     name = f"n{solid_ranks}m{fluid_ranks}{fluid}{fluid_tolerance}{label}"
     fluid_line = f'participant = "{fluid}"' + (f"\nranks = {fluid_ranks}" if fluid_ranks > 1 else "")
-    case = copy_case(CASE, tmp_path / name, {**(scene or {}),
+    case = copy_case(source, tmp_path / name, {**(scene or {}),
         'participant = "solid_fenicsx"': f'participant = "solid_fenicsx"\nranks = {solid_ranks}\nlinear_solver = "lu"',
         'participant = "openfoam"': fluid_line, "tolerance = 1e-7 ": f"tolerance = {fluid_tolerance} ",
         "steps = 2": f"steps = {steps}", 'acceleration = "iqn-ils"': f'acceleration = "iqn-ils"\n{coupling}'})
@@ -178,12 +178,12 @@ def test_solid_xdmf_on_two_ranks_is_the_mesh_file_on_one(tmp_path):
     solid_fenicsx.convert``) and read in parallel by 2 solid ranks gives the run of solid.msh on
     one rank (Chorin fluid, one step), its fields matched by coordinates (the XDMF numbers the
     vertices in its file's rows)."""
-    xdmf = tmp_path / "solid.xdmf"
+    source = copy_case(CASE, tmp_path / "xdmf")  # the case with solid.xdmf beside solid.msh: inputs are in the case
     subprocess.run(["mpirun", "-n", "2", "--oversubscribe", sys.executable, "-m", "solid_fenicsx.convert",
-                    str(CASE / "solid.msh"), str(xdmf)], check=True, env=MPI_ENV)
+                    str(CASE / "solid.msh"), str(source / "solid.xdmf")], check=True, env=MPI_ENV)
     found = assert_same(run(tmp_path, 1, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7"),
                         run(tmp_path, 2, 1, steps=1, fluid="chorin", fluid_tolerance="1e-7",
-                            scene={'mesh = "solid.msh"': f'mesh = "{xdmf}"'}, label="xdmf"),
+                            scene={'mesh = "solid.msh"': 'mesh = "solid.xdmf"'}, label="xdmf", source=source),
                         "solid.xdmf on 2 ranks", by_coordinates=True)
     assert "solid_0000.vtu point:displacement" in found
 

@@ -87,7 +87,8 @@ def test_a_rigid_solid_serves_its_mesh_and_stays_put():
     assert set(out) == {"displacement", "velocity"} and not np.any(out["displacement"].data)
     assert client.last_solves == [] and client.stats["calls"] == 3
     assert client.announce()["kind"] == "rigid_solid"
-    with pytest.raises(ParticipantError, match=r"participant 'solid' failed: ValueError: rigid_solid needs config"):
+    with pytest.raises(ParticipantError,  # bad input: a ParticipantInputError
+                       match=r"participant 'solid' refused its input: InputError: rigid_solid: needs config"):
         client.configure({})
 
 

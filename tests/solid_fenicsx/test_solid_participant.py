@@ -105,8 +105,10 @@ def test_every_use_of_an_empty_boundary_is_named():
         participant(config)
 
 
-@pytest.mark.parametrize("boundary, load", [("bottom = \"z < -5\"", 1), ("top = \"z > 2\"", 4)])
-def test_varcouple_run_refuses_a_load_on_an_empty_boundary(tmp_path, boundary, load):
+@pytest.mark.parametrize("boundary, load, ranks", [("bottom = \"z < -5\"", 1, 1), ("top = \"z > 2\"", 4, 1),
+                                                   ("top = \"z > 2\"", 4, 2)])
+def test_varcouple_run_refuses_a_load_on_an_empty_boundary(tmp_path, boundary, load, ranks):
+    """On 2 solid ranks the reason's extent of the mesh was a ValueError of the ranks' reduction."""
     import json
     import subprocess
     import sys
@@ -118,14 +120,16 @@ def test_varcouple_run_refuses_a_load_on_an_empty_boundary(tmp_path, boundary, l
     case = copy_case(BLOCK, tmp_path, {old: f'boundary = "{name}"',
                                        "[materials.solid]": f"[geometry.solid.boundaries]\n{boundary}\n\n"
                                                             "[materials.solid]",
-                                       '[check]\nkind = "uniaxial"': "[check]\nz = \"0\""})  # not uniaxial now
+                                       '[check]\nkind = "uniaxial"': "[check]\nz = \"0\"",  # not uniaxial now
+                                       'participant = "solid_fenicsx"': f'participant = "solid_fenicsx"\nranks = {ranks}'})
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "coupler.cli", "run", str(case), "--output", str(out)],
                          capture_output=True, text=True, timeout=300)
-    assert run.returncode == 4, run.stderr  # a participant's error
+    assert run.returncode == 2, run.stderr  # bad input, found by the participant (before: 4, a failed run)
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["status"] == "failed"
+    assert summary["status"] == "invalid"
     expression = boundary.split(" = ")[1].strip('"')
     message = (f"[loads.{load}] boundary '{name}': selects no facet of the mesh (expression '{expression}' is false "
                f"on every boundary facet midpoint; the mesh spans z in [0, 1])")
     assert message in summary["error"] and message in run.stderr, run.stderr
+    assert f"varcouple: error: {case / 'scene.toml'}: participant 'solid' refused its input: " in run.stderr

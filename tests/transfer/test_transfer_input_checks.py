@@ -275,7 +275,7 @@ def test_output_over_an_input_is_refused_and_the_input_kept(pair, tmp_path, caps
 def test_scene_output_over_an_input_is_refused(pair, tmp_path, capsys):
     src, dst = pair
     (src.parent / "source_0000.vtu").symlink_to(src)  # what the scene writes into its output directory
-    case = write_scene(tmp_path / "case", "../in/source_0000.vtu", "../in/dst.vtu")
+    case = write_scene(tmp_path, "in/source_0000.vtu", "in/dst.vtu")  # inputs in the case: --output over them
     before = src.read_bytes()
     code, _, err = run_cli(capsys, "run", case, "--output", src.parent)
     assert_clean_error(code, err, "source_0000.vtu", "overwrite", "input of the scene")

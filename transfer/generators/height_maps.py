@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from transfer.errors import without_content
+
 #: how far a point of an XYZ grid may lie from its grid position, a fraction of the spacing
 GRID_TOLERANCE = 1e-6
 
@@ -46,7 +48,7 @@ def read_npz(path) -> tuple[tuple[np.ndarray, np.ndarray], tuple[float, float]]:
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as exc:  # noqa: BLE001 - any reader error means the file is not an .npz
-        raise ValueError(f"{path} is not a readable .npz file ({exc})") from None
+        raise ValueError(f"{path} is not a readable .npz file ({without_content(str(exc))})") from None
     with data:
         for name in ("lower", "upper", "spacing"):
             if name not in data.files:
@@ -82,15 +84,36 @@ def _axis(values: np.ndarray, name: str, path) -> tuple[float, float, np.ndarray
     return float(distinct[0]), float(step), index
 
 
+def _bad_line(lines: list[str]) -> str:
+    """Where `lines` stop being lines of numbers, without quoting them (a file's content stays
+    out of messages)."""
+    columns = None
+    for number, line in enumerate(lines, start=1):
+        words = line.split("#", 1)[0].split()
+        if not words:
+            continue
+        try:
+            [float(w) for w in words]
+        except ValueError:
+            return f"line {number} is not numbers"
+        if columns is not None and len(words) != columns:
+            return f"line {number} has {len(words)} numbers, the lines before it {columns}"
+        columns = len(words)
+    return "not lines of numbers"
+
+
 def read_xyz(path) -> tuple[np.ndarray, tuple[float, float], tuple[float, float]]:
     """``(heights, (dx, dy), (x0, y0))`` of a plain-text XYZ grid: heights (ny, nx), every
     grid node given once."""
     path = _file(path)
     try:
-        text = path.read_text().replace(",", " ")
-        points = np.loadtxt(text.splitlines(), comments="#", ndmin=2)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path} is not a text file of x y z lines ({exc})") from None
+        lines = path.read_text().replace(",", " ").splitlines()
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path} is not a text file of x y z lines (byte {exc.start} is not UTF-8)") from None
+    try:
+        points = np.loadtxt(lines, comments="#", ndmin=2)
+    except ValueError:
+        raise ValueError(f"{path} is not a text file of x y z lines ({_bad_line(lines)})") from None
     if points.shape[1] != 3 or len(points) < 4:
         raise ValueError(f"{path} must hold at least 4 lines of three numbers x y z; got {points.shape[0]} "
                          f"lines of {points.shape[1]}")

@@ -20,8 +20,8 @@ NAME = "transfer"
 DESCRIPTION = "a field carried from a source mesh file to a target mesh file by each method (no solver)"
 ORDER = 5
 TABLES = {"transfer": {
-    "source": "source mesh file, relative to the case directory",
-    "target": "target mesh file, relative to the case directory",
+    "source": "source mesh file inside the case directory, relative to it",
+    "target": "target mesh file inside the case directory, relative to it",
     "field": "name of a point (or cell) field of the source file",
     "method": f"transfer method, one of {', '.join(METHODS)}",
     "methods": "list of transfer methods, each carried to its own copy of the target",
