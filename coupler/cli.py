@@ -3,7 +3,7 @@
     varcouple transfer SRC DST --field NAME -o OUT [--method l2|pseudo_l2]
     varcouple check CASE
     varcouple run CASE [--output DIR]
-    varcouple study CASE --vary KEY=VALUES [--vary ...] [--output DIR]
+    varcouple study CASE --vary KEY=VALUES [--vary ...] [--output DIR] [--figure PATH | --field P.F] [--max-runs N]
 
 ``main(argv)`` returns the exit code: 0 on success, 2 on a usage or input error
 (bad option, missing file or field, invalid scene, meshes that do not overlap),
