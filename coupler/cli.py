@@ -3,7 +3,7 @@
     varcouple transfer SRC DST --field NAME -o OUT [--method l2|pseudo_l2]
     varcouple check CASE
     varcouple run CASE [--output DIR]
-    varcouple study CASE --vary KEY=VALUES [--vary ...] [--output DIR]
+    varcouple study CASE --vary KEY=VALUES [--vary ...] [--output DIR] [--figure PATH | --field P.F] [--max-runs N]
 
 ``main(argv)`` returns the exit code: 0 on success, 2 on a usage or input error
 (bad option, missing file or field, invalid scene, meshes that do not overlap),
@@ -268,17 +268,20 @@ def _log(line: str) -> None:
 def study(args: argparse.Namespace) -> int:
     """Run the scene of CASE over the product of the --vary values, each run in its own
     directory under the study's (default: <[output] directory>/study), through the same path as
-    `varcouple run`; write study.json (per run: values, status, seconds per phase and total,
-    cost in cells, error against the scene's [check] or else against the most accurate run),
-    study.png (error against wall time and cost) and index.html. Exit code 0 when every run
-    completed (and passed its [check]), 1 when some did not (study.json says which), 2 for a
-    bad scene, key or value (nothing runs)."""
+    `varcouple run`; write study.json (the study's status and planned runs; per run: values,
+    status, seconds per phase and total, cost in cells, error), study.png (error against wall
+    time and cost) and index.html. The error is a per-step figure's (--figure), a field's
+    (--field) or the scene's [check]'s, against the most accurate run. Before any run: the runs
+    are counted (more than --max-runs are refused), every one validated, what is compared
+    checked against the plan, and the count and an estimate of the time printed. Exit code 0
+    when every run completed (and passed its [check]), 1 when some did not (study.json says
+    which), 2 for a bad scene, key, value or option (nothing runs), 130/143 on Ctrl-C/SIGTERM
+    (study.json records every run started, the one stopped with its status)."""
     from coupler.errors import EXIT_CODES
     from coupler.run.study import run_study
 
-    result = run_study(args.case, args.vary, args.output, args.field, log=_log)
-    ok = all(run["status"] == "completed" and (run["check"] or {}).get("passed", True) for run in result["runs"])
-    return EXIT_CODES["completed"] if ok else EXIT_CODES["check_failed"]
+    result = run_study(args.case, args.vary, args.output, args.field, args.figure, args.max_runs, log=_log)
+    return EXIT_CODES["completed"] if result["status"] == "completed" else EXIT_CODES["check_failed"]
 
 
 # -- main ----------------------------------------------------------------------------
@@ -316,8 +319,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "'coupling.acceleration=[\"aitken\", \"iqn-ils\"]' (repeatable: the product is run)")
     p.add_argument("--output", "--out", "-o", metavar="DIR", default=None,
                    help="the study's directory (default: the scene's [output] directory/study)")
-    p.add_argument("--field", default="solid.displacement", metavar="PARTICIPANT.FIELD",
-                   help="without a [check]: the field compared with the reference run (default solid.displacement)")
+    p.add_argument("--field", default=None, metavar="PARTICIPANT.FIELD",
+                   help="the field compared with the reference run (relative L2 difference; default: the scene's "
+                        "[check] if it has one, else solid.displacement)")
+    p.add_argument("--figure", default=None, metavar="PATH",
+                   help="a per-step number of summary.json as a dotted path (e.g. fracture.hydraulic_aperture): "
+                        "each run's error is its relative error against the reference run, per step")
+    p.add_argument("--max-runs", type=_positive_int, default=None, metavar="N",
+                   help="refuse a study of more than N runs before anything runs (default 100)")
     p.set_defaults(func=study)
     return parser
 

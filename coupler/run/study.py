@@ -2,51 +2,64 @@
 the values, each run through the same path as ``varcouple run`` into its own directory under
 the study's, and what each run bought for its time.
 
-Every combination is validated as a scene before anything runs (the values are set in the
-scene's TOML data first, :mod:`coupler.scene.overrides`), so a bad key or value is one line
-naming it. A run that fails is recorded with its status; the study goes on. ``study.json``
-holds one record per run: ``values``, ``status``, ``seconds`` (``total`` and per phase),
-``cost`` (cells and vertices of every participant's mesh, from the run's summary) and
-``error``: the scene's ``[check]`` error when the scene has one, else the relative L2
-difference of a field (default the solid's displacement at the last step) from the reference
-run, the most accurate one (the largest cost; among equal costs the longest), the field
-carried onto the reference's mesh by L2 projection (paper eq. 1-3) and measured with the
-reference mesh's mass matrix. ``study.png`` draws error against wall time and against cost.
+Before anything runs: the number of runs is counted from the values alone and refused above
+``--max-runs`` (no combination is built first); every combination is validated as a scene (the
+values are set in the scene's TOML data first, :mod:`coupler.scene.overrides`), so a bad key or
+value is one line naming it; what the error is measured on is checked against each run's plan
+(:mod:`coupler.run.compared`); the count and an estimate of the time are printed (the rule of
+:data:`RUN_SECONDS`, then scaled by the runs done). A run that fails is recorded with its status;
+the study goes on. ``study.json`` (rewritten atomically when a run starts and ends) holds the
+study's ``status`` and ``planned`` runs and one record per run started: ``values``, ``status``,
+``seconds`` (``total`` and per phase), ``cost`` (cells and vertices of every participant's mesh,
+from the run's summary) and ``error`` (:mod:`coupler.run.compared`). ``study.png`` draws error
+against wall time and against cost.
 """
 
 from __future__ import annotations
 
 import itertools
 import json
+import math
 import time
 from pathlib import Path
-
-import numpy as np
 
 from coupler import scene as scenes
 from coupler.errors import CouplerError, SceneError, one_line, run_status
 from coupler.output.report import write_study_page
 from coupler.output.results import write_summary
+from coupler.plan.plan import make_plan
 from coupler.protocol.transport import new_run_id
+from coupler.run.compared import Compared
 from coupler.run.execute import execute
 from coupler.run.outdir import OutputLock, prepare
-from coupler.run.projection import project
+from coupler.run.preflight import estimate
 from coupler.scene.overrides import parse_vary
 from transfer import TransferError
-from transfer.meshfile import MeshFile
 
 STUDY = "study.json"
 PLOT = "study.png"
+#: the runs a study starts without --max-runs
+MAX_RUNS = 100
+#: the rule of thumb a study's time is estimated with before it runs: seconds per run (starting its
+#: participants) and per cell and time step (the cells of every participant, [time] steps). Measured,
+#: machine shared: standin_flow 2.7 s a run (the rule: 8 s), small_fracture 18 s (18 s), hm_fracture
+#: 22 to 129 s (24 to 64 s): within a factor of a few, enough to tell minutes from days.
+RUN_SECONDS = (3.0, 1.0e-3)
 
 
-def combinations(varies: list[str]) -> list[dict]:
+def combinations(varies: list[str], max_runs: int = MAX_RUNS) -> list[dict]:
     """``--vary`` arguments -> one ``{key: value}`` per run: the product of the values, the
-    last key varying fastest."""
+    last key varying fastest; SceneError, before any is built, when they are more than `max_runs`."""
     parsed = [parse_vary(text) for text in varies]
     keys = [key for key, _ in parsed]
     twice = {key for key in keys if keys.count(key) > 1}
     if twice:
         raise SceneError(f"--vary {sorted(twice)[0]}: given twice; list all its values in one --vary")
+    count = math.prod(len(values) for _, values in parsed)
+    if count > max_runs:
+        sizes = " x ".join(f"{len(values)} {key}" for key, values in parsed)
+        raise SceneError(f"--vary: {count:,} runs ({sizes}) exceed the limit of {max_runs:,} runs (--max-runs): "
+                         f"vary fewer values, or give --max-runs {count} to run them all")
     return [dict(zip(keys, values)) for values in itertools.product(*(values for _, values in parsed))]
 
 
@@ -58,18 +71,37 @@ def _label(values: dict) -> str:
     return ", ".join(f"{key}={json.dumps(value)}" for key, value in values.items())
 
 
-def plan(case, varies: list[str], output=None):
-    """The scene of `case`, the study's directory and per run (name, values, validated scene)."""
+def plan(case, varies: list[str], output=None, max_runs: int = MAX_RUNS, log=print):
+    """The scene of `case`, the study's directory and per run (name, values, validated scene);
+    a line every 10 s while validating."""
+    values_of_runs = combinations(varies, max_runs)
     base = scenes.load(case)
     directory = Path(output) if output is not None else Path(base.output_dir) / "study"
-    runs = []
-    for i, values in enumerate(combinations(varies), start=1):
+    runs, said = [], time.monotonic()
+    for i, values in enumerate(values_of_runs, start=1):
         name = f"run_{i:02d}"
         try:
             runs.append((name, values, scenes.load(case, output=directory / name, overrides=values)))
         except SceneError as exc:
             raise SceneError(f"--vary {_label(values)}: {exc}") from None
+        if time.monotonic() - said > 10:
+            log(f"study: validated {i:,} of {len(values_of_runs):,} runs")
+            said = time.monotonic()
     return base, directory, runs
+
+
+def run_seconds(scene) -> tuple[float, int]:
+    """The estimated seconds of one run of `scene` (:data:`RUN_SECONDS`) and its cells (of every
+    participant, from the scene: :func:`coupler.run.preflight.estimate`)."""
+    cells = sum(part.cells for part in estimate(scene))
+    return RUN_SECONDS[0] + RUN_SECONDS[1] * cells * scene.time["steps"], cells
+
+
+def _duration(seconds: float) -> str:
+    for unit, scale in (("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= 2 * scale:
+            return f"{seconds / scale:.3g} {unit}"
+    return f"{seconds:.3g} s"
 
 
 def cost(summary: dict) -> dict | None:
@@ -81,113 +113,105 @@ def cost(summary: dict) -> dict | None:
             "participants": sizes}
 
 
-def _last_file(directory: Path, participant: str) -> Path | None:
-    files = sorted(directory.glob(f"{participant}_[0-9][0-9][0-9][0-9].vtu"))
-    return files[-1] if files else None
-
-
-def difference(file: Path, reference: Path, name: str) -> float | None:
-    """||u - u_ref|| / ||u_ref|| in L2 on the reference's mesh: the field `name` of `file`
-    carried there by L2 projection (taken as is when both files have the same mesh), the norm
-    that of the reference's mass matrix over the dofs the projection covers. None when the
-    reference field is zero."""
-    run, ref = MeshFile.read(file), MeshFile.read(reference)
-    u, u_ref = run.field(name), ref.field(name)
-    space = ref.space(u_ref.kind)
-    same = (run.mesh.cells.shape == ref.mesh.cells.shape and np.array_equal(run.mesh.cells, ref.mesh.cells)
-            and np.array_equal(run.mesh.points, ref.mesh.points))
-    if same:
-        values, covered = u.values, np.ones(space.num_dofs, bool)
-    else:
-        p = project(u, run.space(u.kind), space, "l2")
-        values, covered = p.values, p.covered
-    mass = space.mass_matrix()[covered][:, covered]
-    d = (values - u_ref.values)[covered].reshape(int(covered.sum()), -1)
-    r = u_ref.values[covered].reshape(int(covered.sum()), -1)
-    norm = float(np.sum(r * (mass @ r)))
-    return float(np.sqrt(max(float(np.sum(d * (mass @ d))), 0.0) / norm)) if norm > 0 else None
-
-
-def errors(study: dict, directory: Path, field: str) -> None:
-    """Each run's ``error``: its [check]'s when the scene has one, else its difference in
-    `field` (``participant.name``) from the reference run."""
-    runs = study["runs"]
-    if study["check"]:
-        study["error"] = {"against": f"the scene's [check] (kind {study['check']})"}
-        for run in runs:
-            run["error"] = run["check"]["error"] if run.get("check") else None
-        return
-    done = [run for run in runs if run["status"] == "completed" and run["cost"]]
-    if not done:
-        study["error"] = {"against": "no completed run to compare with"}
-        return
-    reference = max(done, key=lambda run: (run["cost"]["cells"], run["seconds"]["total"]))
-    participant, name = field.split(".", 1)
-    study["error"] = {"against": "the reference run (the largest cost; among equal costs the longest)",
-                      "reference": reference["name"], "field": field,
-                      "norm": "relative L2 on the reference's mesh, the field carried there by L2 projection"}
-    ref_file = _last_file(directory / reference["directory"], participant)
-    for run in runs:
-        file = _last_file(directory / run["directory"], participant)
-        run["error"] = None if run not in done or file is None or ref_file is None else \
-            difference(file, ref_file, name)
-
-
 def study_plot(path: Path, study: dict) -> None:
-    """Error against wall time and against cost (cells), one point per run with an error."""
+    """Error against wall time and against cost (cells), one point per run with an error; of a
+    figure, one series per step of the reference (its error at that step)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    against = study["error"]
     runs = [run for run in study["runs"] if run.get("error") and run.get("cost")]
-    reference = next((run for run in study["runs"] if run["name"] == study["error"].get("reference")), None)
+    reference = next((run for run in study["runs"] if run["name"] == against.get("reference")), None)
     tolerance = next((run["check"]["tolerance"] for run in study["runs"] if run.get("check")), None)
+    times = against.get("t") if "figure" in against else None
+    series = [(f"step {s} (t = {t:g})", lambda run, s=s: run["errors"][s]) for s, t in enumerate(times)] \
+        if times else [(None, lambda run: run["error"])]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for ax, x, label in ((axes[0], lambda r: r["seconds"]["total"], "wall time [s]"),
                          (axes[1], lambda r: r["cost"]["cells"], "cost [cells of all participants]")):
+        for k, (name, error) in enumerate(series):
+            points = [(x(run), error(run)) for run in runs if error(run)]
+            if points:
+                ax.loglog(*zip(*points), "o", color=f"C{k}", label=name)
         for run in runs:
-            ax.loglog(x(run), run["error"], "o", color="C0" if run["status"] == "completed" else "C3")
-            ax.annotate(run["name"], (x(run), run["error"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+            ax.annotate(run["name"], (x(run), run["error"]), fontsize=7, xytext=(3, 3), textcoords="offset points",
+                        color="k" if run["status"] == "completed" else "C3")
         if reference is not None:
             ax.axvline(x(reference), color="k", ls=":", lw=1, label=f"reference {reference['name']}")
-        if tolerance is not None:
+        if tolerance is not None and not times:
             ax.axhline(tolerance, color="k", ls="--", lw=0.8, label=f"[check] tolerance {tolerance:g}")
-        if reference is not None or tolerance is not None:
+        if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
         ax.set_xlabel(label)
         ax.grid(True, which="both", alpha=0.3)
     if not runs:
         axes[0].text(0.5, 0.5, "no run with an error to draw", transform=axes[0].transAxes, ha="center")
-    axes[0].set_ylabel(f"relative L2 difference of {study['error']['field']}" if reference else
+    axes[0].set_ylabel(f"relative error of {against['figure']} per step" if times else
+                       f"relative L2 difference of {against['field']}" if "field" in against and reference else
                        f"error ([check] {study['check']})" if study["check"] else "error")
-    fig.suptitle(f"{study['case']}: error against {study['error']['against']}", fontsize=9)
+    fig.suptitle(f"{study['case']}: error against {against['against']}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def run_study(case, varies: list[str], output=None, field: str = "solid.displacement", log=print) -> dict:
-    """Run the study; write and return study.json's content."""
-    if field.count(".") < 1:
-        raise CouplerError(f"--field {field!r}: give participant.field, e.g. solid.displacement")
-    base, directory, runs = plan(case, varies, output)
+def run_study(case, varies: list[str], output=None, field: str | None = None, figure: str | None = None,
+              max_runs: int | None = None, log=print) -> dict:
+    """Run the study (at most `max_runs` runs, default :data:`MAX_RUNS`); write and return
+    study.json's content. The error of each run is that of `figure` (a dotted path of
+    summary.json's steps), else of `field`, else the scene's [check], else of the solid's
+    displacement (:mod:`coupler.run.compared`)."""
+    max_runs = max_runs or MAX_RUNS
+    base, directory, runs = plan(case, varies, output, max_runs, log)
+    compared = Compared.of(field, figure, base.check["kind"] if getattr(base, "check", None) else None)
+    estimates = []
+    for name, values, scene in runs:
+        compared.check_plan(make_plan(scene), f"{name} ({_label(values)})")
+        estimates.append(run_seconds(scene))
+    planned = sum(seconds for seconds, _ in estimates)
+    cells = [c for _, c in estimates]
+    log(f"study: {len(runs)} run{'s' * (len(runs) > 1)} of {base.path} (at most {max_runs}: --max-runs), "
+        f"{min(cells):,} to {max(cells):,} cells each; about {_duration(planned)} by the rule "
+        f"{RUN_SECONDS[0]:g} s + {1e3 * RUN_SECONDS[1]:g} ms per cell and step a run")
     lock = OutputLock(directory, new_run_id())
     prepare(directory, "--output" if output is not None else f"{base.path}: [output] directory")
     study = {"case": str(base.case_dir), "scene": str(base.path), "description": getattr(base, "description", ""),
+             "status": "running", "planned": {"runs": len(runs), "estimated_seconds": planned},
              "vary": {key: _distinct([values[key] for _, values, _ in runs]) for key in runs[0][1]},
-             "check": base.check["kind"] if getattr(base, "check", None) else None, "runs": []}
+             "check": base.check["kind"] if getattr(base, "check", None) else None,
+             "compared": {"kind": compared.kind, "name": compared.name}, "runs": []}
     with lock:
         try:
-            for name, values, scene in runs:
-                log(f"{name}: {_label(values)}")
-                study["runs"].append(_one_run(name, values, scene, lambda line, n=name: log(f"  [{n}] {line}")))
+            done = 0.0
+            for i, (name, values, scene) in enumerate(runs):
+                log(f"{name} of {len(runs)}: {_label(values)}")
+                record = {"name": name, "directory": name, "values": values, "status": "running",
+                          "seconds": {"total": 0.0}, "cost": None, "check": None}
+                study["runs"].append(record)
                 write_summary(directory, study, STUDY)
+                summary = _one_run(record, scene, lambda line, n=name: log(f"  [{n}] {line}"))
+                write_summary(directory, study, STUDY)
+                compared.check_run(directory / name, summary, name)
+                done += estimates[i][0]
+                left = sum(seconds for seconds, _ in estimates[i + 1:])
+                if left:
+                    measured = sum(run["seconds"]["total"] for run in study["runs"]) / done
+                    log(f"study: {i + 1} of {len(runs)} runs done; about {_duration(measured * left)} left "
+                        f"(the estimate times {measured:.2g}, as measured so far)")
+            passed = all(run["status"] == "completed" and (run["check"] or {}).get("passed", True)
+                         for run in study["runs"])
+            study["status"] = "completed" if passed else "runs_failed"
+        except BaseException as exc:
+            study.update(status=run_status(exc), message=_why(exc))
+            for run in study["runs"]:
+                if run["status"] == "running":  # stopped before its own run began
+                    run["status"] = study["status"]
+            raise
         finally:
-            errors(study, directory, field)
-            write_summary(directory, study, STUDY)
-            study_plot(directory / PLOT, study)
-            write_study_page(directory, study, PLOT)
+            write_summary(directory, study, STUDY)  # the status first: the runs are kept whatever follows
+            _conclude(study, directory, compared)
     for run in study["runs"]:
         error = "-" if run.get("error") is None else f"{run['error']:.3e}"
         cells = "-" if not run["cost"] else f"{run['cost']['cells']:,}"
@@ -198,18 +222,60 @@ def run_study(case, varies: list[str], output=None, field: str = "solid.displace
     return study
 
 
-def _one_run(name: str, values: dict, scene, log) -> dict:
-    start = time.perf_counter()
-    record = {"name": name, "directory": name, "values": values}
+def _conclude(study: dict, directory: Path, compared: Compared) -> None:
+    """Each run's error, study.json again, the plot and the page. An error measuring the runs
+    ends a study that ran to its end; one that is already stopping stops for its own reason."""
     try:
-        summary = execute(scene, f"study run {name}", log=log)
+        compared.errors(study, directory)
+    except BaseException as exc:
+        study["error"] = {"against": f"nothing: {_why(exc)}"}
+        ran = study["status"] in ("completed", "runs_failed")
+        if ran:
+            study.update(status=run_status(exc), message=_why(exc))
+        if ran or not isinstance(exc, (CouplerError, TransferError, OSError)):
+            raise
+    finally:
+        write_summary(directory, study, STUDY)
+    study_plot(directory / PLOT, study)
+    write_study_page(directory, study, PLOT)
+
+
+def _one_run(record: dict, scene, log) -> dict:
+    """Run `scene` into its directory, filling `record` (in the study's list from the start) with
+    its status, seconds, cost and check however the run ends; the run's summary. A failure of the
+    run is recorded and the study goes on; a signal or anything else is recorded and raised."""
+    start, started = time.perf_counter(), time.time()
+    summary = {}
+    try:
+        summary = execute(scene, f"study run {record['name']}", log=log)
         record["status"] = summary.get("status", "completed")
     except (CouplerError, TransferError, OSError) as exc:
         record.update(status=run_status(exc), message=one_line(exc))
         log(f"{record['status']}: {record['message']}")
-        file = Path(scene.output_dir) / "summary.json"
-        summary = json.loads(file.read_text()) if file.is_file() else {}
-    record["seconds"] = {"total": time.perf_counter() - start, **summary.get("phases_seconds", {})}
-    record["cost"] = cost(summary)
-    record["check"] = summary.get("check")
-    return record
+        summary = _own_summary(Path(scene.output_dir), started)
+    except BaseException as exc:  # a signal (or a bug): recorded, then the study stops
+        summary = _own_summary(Path(scene.output_dir), started)
+        own = summary.get("status", "running")
+        record.update(status=run_status(exc) if own == "running" else own,
+                      message=_why(exc) + ("" if own == "running" else
+                                               f" after the run's summary.json said {own!r} (its pictures or "
+                                               f"page may be missing)"))
+        raise
+    finally:
+        record["seconds"] = {"total": time.perf_counter() - start, **summary.get("phases_seconds", {})}
+        record["cost"] = cost(summary)
+        record["check"] = summary.get("check")
+    return summary
+
+
+def _own_summary(directory: Path, since: float) -> dict:
+    """The summary.json this run wrote in `directory` (none from before `since`, its start), or {}."""
+    file = directory / "summary.json"
+    try:
+        return json.loads(file.read_text()) if file.stat().st_mtime >= since - 1.0 else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _why(exc: BaseException) -> str:
+    return "interrupted (SIGINT, Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else one_line(exc)

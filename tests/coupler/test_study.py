@@ -1,22 +1,35 @@
 """``varcouple study``: --vary parsed and applied to the scene's TOML before validation (a bad
-key or value is one line naming it, and nothing runs), the product of the values run each in
-its own directory, study.json with status, seconds, cost and error (the [check]'s, or the
-relative L2 difference from the most accurate run), the PNG and the page."""
+key or value is one line naming it, and nothing runs), the runs counted before any is built and
+refused above --max-runs, the product of the values run each in its own directory, study.json
+with the study's status and planned runs and per run status, seconds, cost and error (the
+[check]'s, the relative L2 difference of a field or the per-step relative error of a figure
+against the most accurate run), every run recorded however the study ends, the PNG and the page."""
 
 from __future__ import annotations
 
 import json
+import re
+import signal
+import subprocess
+import sys
+import time
 
 import meshio
 import numpy as np
 import pytest
 
+from coupler import scene as scenes
 from coupler.cli import main
-from coupler.errors import SceneError
-from coupler.run.study import combinations, difference, plan
+from coupler.errors import EXIT_CODES, SceneError
+from coupler.plan.plan import make_plan
+from coupler.run import study as study_module
+from coupler.run.compared import Compared, difference, figure_errors
+from coupler.run.study import combinations, plan
 from coupler.scene.overrides import apply, parse_vary
 from transfer.generate import box_tetrahedra
-from vc_helpers import CASES, NEEDS_GMSH, copy_case, hertz_mesh_file
+from vc_helpers import CASES, NEEDS_GMSH, copy_case, deliver_stopping_signals, hertz_mesh_file
+
+STANDIN = CASES / "standin_flow"
 
 
 def test_the_product_of_the_values():
@@ -111,6 +124,7 @@ def _study(tmp_path, case, *varies):
 def test_small_fracture_with_two_grid_shapes(tmp_path):
     code, out, study = _study(tmp_path, CASES / "small_fracture", "geometry.fluid.shape=[[21,11,7],[21,11,11]]")
     assert code == 0 and [run["status"] for run in study["runs"]] == ["completed", "completed"]
+    assert study["status"] == "completed" and study["compared"] == {"kind": "field", "name": "solid.displacement"}
     first, second = study["runs"]
     assert first["values"] == {"geometry.fluid.shape": [21, 11, 7]} and study["check"] is None
     assert second["cost"]["cells"] - first["cost"]["cells"] == 21 * 11 * (11 - 7)  # the same solid
@@ -146,7 +160,7 @@ def test_a_knob_without_a_mesh_change_and_a_failed_run(tmp_path):
     run of equal cost."""
     code, out, study = _study(tmp_path, CASES / "standin_flow", 'coupling.acceleration=["aitken","iqn-ils"]',
                               "coupling.max_iterations=[2, 50]")
-    assert code == 1
+    assert code == 1 and study["status"] == "runs_failed" and study["planned"]["runs"] == 4
     statuses = {(r["values"]["coupling.acceleration"], r["values"]["coupling.max_iterations"]): r for r in study["runs"]}
     for acceleration in ("aitken", "iqn-ils"):
         capped, free = statuses[(acceleration, 2)], statuses[(acceleration, 50)]
@@ -156,3 +170,184 @@ def test_a_knob_without_a_mesh_change_and_a_failed_run(tmp_path):
     assert next(r for r in study["runs"] if r["name"] == reference)["error"] == 0.0
     assert len({r["cost"]["cells"] for r in study["runs"]}) == 1
     assert study["vary"] == {"coupling.acceleration": ["aitken", "iqn-ils"], "coupling.max_iterations": [2, 50]}
+
+
+# -- the size of a study (issue 26, item 4) ------------------------------------------
+def test_a_huge_product_is_refused_before_any_combination_is_built(tmp_path, capsys, monkeypatch):
+    """10^6 combinations: refused from the count alone, naming --max-runs, no scene loaded (the
+    product once validated for 180 s and 1.45 GB)."""
+    loads = []
+    monkeypatch.setattr(study_module.scenes, "load", lambda *a, **k: loads.append(k) or pytest.fail(
+        "a scene was loaded before the runs were counted"))
+    values = "[" + ", ".join(str(i) for i in range(1, 1001)) + "]"
+    code = main(["study", str(STANDIN), "--vary", f"time.steps={values}", "--vary",
+                 f"coupling.max_iterations={values}", "-o", str(tmp_path / "study")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "1,000,000 runs (1000 time.steps x 1000 coupling.max_iterations) exceed the limit of 100 runs " \
+           "(--max-runs)" in err and "--max-runs 1000000" in err
+    assert not loads and not (tmp_path / "study").exists()
+
+
+def test_max_runs_raises_the_limit():
+    varies = ["time.steps=[1, 2, 3]", "coupling.max_iterations=[5, 6]"]
+    with pytest.raises(SceneError, match=r"--vary: 6 runs \(3 time.steps x 2 coupling.max_iterations\) exceed "
+                                         r"the limit of 5 runs \(--max-runs\)"):
+        combinations(varies, max_runs=5)
+    assert len(combinations(varies, max_runs=6)) == 6
+    assert len(combinations(["time.steps=" + str(list(range(1, 101)))])) == 100  # the default limit
+
+
+def test_the_estimate_follows_the_stated_rule():
+    scene = scenes.load(STANDIN)
+    seconds, cells = study_module.run_seconds(scene)
+    assert cells == 6 * 4 * 4 * 3 + 10 * 10 * 10  # the solid's tets and the fluid's cells
+    a, b = study_module.RUN_SECONDS
+    assert seconds == pytest.approx(a + b * cells * scene.time["steps"])
+
+
+# -- what is compared is checked before any run (issue 26 item 8, issue 27 item 4) ---
+@pytest.mark.parametrize("case, options, message", [
+    (STANDIN, ["--figure", "fracture.hydraulic_aperture"], r"--figure fracture.hydraulic_aperture: run_01 "
+     r"\(coupling.max_iterations=30\): the plan has no per-step 'fracture' figures \(its per-step figures: none"),
+    (STANDIN, ["--figure", "figures.solidd.stress"], r"--figure figures.solidd.stress: .*the plan has no participant "
+     r"'solidd' \(it has solid, fluid\)"),
+    (STANDIN, ["--figure", "fracture..x"], r"--figure 'fracture..x': give the dotted path of a number"),
+    (STANDIN, ["--field", "solidd.displacement"], r"--field solidd.displacement: .*no participant 'solidd'"),
+    (STANDIN, ["--field", "displacement"], r"--field 'displacement': give participant.field"),
+    (STANDIN, ["--field", "solid.displacement", "--figure", "max_displacement"], r"give one of them"),
+    (CASES / "hm_fracture", ["--figure", "fracture"], r"--figure fracture: a table of figures, not a number"),
+])
+def test_a_bad_figure_or_field_is_refused_before_any_run(tmp_path, capsys, monkeypatch, case, options, message):
+    monkeypatch.setattr(study_module, "execute", lambda *a, **k: pytest.fail("a run started"))
+    out = tmp_path / "study"
+    code = main(["study", str(case), "--vary", "coupling.max_iterations=[30, 31]", *options, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+def test_the_plan_vouches_for_a_monitor_and_a_crossing_field():
+    hm = make_plan(scenes.load(CASES / "hm_fracture"))
+    figure = Compared.of(None, "fracture.hydraulic_aperture", None)
+    figure.check_plan(hm, "run_01")
+    assert figure.pending  # its name inside the table: checked on the first run's summary
+    field = Compared.of("fluid.pressure", None, None)
+    field.check_plan(hm, "run_01")
+    assert not field.pending  # it crosses to the solid: the plan says the fluid writes it
+
+
+def test_a_figure_not_in_the_first_run_is_refused_before_the_next(tmp_path):
+    steps = [{"step": 0, "t": 1.0, "fracture": {"hydraulic_aperture": 8.8e-5, "percolating": True}}]
+    compared = Compared.of(None, "fracture.hydraulic_apertur", None)
+    with pytest.raises(SceneError, match=r"--figure fracture.hydraulic_apertur: not in run_01's summary.json, "
+                                         r"step 0: fracture has no 'hydraulic_apertur' \(it has \['hydraulic_"
+                                         r"aperture', 'percolating'\]\)"):
+        compared.check_run(tmp_path, {"steps": steps}, "run_01")
+    compared = Compared.of(None, "fracture.percolating", None)
+    with pytest.raises(SceneError, match=r"step 0: True is not a number"):
+        compared.check_run(tmp_path, {"steps": steps}, "run_01")
+    compared = Compared.of(None, "fracture.hydraulic_aperture", None)
+    compared.check_run(tmp_path, {"steps": []}, "run_01")  # no step yet: still to be found
+    assert compared.pending
+    compared.check_run(tmp_path, {"steps": steps}, "run_02")
+    assert not compared.pending
+
+
+def test_a_field_not_written_stops_the_study_after_the_first_run(tmp_path, capsys):
+    """A field the plan cannot vouch for is looked for in the first run's files: not there, the
+    study stops before the second run (it was found only after every run)."""
+    code = main(["study", str(STANDIN), "--vary", "coupling.max_iterations=[30, 31]", "--field",
+                 "solid.displacment", "-o", str(tmp_path / "study")])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 2 and err.startswith("varcouple: error: --field solid.displacment: ") and "no field " \
+        "'displacment'" in err, err
+    study = json.loads((tmp_path / "study" / "study.json").read_text())
+    assert study["status"] == "invalid" and study["planned"]["runs"] == 2
+    assert [(r["name"], r["status"]) for r in study["runs"]] == [("run_01", "completed")]
+    assert not (tmp_path / "study" / "run_02").exists()
+
+
+# -- studies on a figure (issue 27, item 4) ---------------------------------------------
+def test_figure_errors_per_step_at_the_reference_times():
+    ref = [{"t": 1.0, "a": {"b": 2.0}}, {"t": 2.0, "a": {"b": 4.0}}, {"t": 3.0, "a": {"b": 0.0}},
+           {"t": 4.0, "a": {"b": 1.0}}]
+    run = [{"t": 2.0, "a": {"b": 3.0}}, {"t": 1.0 + 1e-12, "a": {"b": 2.5}}, {"t": 3.0, "a": {"b": 1.0}}]
+    assert figure_errors(run, ref, "a.b") == [pytest.approx(0.25), pytest.approx(0.25), None, None]
+
+
+def test_a_study_of_a_figure(tmp_path, capsys):
+    """The relative error of max_displacement per step against the reference run, recomputed
+    here from the runs' own summaries; the count and the estimate printed before the first run."""
+    code = main(["study", str(STANDIN), "--vary", "solvers.fluid.pressure=[1.0e5, 1.2e5]", "--figure",
+                 "max_displacement", "-o", str(tmp_path / "study")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    first = out.index("run_01 of 2")
+    assert re.search(r"study: 2 runs of .*scene.toml \(at most 100: --max-runs\), 1,288 to 1,288 cells each; "
+                     r"about 16.3 s by the rule 3 s \+ 1 ms per cell and step a run", out[:first]), out
+    study = json.loads((tmp_path / "study" / "study.json").read_text())
+    assert study["status"] == "completed" and study["planned"]["runs"] == 2
+    assert study["compared"] == {"kind": "figure", "name": "max_displacement"}
+    reference = study["error"]["reference"]
+    assert study["error"]["figure"] == "max_displacement" and study["error"]["t"] == pytest.approx(
+        [0.01, 0.02, 0.03, 0.04])
+    ref = [s["max_displacement"] for s in json.loads((tmp_path / "study" / reference / "summary.json").read_text())
+           ["steps"]]
+    for run in study["runs"]:
+        own = [s["max_displacement"] for s in json.loads((tmp_path / "study" / run["name"] / "summary.json")
+                                                          .read_text())["steps"]]
+        assert run["figure"] == own
+        assert run["errors"] == pytest.approx([abs(f - r) / abs(r) for f, r in zip(own, ref)], rel=1e-12)
+        assert run["error"] == pytest.approx(max(run["errors"]))
+        assert (run["error"] == 0.0) == (run["name"] == reference)
+    other = next(run for run in study["runs"] if run["name"] != reference)
+    assert other["error"] > 0.01  # the pressures differ by 20 %
+    assert (tmp_path / "study" / "study.png").stat().st_size > 0
+
+
+# -- every run recorded however the study ends (issue 26, item 8) -----------------------
+def test_an_interrupt_after_the_run_wrote_its_summary_keeps_the_run(tmp_path, monkeypatch):
+    """Ctrl-C while the first run writes its pictures (its summary says completed): the run is
+    recorded with that status and the interrupt, the study says interrupted, the plan 2 runs."""
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("coupler.run.runner.publish", interrupted)
+    out = tmp_path / "study"
+    code = main(["study", str(STANDIN), "--vary", "coupling.max_iterations=[30, 31]", "-o", str(out)])
+    assert code == EXIT_CODES["interrupted"]
+    study = json.loads((out / "study.json").read_text())
+    (run,) = study["runs"]
+    assert run["name"] == "run_01" and run["status"] == "completed" and run["cost"]["cells"] == 1288
+    assert run["message"].startswith("interrupted (SIGINT, Ctrl-C) after the run's summary.json said 'completed'")
+    assert study["status"] == "interrupted" and study["planned"] == {"runs": 2, "estimated_seconds": pytest.approx(
+        2 * (3.0 + 1e-3 * 1288 * 4))}
+    assert json.loads((out / "run_01" / "summary.json").read_text())["status"] == "completed"
+
+
+@pytest.mark.parametrize("sig, code, status", [(signal.SIGINT, 130, "interrupted"),
+                                               (signal.SIGTERM, 143, "terminated")], ids=["ctrl_c", "sigterm"])
+def test_a_signal_during_a_run_records_it_and_the_study(tmp_path, sig, code, status):
+    out = tmp_path / "study"
+    proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", "study", str(STANDIN), "--vary",
+                             "time.steps=[100000, 100001]", "-o", str(out)], preexec_fn=deliver_stopping_signals,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            if json.loads((out / "run_01" / "summary.json").read_text()).get("steps"):
+                break
+        except (OSError, ValueError):
+            pass
+        time.sleep(0.05)
+    proc.send_signal(sig)
+    stdout, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, err
+    study = json.loads((out / "study.json").read_text())
+    (run,) = study["runs"]
+    assert run["name"] == "run_01" and run["status"] == status and run["seconds"]["total"] > 0
+    assert json.loads((out / "run_01" / "summary.json").read_text())["status"] == status
+    assert study["status"] == status and study["planned"]["runs"] == 2
+    assert "study: 2 runs of" in stdout and re.search(r"about [0-9.]+ days", stdout)  # the count and the estimate
