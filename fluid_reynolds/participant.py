@@ -97,7 +97,8 @@ class ReynoldsParticipant(Participant):
         return solve(aperture, spec.columns.spacing, spec.mu, self.state["pressures"], inflow)
 
     def save_state(self, window):
-        self.saved[int(window)] = {"fraction": self.state["fraction"].copy(), "pressures": dict(self.state["pressures"])}
+        state = self.state
+        self.saved[int(window)] = {"fraction": state["fraction"].copy(), "pressures": dict(state["pressures"])}
         for w in [w for w in self.saved if w < int(window) - 1]:
             del self.saved[w]  # keep the last two windows
 

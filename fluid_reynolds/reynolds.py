@@ -9,7 +9,7 @@ the harmonic mean of e^3 over the two half cells. A fixed-pressure face of the g
 segment at the face (half a cell); any other face passes nothing. Cells with e = 0 are closed
 and excluded, and so are open cells that no path connects to a fixed-pressure face (their
 pressure is not defined by the flow: they take the nearest solved cell's). One sparse direct
-solve (SuperLU) of the symmetric positive definite system."""
+solve (SuperLU, symmetric mode) of the symmetric positive definite system."""
 
 from __future__ import annotations
 
@@ -126,7 +126,10 @@ def solve(aperture: np.ndarray, spacing, viscosity: float, pressures: dict[str, 
         A = sp.csc_matrix((np.concatenate([*vals, diagonal]),
                            (np.concatenate([*rows, np.arange(n)]), np.concatenate([*cols, np.arange(n)]))),
                           shape=(n, n))
-        x = spla.splu(A).solve(rhs)
+        # symmetric positive definite: SuperLU in symmetric mode, a minimum-degree ordering of A + A^T and
+        # no pivoting (half the time of the default column ordering on a 256 x 256 map)
+        factor = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        x = factor.solve(rhs)
         residual = float(np.linalg.norm(A @ x - rhs) / max(np.linalg.norm(rhs), np.finfo(float).tiny))
         pressure[solved] = x
         nearest = ndimage.distance_transform_edt(~solved, return_distances=False, return_indices=True)
