@@ -84,6 +84,12 @@ def test_a_closed_gap_passes_nothing():
     p = participant()
     out = p.advance(0, 0, 0.0, 1.0, {"solid_fraction": Field("solid_fraction", np.ones(int(np.prod(SHAPE))))})
     assert not out["velocity"].data.any() and np.all(out["pressure"].data == 0.0)
+    # a gap below `closed` (a share of the grid's height, 0.5 mm) is closed; above it, it passes the cubic law
+    thin = {"solid_fraction": Field("solid_fraction", gap_fraction(LOW, LOW + 4e-10))}  # 0.8e-6 of the height
+    assert not participant().advance(0, 0, 0.0, 1.0, thin)["velocity"].data.any()
+    sections = section_flow_rates(StructuredGrid([0, 0, 0], SPACING, SHAPE),
+                                  participant(closed=1e-7).advance(0, 0, 0.0, 1.0, thin)["velocity"].data)
+    assert sections.mean() == pytest.approx(cubic_law(4e-10), rel=1e-6)
 
 
 @pytest.mark.parametrize("case, edit, reason", [
