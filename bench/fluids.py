@@ -1,5 +1,6 @@
-"""The two fluids side by side: the OpenFOAM participant (stock binaries, a relaunch per
-coupling iteration) and the Chorin participant (fluid_chorin, state in memory).
+"""The three fluids side by side: the OpenFOAM participant (stock binaries, a relaunch per
+coupling iteration), the Chorin participant (fluid_chorin, state in memory) and the Reynolds
+participant (fluid_reynolds: the local cubic law in the fracture's plane, no 3D flow).
 
 * ``coupled``: each case (default small_fracture, added_mass_heavy, added_mass_light) run
   through ``varcouple run`` once per fluid (the one ``participant`` line swapped): wall time,
@@ -8,11 +9,14 @@ coupling iteration) and the Chorin participant (fluid_chorin, state in memory).
   the inlet column minus the outlet column), and the Chorin run's differences to the OpenFOAM
   run; the transient cases also with the Chorin fluid in the OpenFOAM fluid's rigid-body model
   (``chorin_bodies``: ``solid_velocity = "bodies"``), the same discrete problem, so that the
-  per-cell run's difference is the model's;
+  per-cell run's difference is the model's; the Reynolds fluid where it can run (no dynamics);
 * ``plates``: the fluid alone on the immersed plates of cases/parallel_plates (4 to 32 cells
   across the aperture, offset 0.3 of a cell), run once per fluid as well: error of the flow rate
   against the cubic law (the scene's [check]) and the fluid's time (set-up and solve) per fluid
   (accuracy against cost).
+* ``hm_fracture`` (``--hm``): cases/hm_fracture as shipped with the Chorin and the Reynolds fluid:
+  e_h, e_m, Q per stress and the fluid's time, the Chorin fluid's time over the Reynolds fluid's
+  (goal >= 100); and the Reynolds solve alone on a 256 x 256 rough aperture map (seconds per solve).
 
 * ``ranks`` (with ``--ranks 1 2``): the Chorin fluid on MPI ranks by grid slabs: the lid-driven
   cavity (Re 100; 64^2 and 128^2 cells, and a 3D cavity of 40^3) for a fixed number of
@@ -21,10 +25,11 @@ coupling iteration) and the Chorin participant (fluid_chorin, state in memory).
   fluid time). The machine's load average is recorded before and after: MPI ranks that share
   their cores with other jobs wait on each other, so timings under load are no speed-ups.
 
-Goal (PASS/MISS): coupled small_fracture at least 2x faster end to end with the Chorin fluid.
+Goals (PASS/MISS): coupled small_fracture at least 2x faster end to end with the Chorin fluid; the
+Reynolds fluid's time on hm_fracture at least 100x below the Chorin fluid's.
 
-    .venv/bin/python bench/fluids.py [--cases small_fracture ...] [--across 4 8 16 32] [--ranks 1 2] [--quick]
-                                     [-o FILE]
+    .venv/bin/python bench/fluids.py [--cases small_fracture ...] [--across 4 8 16 32] [--ranks 1 2] [--hm]
+                                     [--quick] [-o FILE]
 
 ``--quick`` (smoke test): small_fracture only, plates at 4 and 8 across; output
 bench/results/fluids_quick.json unless ``-o`` is given.
@@ -47,11 +52,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-FLUIDS = ("openfoam", "chorin")
+FLUIDS = ("openfoam", "chorin", "reynolds")
 #: the Chorin fluid in the OpenFOAM fluid's rigid-body model (scenes with dynamics)
 BODIES = {"substeps = 1": 'substeps = 1\nsolid_velocity = "bodies"'}
 CASES = ("small_fracture", "added_mass_heavy", "added_mass_light")
 GOAL_SPEEDUP = 2.0
+GOAL_REYNOLDS = 100.0  # the Chorin fluid's time over the Reynolds fluid's on hm_fracture
 
 
 def pressure_drop(out: Path, step: int) -> float | None:
@@ -78,10 +84,11 @@ def run_case(case: str, fluid: str, replace: dict | None = None) -> dict:
         copy = Path(tmp) / case
         shutil.copytree(ROOT / "cases" / case, copy, ignore=shutil.ignore_patterns("results"))
         scene = (copy / "scene.toml").read_text()
-        if 'participant = "openfoam"' not in scene:
-            raise SystemExit(f"cases/{case}/scene.toml: no 'participant = \"openfoam\"' line to swap")
-        scene = scene.replace('participant = "openfoam"', f'participant = "{fluid}"')
-        if fluid == "chorin":  # simpleFoam's iteration budget is not a pseudo-time step budget
+        line = next((f'participant = "{f}"' for f in ("openfoam", "chorin") if f'participant = "{f}"' in scene), None)
+        if line is None:
+            raise SystemExit(f"cases/{case}/scene.toml: no fluid 'participant = ...' line to swap")
+        scene = scene.replace(line, f'participant = "{fluid}"')
+        if fluid != "openfoam":  # simpleFoam's iteration budget is not a pseudo-time step budget
             scene = scene.replace("max_iterations = 3000\n", "")
         for old, new in (replace or {}).items():
             scene = scene.replace(old, new)
@@ -105,13 +112,14 @@ def run_case(case: str, fluid: str, replace: dict | None = None) -> dict:
                 "pressure_drop": pressure_drop(out, len(steps) - 1) if steps else None,
                 "pressure_drop_per_step": [pressure_drop(out, k) for k in range(len(steps))],
                 "fluid_setup_seconds": phases.get("fluid setup", 0.0), "check": summary.get("check"),
+                "fracture": [s["fracture"] for s in steps if "fracture" in s],
                 "fluid_cells": summary.get("sizes", {}).get("fluid", {}).get("cells"),
                 "fluid_solves": steps[-1]["solves"].get("fluid", []) if steps else []}
 
 
 def compare(runs: dict, chorin: str = "chorin") -> dict:
-    """The Chorin run (``chorin``: its key in ``runs``) against the OpenFOAM run: relative
-    differences and the speed-up."""
+    """The run ``chorin`` (its key in ``runs``: a Chorin or the Reynolds run) against the OpenFOAM
+    run: relative differences and the speed-up."""
     of, ch = runs["openfoam"], runs[chorin]
     out = {"speedup_end_to_end": of["wall_seconds"] / ch["wall_seconds"],
            "fluid_speedup": of["fluid_seconds"] / ch["fluid_seconds"] if ch["fluid_seconds"] else None,
@@ -131,7 +139,7 @@ def plates_side_by_side(across) -> list[dict]:
     for n in across:
         replace = {"cells_across = 8 ": f"cells_across = {n} ", "offset = 0.25 ": "offset = 0.3 "}
         runs = {fluid: run_case("parallel_plates", fluid, {**replace, **({"max_iterations = 5000\n": ""}
-                                                                         if fluid == "chorin" else {})})
+                                                                         if fluid != "openfoam" else {})})
                 for fluid in FLUIDS}
         rows.append({"cells_across": n, "cells": runs["openfoam"]["fluid_cells"],
                      **{fluid: {"error": r["check"]["relative_difference"] if r["check"] else None,
@@ -139,6 +147,41 @@ def plates_side_by_side(across) -> list[dict]:
                                 "iterations": sum(s["iterations"] for s in r["fluid_solves"]),
                                 "converged": r["status"] == "completed"} for fluid, r in runs.items()}})
     return rows
+
+
+def hm_side_by_side() -> dict:
+    """cases/hm_fracture as shipped, once with the Chorin and once with the Reynolds fluid: the
+    fracture's figures per stress and the fluid's time; then the Reynolds solve alone on a
+    256 x 256 rough aperture map with contacts (the seconds of one solve, the best of three)."""
+    from fluid_reynolds.reynolds import solve
+
+    out = {"load_average_before": os.getloadavg()}
+    for fluid in ("chorin", "reynolds"):
+        r = run_case("hm_fracture", fluid)
+        out[fluid] = {k: r[k] for k in ("status", "wall_seconds", "fluid_seconds", "coupling_iterations",
+                                         "iterations_per_step", "fracture")}
+        rows = "; ".join(f"e_h {1e6 * f['hydraulic_aperture']:.2f} um, e_m {1e6 * f['mechanical_aperture']:.2f} um, "
+                         f"Q {f['flow_rate']:.3e}" for f in r["fracture"])
+        print(f"  {fluid:9s} {r['status']}: wall {r['wall_seconds']:.2f} s, fluid {r['fluid_seconds']:.3f} s; {rows}")
+    out["fluid_time_chorin_over_reynolds"] = out["chorin"]["fluid_seconds"] / out["reynolds"]["fluid_seconds"]
+    out["hydraulic_aperture_reynolds_over_chorin"] = [
+        a["hydraulic_aperture"] / b["hydraulic_aperture"] - 1
+        for a, b in zip(out["reynolds"]["fracture"], out["chorin"]["fracture"])]
+    rng = np.random.default_rng(0)
+    aperture = np.maximum(1e-4 * (rng.random((256, 256)) - 0.1), 0.0)  # about 10 % of the cells closed
+    seconds = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        flow = solve(aperture, (0.1 / 256, 0.1 / 256), 1e-3, {"xmin": 1.0, "xmax": 0.0})
+        seconds.append(time.perf_counter() - t0)
+    out["map_256"] = {"cells": aperture.size, "closed": int((aperture == 0).sum()), "seconds": min(seconds),
+                      "flow_rate": flow.flow_rate, "residual": flow.residual}
+    out["load_average_after"] = os.getloadavg()
+    print(f"  the Chorin fluid's time over the Reynolds fluid's: {out['fluid_time_chorin_over_reynolds']:.0f}x; e_h "
+          f"Reynolds against Chorin per stress: "
+          + ", ".join(f"{d:+.1%}" for d in out["hydraulic_aperture_reynolds_over_chorin"])
+          + f"; a 256 x 256 map: {min(seconds):.3f} s per solve")
+    return out
 
 
 #: the cavities of the ranks section: name -> (shape, pseudo-time steps timed)
@@ -222,6 +265,7 @@ def main(argv=None):
     ap.add_argument("--across", nargs="*", type=int, default=[4, 8, 16, 32], help="none: skip the plates")
     ap.add_argument("--quick", action="store_true", help="small_fracture and plates at 4, 8 across only")
     ap.add_argument("--ranks", nargs="+", type=int, help="also the Chorin fluid on these MPI rank counts")
+    ap.add_argument("--hm", action="store_true", help="also hm_fracture with the Chorin and the Reynolds fluid")
     ap.add_argument("--cavity", nargs=5, metavar=("NX", "NY", "NZ", "STEPS", "POISSON"),
                     help="(run under mpirun by --ranks) time the cavity's steps, print JSON")
     ap.add_argument("-o", "--output", type=Path)
@@ -240,13 +284,13 @@ def main(argv=None):
     result = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(),
               "cpu_count": os.cpu_count(), "load_average_before": os.getloadavg(), "coupled": {}, "goals": {}}
     for case in args.cases:
-        runs = {fluid: run_case(case, fluid) for fluid in FLUIDS}
         dynamic = "substeps = 1" in (ROOT / "cases" / case / "scene.toml").read_text()
+        runs = {fluid: run_case(case, fluid) for fluid in FLUIDS if fluid != "reynolds" or not dynamic}
         if dynamic:
             runs["chorin_bodies"] = run_case(case, "chorin", BODIES)
         result["coupled"][case] = {"runs": runs, "chorin_against_openfoam": compare(runs)}
-        if dynamic:
-            result["coupled"][case]["chorin_bodies_against_openfoam"] = compare(runs, "chorin_bodies")
+        extra = "chorin_bodies" if dynamic else "reynolds"  # the Reynolds fluid refuses dynamics
+        result["coupled"][case][f"{extra}_against_openfoam"] = compare(runs, extra)
         print(f"\n{case}")
         print(f"  {'fluid':13s} {'status':10s} {'wall s':>7s} {'fluid s':>8s} {'share':>6s} {'iters':>6s} "
               f"{'s/iter':>7s} {'max displacement [m]':>22s} {'dp [Pa]':>8s}")
@@ -256,7 +300,7 @@ def main(argv=None):
             print(f"  {fluid:13s} {str(r['status']):10s} {r['wall_seconds']:7.2f} {r['fluid_seconds']:8.2f} "
                   f"{r['fluid_share']:6.2f} {r['coupling_iterations']:6d} {r['seconds_per_coupling_iteration']:7.3f} "
                   f"{disp:22.4e} {dp:8.1f}")
-        for key in ("chorin_against_openfoam", "chorin_bodies_against_openfoam")[:1 + dynamic]:
+        for key in ("chorin_against_openfoam", f"{extra}_against_openfoam"):
             c = result["coupled"][case][key]
             diffs = ", ".join(f"{d:+.2%}" if d is not None else "-" for d in c["max_displacement_difference"])
             drops = ", ".join(f"{d:+.2%}" if d is not None else "-" for d in c["pressure_drop_difference_per_step"])
@@ -268,11 +312,18 @@ def main(argv=None):
                                                      "status": "PASS" if speedup >= GOAL_SPEEDUP else "MISS"}
     if args.across:
         print("\nimmersed plates (fluid alone, offset 0.3): error against the cubic law and seconds")
-        print(f"  {'across':>6s} {'cells':>6s} {'openfoam err':>13s} {'s':>6s} {'chorin err':>11s} {'s':>6s}")
+        print(f"  {'across':>6s} {'cells':>6s} {'openfoam err':>13s} {'s':>6s} {'chorin err':>11s} {'s':>6s} "
+              f"{'reynolds err':>13s} {'s':>6s}")
     result["plates"] = plates_side_by_side(args.across)
     for row in result["plates"]:
-        print(f"  {row['cells_across']:6d} {row['cells']:6d} {row['openfoam']['error']:+13.3%} "
-              f"{row['openfoam']['seconds']:6.2f} {row['chorin']['error']:+11.3%} {row['chorin']['seconds']:6.2f}")
+        print(f"  {row['cells_across']:6d} {row['cells']:6d} " + " ".join(
+            f"{row[f]['error']:+{len(f) + 4}.3%} {row[f]['seconds']:6.2f}" for f in FLUIDS))
+    if args.hm:
+        print("\nhm_fracture as shipped: the 3D Chorin fluid and the Reynolds fluid")
+        result["hm_fracture"] = hm_side_by_side()
+        speedup = result["hm_fracture"]["fluid_time_chorin_over_reynolds"]
+        result["goals"]["hm_fracture_reynolds_fluid_time"] = {
+            "value": speedup, "goal": f">= {GOAL_REYNOLDS:g}", "status": "PASS" if speedup >= GOAL_REYNOLDS else "MISS"}
     if args.ranks:
         print("\nthe Chorin fluid on MPI ranks by grid slabs")
         result["ranks"] = ranks_side_by_side(args.ranks)

@@ -42,7 +42,7 @@ log() { printf '[install] %s\n' "$*"; }
 die() { printf '[install] ERROR: %s\n' "$*" >&2; exit 1; }
 
 list_modules() {
-  (cd "$ROOT" && find transfer coupler solid_fenicsx fluid_openfoam nonsmooth -name '*.py' \
+  (cd "$ROOT" && find transfer coupler solid_fenicsx fluid_openfoam fluid_reynolds nonsmooth -name '*.py' \
      -not -path '*/__pycache__/*' | LC_ALL=C sort)
 }
 

@@ -8,13 +8,13 @@ import importlib.util
 
 from vc_helpers import ROOT
 
-PACKAGES = ("transfer", "nonsmooth", "coupler", "solid_fenicsx", "fluid_openfoam", "fluid_chorin")
+PACKAGES = ("transfer", "nonsmooth", "coupler", "solid_fenicsx", "fluid_openfoam", "fluid_chorin", "fluid_reynolds")
 
 #: module prefix -> layer (the longest matching prefix wins); docs/architecture.md
 LAYERS = {
     "transfer": 0, "nonsmooth": 0,
     "coupler.errors": 1, "coupler.protocol": 1, "coupler.coupling": 1,
-    "solid_fenicsx": 2, "fluid_openfoam": 2, "fluid_chorin": 2, "coupler.standins": 2,
+    "solid_fenicsx": 2, "fluid_openfoam": 2, "fluid_chorin": 2, "fluid_reynolds": 2, "coupler.standins": 2,
     "coupler.scene": 3, "coupler.plan": 3, "coupler.fsi": 3, "coupler.checks": 3,
     "coupler.run": 4, "coupler.output": 4,
     "coupler.cli": 5, "coupler": 5,
@@ -22,7 +22,7 @@ LAYERS = {
 #: participants may import these parts of the coupler, and nothing else of it
 PARTICIPANT_MAY_IMPORT = ("coupler.errors", "coupler.protocol")
 #: the participants' packages (the stand-ins are a module of the coupler)
-PARTICIPANT_PACKAGES = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin")
+PARTICIPANT_PACKAGES = ("solid_fenicsx", "fluid_openfoam", "fluid_chorin", "fluid_reynolds")
 #: a participant's settings module (its declaration, read by the coupler) imports only these
 #: (the declarations, the penalization keys every grid fluid shares, the slab cut of a grid on MPI ranks)
 SETTINGS_MAY_IMPORT = {"coupler.errors", "coupler.protocol.settings", "coupler.protocol.penalization",
@@ -137,7 +137,8 @@ def test_a_settings_module_imports_only_the_protocol_settings():
     checks the third-party side in a fresh interpreter)."""
     g = graph()
     found = sorted(m for m in g if settings_module(m))
-    assert found == ["fluid_chorin.settings", "fluid_openfoam.settings", "solid_fenicsx.settings"]
+    assert found == ["fluid_chorin.settings", "fluid_openfoam.settings", "fluid_reynolds.settings",
+                     "solid_fenicsx.settings"]
     wrong = {f"{m} -> {b}" for m in found for b in g[m] if b not in SETTINGS_MAY_IMPORT}
     assert not wrong, "\n".join(sorted(wrong))
     assert g["coupler.protocol.settings"] <= {"coupler.errors"}

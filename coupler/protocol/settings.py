@@ -334,7 +334,9 @@ class ParticipantSpec:
     beyond its role's (``"inlet_pressure"``: the pressure on the grid face xmin, set by the
     coupler in every coupling iteration of a flow driven by ``[flow] flow_rate``); ``memory``:
     (bytes per MPI rank, bytes per cell) of its peak
-    resident memory, for the coupler's estimate before a run. A participant that declares the
+    resident memory, for the coupler's estimate before a run; ``refuses``: its own check of a
+    parsed scene, the reason it cannot run it (None: it can; e.g. a fluid without a 3D
+    velocity field and a solid moving in the flow). A participant that declares the
     key ``ranks`` is one process that runs its own solver on that many MPI ranks (the coupler
     does not start it with ``mpirun -n``); otherwise the coupler starts it on ``ranks`` MPI
     processes."""
@@ -348,6 +350,7 @@ class ParticipantSpec:
     needs: tuple[str, ...] = ()
     accepts: tuple[str, ...] = ()
     memory: tuple[int, int] = (50 * 2**20, 100)
+    refuses: Callable[[object], str | None] | None = None
 
     @property
     def own_ranks(self) -> bool:

@@ -275,6 +275,10 @@ def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = No
     for name, rule in RULES.items():  # in the rules' order: a rule may read what an earlier one parsed
         if name in effects and hasattr(rule, "parse"):
             rule.parse(scene, data)
+    for role, solver in solver_cfg.items():  # what a participant cannot run, in its own words
+        reason = solver.spec.refuses(scene) if solver.spec.refuses else None
+        if reason:
+            raise SceneError(f"{path}: [solvers.{role}] participant = {solver.kind!r}: {reason}")
     if "check" in data:  # last: a check kind takes its parameters from the validated scene
         scene.check = checks.parse(path, data["check"], scene)
     return scene

@@ -62,12 +62,13 @@ def scene(tmp_path, solvers="", effects='["elasticity", "flow"]'):
 def test_the_entry_points_declare_every_participant_in_its_settings_module():
     entries = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"][participants.GROUP]
     assert sorted(participants.registered()) == sorted(entries) == [
-        "chorin", "echo", "openfoam", "replay_fluid", "solid_fenicsx", "spring_solid"]
+        "chorin", "echo", "openfoam", "replay_fluid", "reynolds", "solid_fenicsx", "spring_solid"]
     for kind, target in entries.items():
         module = target.split(":")[0]
         assert module.endswith(".settings") or module == "coupler.standins", target
     assert {k: s.role for k, s in participants.registered().items()} == {
-        "chorin": "fluid", "echo": None, "openfoam": "fluid", "replay_fluid": "fluid", "solid_fenicsx": "solid", "spring_solid": "solid"}
+        "chorin": "fluid", "echo": None, "openfoam": "fluid", "replay_fluid": "fluid", "reynolds": "fluid",
+        "solid_fenicsx": "solid", "spring_solid": "solid"}
 
 
 def test_reading_the_declarations_and_a_scene_imports_no_solver():
@@ -120,7 +121,7 @@ def test_a_required_key_of_the_participant_is_asked_for(tmp_path):
 
 def test_an_unknown_participant_names_those_of_the_role(tmp_path):
     with pytest.raises(SceneError, match=r"\[solvers.fluid\] participant: unknown value 'spring_solid'; use one of "
-                                         r"'chorin', 'openfoam', 'replay_fluid'$"):
+                                         r"'chorin', 'openfoam', 'replay_fluid', 'reynolds'$"):
         scene(tmp_path, '[solvers.fluid]\nparticipant = "spring_solid"\n')
 
 

@@ -43,8 +43,8 @@ TABLES = {"flow": {
     "inlet_velocity": "fixed inlet velocity [u, v, w] on the grid face xmin [m/s]",
     "inlet_pressure": "fixed inlet pressure on the grid face xmin [Pa]",
     "flow_rate": "the volume flow rate Q from xmin to xmax instead of a fixed inlet [m^3/s]: the inlet pressure is "
-                 "an unknown of the coupling, adjusted each iteration until Q is reached (fluids that accept "
-                 "'inlet_pressure': chorin)",
+                 "an unknown of the coupling, adjusted each iteration until Q is reached (a fluid that accepts "
+                 "'inlet_pressure')",
     "outlet_pressure": "fixed outlet pressure on the grid face xmax [Pa] (default 0)",
     "walls": f"condition of the other grid faces: one of {', '.join(FACE_CONDITIONS)} (default wall)",
     "faces": "table: face (ymin ... zmax) -> condition ({ pressure = p } for an open face), overriding walls",
