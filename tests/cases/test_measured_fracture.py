@@ -1,7 +1,8 @@
 """cases/measured_fracture: a closure test whose fracture faces are height maps. The scene's
 map files are found relative to the case directory, a bad map is one line naming the scene
-file, the parameter and the reason, and the XYZ form of the shipped map runs a contact step
-whose platen force is the contact force."""
+file, the parameter and the reason, a scan as scanners deliver it (2^n nodes, periodic, in
+first contact) loads with the plan saying what was done to it, and the XYZ form of the shipped
+map runs a contact step whose platen force is the contact force."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ import numpy as np
 import pytest
 
 from cli_helpers import assert_clean_error, run_cli
-from transfer.generators.height_maps import read_npz, write_xyz
+from transfer.generators.height_maps import read_npz, write_npz, write_xyz
+from transfer.generators.surfaces import fracture_pair
 from vc_helpers import CASES, copy_case
 
 
@@ -33,6 +35,29 @@ def test_a_bad_map_is_one_line_naming_the_scene_and_key(capsys, tmp_path, broken
     broken(case)
     code, _, err = run_cli(capsys, "check", "--quick", case)
     assert_clean_error(code, err, str(case / "scene.toml"), *words)
+
+
+def test_a_scan_as_delivered_loads_and_the_plan_says_what_was_done(capsys, tmp_path):
+    """32 x 32 nodes of one period, the faces in first contact (touching nodes a round-off apart),
+    in the shipped scene without min_aperture: check accepts it at coarsen 8 and ratio 2 without
+    extra keys, and its notes name the periodic closure and the lattice; without periodic the
+    31 cells take a remainder cell, also noted."""
+    lower, upper = fracture_pair((32, 32), (0.016, 0.016), aperture=1e-4, rms=2e-4, mismatch_length=4e-3, seed=7,
+                                 min_aperture=0.0, periodic=True)
+    lower, upper = lower[:-1, :-1].T + 1e-3, upper[:-1, :-1].T + 1e-3  # one period, offset as a scanner's
+    upper = np.where(upper <= lower, np.nextafter(lower, -np.inf), upper)
+    assert (upper < lower).any()
+    for periodic, words in ((True, "map of 32 x 32 nodes, periodic, closed by its first row and column: 32 x 32 "
+                                   "cells, 0.016 x 0.016 m; lattice 4 x 4, map cells per lattice cell 8 (x), 8 (y)"),
+                            (False, "map of 32 x 32 nodes; lattice 4 x 4, map cells per lattice cell 8, the last 7 "
+                                    "(x), 8, the last 7 (y)")):
+        case = copy_case(CASES / "measured_fracture", tmp_path / str(periodic), {
+            "coarsen = 2 ": f"coarsen = 8\nperiodic = {str(periodic).lower()} ",
+            "min_aperture = 1.0e-6 ": "# no min_aperture "})
+        write_npz(case / "surfaces.npz", lower, upper, (0.5e-3, 0.5e-3))
+        code, out, err = run_cli(capsys, "check", "--quick", case)
+        assert code == 0, err
+        assert f"note          measured_fracture: {words}" in out
 
 
 def test_the_xyz_map_closes_under_the_platen(capsys, tmp_path):
