@@ -78,3 +78,8 @@ def test_the_xyz_map_closes_under_the_platen(capsys, tmp_path):
     assert figures["platen_force"] == pytest.approx(-figures["force_z"], rel=1e-9)  # the contact carries the load
     assert figures["platen_force"] == pytest.approx(figures["stress"] * 0.01, rel=1e-12)
     assert figures["min_gap"] >= -1e-15 and 0 < figures["closure"] < 2e-4 + 1e-4
+    keys = list(figures)  # what a user compares, side by side: the faces' closure and the platen's displacement
+    assert keys[keys.index("mean_gap"):keys.index("mean_gap") + 3] == ["mean_gap", "closure", "platen_displacement"]
+    # the platen's displacement is the closure plus the blocks' compression, about stress x 2 height / E
+    bulk = (figures["platen_displacement"] - figures["closure"]) / (figures["stress"] * 2 * 0.04 / 1e10)
+    assert 0.7 < bulk < 1.1, bulk
