@@ -253,7 +253,12 @@ def test_a_periodic_map_is_closed_by_its_first_row_and_column(tmp_path):
     assert block.points[:, :2].max(axis=0) == pytest.approx([SCAN * SCAN_DX] * 2, abs=1e-15)
     assert_faces_are_the_map(block, lower, upper, np.arange(0, SCAN + 1, 8), wrap=SCAN)
     assert block.info["lattice"].startswith("4 x 4, map cells per lattice cell 8 (x), 8 (y)")
-    assert block.info["periodic"].endswith("32 x 32 cells, 0.016 x 0.016 m") and block.num_cells == cells("measured_fracture", values)
+    assert block.info["periodic"].endswith("32 x 32 cells, 0.016 x 0.016 m")
+    assert block.num_cells == cells("measured_fracture", values)
+    closed = write_npz(tmp_path / "closed.npz", *(np.pad(h, ((0, 1), (0, 1)), mode="wrap") for h in (lower, upper)),
+                       (SCAN_DX, SCAN_DX))  # already closed: periodic would repeat the first row and column
+    with pytest.raises(ValueError, match=r"^periodic: the map's last row and column repeat its first already"):
+        parameters("measured_fracture", {**values, "surfaces": str(closed)})
 
 
 def test_a_pair_in_first_contact_loads_as_is(tmp_path):
@@ -265,6 +270,8 @@ def test_a_pair_in_first_contact_loads_as_is(tmp_path):
     assert touch.any() and (lower - upper)[touch].max() < 1e-18
     block = generate("measured_fracture", {"surfaces": path, "height": 0.01, "layers": 1, "coarsen": 4})
     assert block.info["min_aperture"] == 0.0 and block.info["raised_nodes"] == int(touch.sum())
+    (note,) = notes("measured_fracture", {"surfaces": path, "height": 0.01, "coarsen": 4})[1:]
+    assert note.startswith(f"measured_fracture: {int(touch.sum())} map nodes' overlaps closed to touching (up to ")
     raised = generate("measured_fracture", {"surfaces": path, "height": 0.01, "layers": 1, "coarsen": 4,
                                             "min_aperture": 1e-6})
     assert raised.info["min_aperture"] == pytest.approx(1e-6, rel=1e-9)

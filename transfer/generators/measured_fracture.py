@@ -1,6 +1,7 @@
-"""Two rock blocks around a measured fracture: the faces from height maps (profilometer
-scans, :mod:`.height_maps`) instead of synthetic ones, meshed as the synthetic fractures are
-(:func:`~transfer.generators.blocks.mortar_lattices`, :func:`~transfer.generators.blocks.fracture_blocks`).
+"""Two rock blocks around a measured fracture: the faces from height maps (profilometer scans,
+:mod:`.height_maps`) instead of synthetic ones, meshed as the synthetic fractures are
+(:func:`~transfer.generators.blocks.mortar_lattices`,
+:func:`~transfer.generators.blocks.fracture_blocks`).
 
 A map of any node count: the lattice's nodes are map nodes, every ``coarsen``-th one in x and y
 (sampled, not averaged), the last lattice cell taking the remainder of the map's cells
@@ -10,10 +11,11 @@ upper face's lattice is ``ratio`` times coarser again the same way (non-matching
 mortar contact). ``periodic``: the map is one period of a periodic surface (its last row and
 column do not repeat the first), closed by its first row and column: n nodes span n cells.
 Where the aperture ``upper - lower`` is below ``min_aperture`` the upper face is raised to
-``lower + min_aperture``, overlaps included. With ``min_aperture = 0`` faces that interpenetrate
-by more than ``tolerance`` (default :data:`RELATIVE_TOLERANCE` of the larger face's RMS height:
-the round-off of a pair in first contact) are refused, smaller overlaps closed to touching. Each block is ``height`` thick from its face's mean plane; the
-rectangle starts at the map's origin ((0, 0) for an ``.npz``).
+``lower + min_aperture``, overlaps included. With ``min_aperture = 0`` faces that
+interpenetrate by more than ``tolerance`` (default :data:`RELATIVE_TOLERANCE` of the larger
+face's RMS height: the round-off of a pair in first contact) are refused, smaller overlaps
+closed to touching. Each block is ``height`` thick from its face's mean plane; the rectangle
+starts at the map's origin ((0, 0) for an ``.npz``).
 """
 
 from __future__ import annotations
@@ -85,6 +87,10 @@ def closed_map(p: dict) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
     """:func:`read_faces`, closed by its first row and column when ``periodic``."""
     lower, upper, spacing, origin = read_faces(p)
     if p["periodic"]:
+        if all(np.array_equal(h[0], h[-1]) and np.array_equal(h[:, 0], h[:, -1]) and np.ptp(h) > 0
+               for h in (lower, upper)):
+            raise ValueError("periodic: the map's last row and column repeat its first already (a closed map): "
+                             "closing it again would repeat them; leave periodic false")
         lower, upper = (np.pad(h, ((0, 1), (0, 1)), mode="wrap") for h in (lower, upper))
     return lower, upper, spacing, origin
 
@@ -169,9 +175,12 @@ def notes(p: dict) -> list[str]:
     if "the last" in info["lattice"] or p["periodic"]:
         closed = f", periodic, {info['periodic']}" if p["periodic"] else ""
         out.append(f"measured_fracture: map of {info['map_nodes']} nodes{closed}; lattice {info['lattice']}")
-    if info["raised_nodes"]:
+    if info["raised_nodes"] and p["min_aperture"] > 0:
         out.append(f"measured_fracture: {info['raised_nodes']} map nodes' apertures raised to min_aperture "
                    f"{p['min_aperture']:g} m (the upper face lifted by up to {info['largest_lift']:.3g} m)")
+    elif info["raised_nodes"]:
+        out.append(f"measured_fracture: {info['raised_nodes']} map nodes' overlaps closed to touching (up to "
+                   f"{info['largest_lift']:.3g} m, within the tolerance {p['tolerance']:.3g} m)")
     return out
 
 
