@@ -334,7 +334,10 @@ class ParticipantSpec:
     beyond its role's (``"inlet_pressure"``: the pressure on the grid face xmin, set by the
     coupler in every coupling iteration of a flow driven by ``[flow] flow_rate``); ``memory``:
     (bytes per MPI rank, bytes per cell) of its peak
-    resident memory, for the coupler's estimate before a run. A participant that declares the
+    resident memory, for the coupler's estimate before a run; ``contact_step``: (seconds,
+    exponent) of its first load step with contact, about seconds x (cells / 10^4)^exponent on
+    a core of its own, for the coupler's warning that it outlasts ``[messaging] timeout`` (None: not
+    estimated). A participant that declares the
     key ``ranks`` is one process that runs its own solver on that many MPI ranks (the coupler
     does not start it with ``mpirun -n``); otherwise the coupler starts it on ``ranks`` MPI
     processes."""
@@ -348,6 +351,7 @@ class ParticipantSpec:
     needs: tuple[str, ...] = ()
     accepts: tuple[str, ...] = ()
     memory: tuple[int, int] = (50 * 2**20, 100)
+    contact_step: tuple[float, float] | None = None
 
     @property
     def own_ranks(self) -> bool:

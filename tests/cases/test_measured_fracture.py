@@ -7,6 +7,8 @@ map runs a contact step whose platen force is the contact force."""
 from __future__ import annotations
 
 import json
+import os
+import re
 
 import numpy as np
 import pytest
@@ -58,6 +60,34 @@ def test_a_scan_as_delivered_loads_and_the_plan_says_what_was_done(capsys, tmp_p
         code, out, err = run_cli(capsys, "check", "--quick", case)
         assert code == 0, err
         assert f"note          measured_fracture: {words}" in out
+
+
+def test_check_warns_when_the_first_step_may_outlast_the_messaging_timeout(capsys, monkeypatch, tmp_path):
+    """A timeout of 1 s: check estimates the first load step from the solid's size, warns naming
+    [messaging] timeout and a value; with that value set the warning is gone. The shipped scene
+    (timeout 300 s by default) is not warned about. The estimate grows with the machine's load
+    per core (here fixed: 2 cores, load 1, then 8)."""
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(os, "getloadavg", lambda: (1.0, 1.0, 1.0))
+    code, out, _ = run_cli(capsys, "check", "--quick", CASES / "measured_fracture")
+    assert code == 0 and "time          the solid's first load step with contact about" in out
+    assert "warning" not in out
+    case = copy_case(CASES / "measured_fracture", tmp_path, {"[contact]": "[messaging]\ntimeout = 1.0\n\n[contact]"})
+    code, out, _ = run_cli(capsys, "check", "--quick", case)
+    assert code == 0
+    (warning,) = [line for line in out.splitlines() if line.startswith("warning")]
+    assert "9,600 cells" in warning and "more than [messaging] timeout = 1 s" in warning
+    value = int(re.search(r"set \[messaging\] timeout = (\d+) in the scene$", warning).group(1))
+    assert value >= 100
+    scene = (case / "scene.toml").read_text().replace("timeout = 1.0", f"timeout = {value}")
+    (case / "scene.toml").write_text(scene)
+    code, out, _ = run_cli(capsys, "check", "--quick", case)
+    assert code == 0 and "warning" not in out and f"[messaging] timeout {value} s" in out
+    idle = float(re.search(r"about ([\d,.]+) s \(9,600 cells", out).group(1).replace(",", ""))
+    monkeypatch.setattr(os, "getloadavg", lambda: (8.0, 8.0, 8.0))  # 4 runnable processes per core
+    code, out, _ = run_cli(capsys, "check", "--quick", case)
+    loaded = float(re.search(r"about ([\d,.]+) s \(9,600 cells", out).group(1).replace(",", ""))
+    assert loaded == pytest.approx(4 * idle, rel=0.05) and "load 8.0 on 2 cores" in out
 
 
 def test_the_xyz_map_closes_under_the_platen(capsys, tmp_path):
