@@ -203,7 +203,7 @@ def check(args: argparse.Namespace) -> int:
     (``--quick``: the scene alone)."""
     from coupler import scene as scenes
     from coupler.plan.plan import make_plan
-    from coupler.run.preflight import check_memory, estimate
+    from coupler.run.preflight import check_memory, estimate, first_step
 
     scene = scenes.load(args.case)
     print(f"scene         {scene.path}: valid")
@@ -218,6 +218,11 @@ def check(args: argparse.Namespace) -> int:
     estimates = estimate(scene)
     print("size          " + "; ".join(f"{e.name} {e.cells:,} cells" for e in estimates if e.cells))
     print(f"memory        {check_memory(scene, estimates)}")
+    step, warning = first_step(scene, estimates)
+    if step:
+        print(f"time          {step}")
+    if warning:
+        print(f"warning       {warning}")
     if not args.quick:
         from coupler.run.runner import rehearse
 

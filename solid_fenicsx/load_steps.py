@@ -122,7 +122,7 @@ class StaticStep:
                 raise ContactLost(f"load step {step}: {exc}") from None
             reports.append(("platen", result.converged, result.solves, result.mismatch, self.platen.tolerance,
                             f"{result.reason}: {result.stress:.6g} Pa for {result.target:.6g} Pa", ()))
-            figures.update(stress=result.stress, target_stress=result.target, platen_displacement=result.displacement,
+            figures.update(platen_displacement=result.displacement, stress=result.stress, target_stress=result.target,
                            platen_force=result.force, platen_solves=result.solves)
         else:
             self._solve_once()
@@ -130,13 +130,13 @@ class StaticStep:
             reports[:0] = [(f"{r.solver} {r.what}", r.converged, r.iterations, r.residual, r.tolerance, r.reason, ())
                            for r in self.elasticity.info.solves]
             return reports, figures, {}
-        fields, contact_figures, report = self._contact()
+        fields, contact_figures, report = self._contact(figures)
         reports.insert(0, report)
-        figures.update(contact_figures)
-        return reports, figures, fields
+        return reports, contact_figures, fields
 
-    def _contact(self) -> tuple[dict, dict, tuple]:
-        """The last contact solve: its report, figures and slave fields, with the fluid in
+    def _contact(self, platen: dict) -> tuple[dict, dict, tuple]:
+        """The last contact solve: its report, figures (the `platen` figures after ``closure``,
+        the platen's displacement beside the faces' closure) and slave fields, with the fluid in
         the contact moved from the fluid's load to the contact stress (module docstring)."""
         state, contact = self.state, self.contact
         sol, m = state.solution, contact.mortar
@@ -156,7 +156,7 @@ class StaticStep:
                        seconds=state.seconds["solve"], active_nodes=stats["active_nodes"],
                        area_fraction=state.area_fraction, max_pressure=float(np.max(pressure, initial=0.0)),
                        **{f"force_{c}": force[i] for c, i in AXES.items()}, min_gap=stats["min_gap"],
-                       mean_gap=state.mean_gap, closure=contact.initial_mean_gap - state.mean_gap,
+                       mean_gap=state.mean_gap, closure=contact.initial_mean_gap - state.mean_gap, **platen,
                        dofs=contact.num_dofs)
         if "asymptotic_rate" in sol.info:
             figures["asymptotic_rate"] = sol.info["asymptotic_rate"]

@@ -336,7 +336,10 @@ class ParticipantSpec:
     (bytes per MPI rank, bytes per cell) of its peak
     resident memory, for the coupler's estimate before a run; ``refuses``: its own check of a
     parsed scene, the reason it cannot run it (None: it can; e.g. a fluid without a 3D
-    velocity field and a solid moving in the flow). A participant that declares the
+    velocity field and a solid moving in the flow); ``contact_step``: (seconds, exponent) of
+    its first load step with contact, about seconds x (cells / 10^4)^exponent on a core of its
+    own, for the coupler's warning that it outlasts ``[messaging] timeout`` (None: not
+    estimated). A participant that declares the
     key ``ranks`` is one process that runs its own solver on that many MPI ranks (the coupler
     does not start it with ``mpirun -n``); otherwise the coupler starts it on ``ranks`` MPI
     processes."""
@@ -351,6 +354,7 @@ class ParticipantSpec:
     accepts: tuple[str, ...] = ()
     memory: tuple[int, int] = (50 * 2**20, 100)
     refuses: Callable[[object], str | None] | None = None
+    contact_step: tuple[float, float] | None = None
 
     @property
     def own_ranks(self) -> bool:

@@ -8,6 +8,13 @@ estimated per participant from the per-rank and per-cell costs it declares
 its ranks), and for the coupler (operators, fields) a fixed part per coupler rank and about 2 kB
 per solid tet + 0.3 kB per fluid cell over all of them.
 
+The first load step of a solid with contact (platen solves, each an active-set solve) is
+estimated from the solid's cells by the rule its participant declares
+(:attr:`~coupler.protocol.settings.ParticipantSpec.contact_step`, seconds on a core of its own,
+measured by bench/first_step.py), times the machine's load per core; :func:`first_step` warns, naming ``[messaging] timeout`` and a value,
+when :data:`MARGIN` times the estimate exceeds the timeout (the coupler waits that long for
+each answer).
+
 A scene whose estimate exceeds the memory available (the smallest of the machine's
 MemAvailable, the cgroup's memory.max, the address-space limit and ``[resources]
 memory_limit``) is refused naming the key that makes it large; ``[resources] check_memory
@@ -19,6 +26,8 @@ meshes reach the user before a run is launched.
 
 from __future__ import annotations
 
+import math
+import os
 import resource
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +39,10 @@ MB = 2**20
 #: fluid (bench/ranks.py: 159-207 MB per rank on the small scene, of it 130 MB before any mesh)
 COSTS = {"coupler_solid": (150 * MB, 2000), "coupler_fluid": (0, 300)}
 
+
+#: a first step may take this many times the estimate (the spread of bench/first_step.py's runs
+#: about the fit and the machine's load): the timeout it warns below and the value it suggests
+MARGIN = 3.0
 
 @dataclass
 class Estimate:
@@ -148,3 +161,28 @@ def check_memory(scene, estimates: list[Estimate]) -> str:
         raise SceneError(f"{big.key}: {big.cells:,} {big.name} cells: the run would need {line}; make it "
                          f"smaller, or set [resources] check_memory = false to run it anyway")
     return line
+
+
+def first_step(scene, estimates: list[Estimate]) -> tuple[str | None, str | None]:
+    """The estimate of the solid's first load step with contact, as a line for ``varcouple
+    check`` (None: nothing estimated): the rule's seconds on a core of its own, times the
+    machine's load per core when above one; and a warning naming ``[messaging] timeout`` and a
+    value to set when :data:`MARGIN` times the estimate exceeds it (else None)."""
+    solid = scene.solvers.get("solid")
+    rule = solid.spec.contact_step if solid is not None and "contact" in scene.effects else None
+    if rule is None:
+        return None, None
+    cells = next(e.cells for e in estimates if e.name == "solid")
+    core = rule[0] * (cells / 1e4) ** rule[1]
+    load, cores = os.getloadavg()[0], os.cpu_count() or 1
+    seconds = core * max(1.0, load / cores)
+    timeout = scene.messaging["timeout"]
+    line = (f"the solid's first load step with contact about {seconds:,.1f} s ({cells:,} cells: {core:,.1f} s on a "
+            f"core of its own by the rule of {solid.spec.kind}, load {load:.1f} on {cores} cores); [messaging] "
+            f"timeout {timeout:g} s")
+    if MARGIN * seconds <= timeout:
+        return line, None
+    value = 100 * math.ceil(MARGIN * seconds / 100)
+    return line, (f"{scene.path}: the solid's first load step may take about {seconds:,.1f} s ({cells:,} cells) and "
+                  f"up to {MARGIN:g} times that, more than [messaging] timeout = {timeout:g} s, after which the run "
+                  f"stops (exit 4); set [messaging] timeout = {value} in the scene")

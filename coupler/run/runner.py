@@ -51,7 +51,7 @@ from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession
 from coupler.run.launch import Launcher
 from coupler.run.local import LocalClient
-from coupler.run.preflight import check_memory, estimate
+from coupler.run.preflight import check_memory, estimate, first_step
 from coupler.run.solves import StepSolves
 from transfer import Mesh, StructuredGrid
 from transfer.mesh import CELL_TYPES
@@ -114,7 +114,11 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     root = comm is None or comm.rank == 0
     plan = make_plan(scene)
     run_class.admit(scene, plan, comm)
-    log(f"memory: {check_memory(scene, estimate(scene, comm.size if comm is not None else 1))}")
+    estimates = estimate(scene, comm.size if comm is not None else 1)
+    log(f"memory: {check_memory(scene, estimates)}")
+    warning = first_step(scene, estimates)[1]
+    if warning:
+        log(f"warning: {warning}")
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     check_inputs_kept(scene, plan, out)

@@ -58,6 +58,17 @@ def test_node_weights_integrate_p1_exactly():
     assert abs(surface_integral(1 + 2 * x - 3 * y, SIZE) - (0.5 + 0.5 - 3 * 0.125)) < 1e-14
 
 
+def test_node_weights_of_a_grid_that_is_not_uniform_integrate_p1_exactly():
+    """A lattice whose last cell takes a remainder (a height map's): the weights on its own axes."""
+    xs, ys = np.array([0.0, 0.25, 0.5, 0.75, 1.0 - 1e-9, 1.0]), np.array([0.0, 0.2, 0.4, 0.5])
+    w = node_weights((5, 3), SIZE, (xs, ys))
+    assert abs(w.sum() - 0.5) < 1e-15 and w.min() > 0
+    x, y = np.meshgrid(xs, ys, indexing="ij")
+    assert abs(surface_integral(1 + 2 * x - 3 * y, SIZE, (xs, ys)) - (0.5 + 0.5 - 3 * 0.125)) < 1e-14
+    uniform = (np.linspace(0, 1, 9), np.linspace(0, 0.5, 5))
+    assert np.allclose(node_weights((8, 4), SIZE, uniform), node_weights((8, 4), SIZE), rtol=1e-13, atol=0)
+
+
 def test_fracture_pair_matched_above_mismatch_length():
     shape, size, lam = (128, 64), SIZE, 0.1
     lower, upper = fracture_pair(shape, size, aperture=1.0, hurst=0.8, rms=0.01, mismatch_length=lam, seed=11)

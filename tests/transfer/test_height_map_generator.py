@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from transfer.generators import cells, generate, parameters
+from transfer.generators import cells, generate, notes, parameters
 from transfer.generators.height_maps import read_npz, read_xyz, write_npz, write_xyz
 from transfer.generators.surfaces import fracture_pair
 
@@ -29,12 +29,12 @@ def npz(tmp_path):
     return str(write_npz(tmp_path / "map.npz", lower, upper, (DX, DY)))
 
 
-def face_heights(block, face):
+def face_heights(block, face, dx=DX, dy=DY):
     """{(i, j): z} of a face's nodes, (i, j) the map node under them."""
     nodes = np.unique(block.faces[face])
     x, y, z = block.points[nodes].T
-    i, j = np.rint(x / DX).astype(int), np.rint(y / DY).astype(int)
-    assert np.abs(x - i * DX).max() < 1e-15 and np.abs(y - j * DY).max() < 1e-15  # the nodes are map nodes
+    i, j = np.rint(x / dx).astype(int), np.rint(y / dy).astype(int)
+    assert np.abs(x - i * dx).max() < 1e-15 and np.abs(y - j * dy).max() < 1e-15  # the nodes are map nodes
     return dict(zip(zip(i.tolist(), j.tolist()), z))
 
 
@@ -103,7 +103,8 @@ def test_apertures_below_the_minimum_are_raised_within_the_tolerance(tmp_path):
     assert face_heights(block, "fracture_upper")[(3, 2)] == pytest.approx(lower[2, 3] + 1e-6, abs=1e-15)
     assert block.info["raised_nodes"] == int(np.sum(upper - lower < 1e-6)) >= 1
     with pytest.raises(ValueError, match=r"^surfaces: the faces interpenetrate by 4e-06 m \(more than the "
-                                         r"tolerance 1e-06 m\) at x = 0.006, y = 0.006 m from the map's origin$"):
+                                         r"tolerance 1e-06 m\) at x = 0.006, y = 0.006 m from the map's origin; raise "
+                                         r"them with min_aperture or accept them with tolerance$"):
         parameters("measured_fracture", {"surfaces": path, "height": 0.01, "tolerance": 1e-6})
 
 
@@ -178,11 +179,11 @@ def test_a_bad_xyz_map_is_named(tmp_path, name, bad, message):
     ({}, r"surfaces: give either surfaces \(an .npz of both faces\) or lower and upper \(XYZ files\)$"),
     ({"lower": "a.xyz"}, r"upper: missing \(the other face's XYZ file\)$"),
     ({"surfaces": 3}, r"surfaces: must be a file name, got 3$"),
-    ({"coarsen": 3}, r"coarsen: coarsen x ratio = 3 must divide the map's 8 x 4 cells$"),
+    ({"periodic": "yes"}, r"periodic: must be true or false, got 'yes'$"),
     ({"ratio": 0}, r"ratio: must lie in \[1, inf\), got 0$"),
 ])
 def test_bad_parameters_are_named(npz, values, message):
-    values = {"surfaces": npz, **values} if "coarsen" in values or "ratio" in values else values
+    values = {"surfaces": npz, **values} if "periodic" in values or "ratio" in values else values
     with pytest.raises(ValueError, match=message):
         parameters("measured_fracture", {"height": 0.01, **values})
 
@@ -190,3 +191,92 @@ def test_bad_parameters_are_named(npz, values, message):
 def test_the_readers_give_what_the_writers_wrote(npz):
     (lower, upper), spacing = read_npz(npz)
     assert np.array_equal(lower, faces()[0]) and np.array_equal(upper, faces()[1]) and spacing == (DX, DY)
+
+
+SCAN, SCAN_DX = 32, 0.5e-3  # a scanner's 2^n nodes per side (its cells are 2^n - 1), spacing [m]
+
+
+def scan(tmp_path, periodic=False, touching=False):
+    """A SCAN x SCAN node map written as an .npz: (path, lower, upper), (ny, nx) each; `periodic`: one
+    period of a periodic pair (the last row and column not repeated); `touching`: the faces in first
+    contact where the aperture would be negative, the upper face there one round-off step below the
+    lower (as ``lower + aperture`` with a zero aperture rounds)."""
+    n = SCAN if periodic else SCAN - 1  # cells of the synthesis (periodic: one more node, then left off)
+    lower, upper = fracture_pair((n, n), (n * SCAN_DX, n * SCAN_DX), aperture=1e-4 if touching else 3e-4, rms=2e-4,
+                                 mismatch_length=4e-3, seed=7, min_aperture=0.0, periodic=periodic)
+    lower, upper = lower.T + 1.5e-3, upper.T + 1.5e-3
+    if periodic:
+        lower, upper = lower[:-1, :-1], upper[:-1, :-1]  # one period: n nodes, the closing row and column left off
+    if touching:
+        touch = upper - lower <= 0
+        upper = np.where(touch, np.nextafter(lower, -np.inf), upper)
+    return str(write_npz(tmp_path / "scan.npz", lower, upper, (SCAN_DX, SCAN_DX))), lower, upper
+
+
+def assert_faces_are_the_map(block, lower, upper, nodes, wrap=None):
+    """Each face's nodes are the map nodes `nodes` (lower face) / every second of them (upper,
+    ratio 2) and its heights the map's there (`wrap`: the map's period in nodes)."""
+    for face, heights in (("fracture_lower", lower), ("fracture_upper", upper)):
+        on_mesh = face_heights(block, face, SCAN_DX, SCAN_DX)
+        coarse = max(1, int((len(nodes) - 1) / 2 + 0.5))  # upper cells: two lower ones, the last one to three
+        along = nodes if face == "fracture_lower" else np.append(nodes[:2 * coarse - 1:2], nodes[-1])
+        assert sorted(on_mesh) == [(i, j) for i in along for j in along]
+        period = wrap or len(heights)
+        assert max(abs(z - heights[j % period, i % period]) for (i, j), z in on_mesh.items()) == 0.0
+
+
+@pytest.mark.parametrize("coarsen", [2, 4, 8])
+def test_a_map_of_any_node_count_loads_with_its_last_cell_taking_the_remainder(tmp_path, coarsen):
+    """32 nodes are 31 cells, divisible by no coarsening: the lattice takes every coarsen-th node and
+    the last node, so the mesh spans the map's extent and its faces are the map at their nodes."""
+    path, lower, upper = scan(tmp_path)
+    values = {"surfaces": path, "height": 0.01, "layers": 1, "coarsen": coarsen, "ratio": 2}
+    block = generate("measured_fracture", values)
+    n = round(31 / coarsen)
+    nodes = np.append(coarsen * np.arange(n), 31)  # the last lattice cell from (n-1) coarsen to 31
+    assert block.num_cells == cells("measured_fracture", values) and block.mesh.num_cells == block.num_cells
+    assert block.points[:, :2].max(axis=0) == pytest.approx([31 * SCAN_DX] * 2, abs=1e-15)
+    assert_faces_are_the_map(block, lower, upper, nodes)
+    last = 31 - coarsen * (n - 1)
+    assert f"the last {last}" in block.info["lattice"] and coarsen / 2 <= last < 1.5 * coarsen
+    assert any(f"map of 32 x 32 nodes; lattice {n} x {n}" in line
+               for line in notes("measured_fracture", values))
+
+
+def test_a_periodic_map_is_closed_by_its_first_row_and_column(tmp_path):
+    """32 nodes of one period span 32 cells (the period): coarsen 8 is 4 whole lattice cells, the
+    last column and row of nodes the first's heights."""
+    path, lower, upper = scan(tmp_path, periodic=True)
+    assert lower.shape == (SCAN, SCAN)
+    values = {"surfaces": path, "height": 0.01, "layers": 1, "coarsen": 8, "ratio": 2, "periodic": True}
+    block = generate("measured_fracture", values)
+    assert block.points[:, :2].max(axis=0) == pytest.approx([SCAN * SCAN_DX] * 2, abs=1e-15)
+    assert_faces_are_the_map(block, lower, upper, np.arange(0, SCAN + 1, 8), wrap=SCAN)
+    assert block.info["lattice"].startswith("4 x 4, map cells per lattice cell 8 (x), 8 (y)")
+    assert block.info["periodic"].endswith("32 x 32 cells, 0.016 x 0.016 m")
+    assert block.num_cells == cells("measured_fracture", values)
+    closed = write_npz(tmp_path / "closed.npz", *(np.pad(h, ((0, 1), (0, 1)), mode="wrap") for h in (lower, upper)),
+                       (SCAN_DX, SCAN_DX))  # already closed: periodic would repeat the first row and column
+    with pytest.raises(ValueError, match=r"^periodic: the map's last row and column repeat its first already"):
+        parameters("measured_fracture", {**values, "surfaces": str(closed)})
+
+
+def test_a_pair_in_first_contact_loads_as_is(tmp_path):
+    """Faces that touch at zero load, their aperture a round-off below zero, load without a key:
+    the default tolerance is relative to the map's RMS height; the touching nodes close to zero
+    aperture. A real overlap is still refused, and min_aperture raises the touching nodes."""
+    path, lower, upper = scan(tmp_path, touching=True)
+    touch = upper < lower
+    assert touch.any() and (lower - upper)[touch].max() < 1e-18
+    block = generate("measured_fracture", {"surfaces": path, "height": 0.01, "layers": 1, "coarsen": 4})
+    assert block.info["min_aperture"] == 0.0 and block.info["raised_nodes"] == int(touch.sum())
+    (note,) = notes("measured_fracture", {"surfaces": path, "height": 0.01, "coarsen": 4})[1:]
+    assert note.startswith(f"measured_fracture: {int(touch.sum())} map nodes' overlaps closed to touching (up to ")
+    raised = generate("measured_fracture", {"surfaces": path, "height": 0.01, "layers": 1, "coarsen": 4,
+                                            "min_aperture": 1e-6})
+    assert raised.info["min_aperture"] == pytest.approx(1e-6, rel=1e-9)
+    upper[touch] = lower[touch] - 1e-9  # an overlap of 1 nm: 5e-6 of the RMS height
+    overlap = str(write_npz(tmp_path / "overlap.npz", lower, upper, (SCAN_DX, SCAN_DX)))
+    with pytest.raises(ValueError, match=r"^surfaces: the faces interpenetrate by 1e-09 m \(more than the tolerance "
+                                         r"[0-9.e-]+ m, 1e-09 of the RMS height\)"):
+        parameters("measured_fracture", {"surfaces": overlap, "height": 0.01})

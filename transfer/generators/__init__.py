@@ -10,7 +10,8 @@ values), ``check(parameters) -> dict`` (types and ranges; ``ValueError("<key>: <
 named boundary faces), ``FACES`` (``{name: tag}`` of the faces every mesh it makes carries)
 and, optionally, ``FILES`` (the parameters that name files: the scene gives them relative to the
 case directory and resolves them), ``cells(parameters)`` (the number of tetrahedra without
-building the mesh), ``lattices(parameters)`` (the mesh by index,
+building the mesh), ``notes(parameters)`` (what it did to its input that the user should know,
+e.g. a map's remainder cell: lines for the plan and the run's summary), ``lattices(parameters)`` (the mesh by index,
 :class:`~transfer.generators.lattices.Lattices`: any block of cells or points made alone) and,
 for geometry made for a fluid grid (an immersed-boundary study), ``grid(parameters) ->
 {"origin", "spacing", "shape"}``.
@@ -70,6 +71,13 @@ def cells(name: str, values: dict) -> int:
     """How many tetrahedra generator `name` makes with `values` (built only without a formula)."""
     module, checked = GENERATORS[name], parameters(name, values)
     return int(module.cells(checked)) if hasattr(module, "cells") else len(module.mesh(checked).cells)
+
+
+def notes(name: str, values: dict) -> list[str]:
+    """What generator `name` did to its input with `values` that the user should know (none
+    without a ``notes`` of its module)."""
+    module = GENERATORS[name]
+    return list(module.notes(parameters(name, values))) if hasattr(module, "notes") else []
 
 
 def number(parameters: dict, key: str, minimum: float | None = None, below: float | None = None,

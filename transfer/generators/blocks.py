@@ -212,7 +212,7 @@ def fracture_blocks(shape, size, height, heights, origin=(0.0, 0.0), top=None, g
 
 
 def fracture_lattices(shape, size, height, heights, origin=(0.0, 0.0), top=None, grading=1.0,
-                      bottom=None) -> tuple[Lattice, Lattice]:
+                      bottom=None, axes=None) -> tuple[Lattice, Lattice]:
     """The lattices of two tetrahedral rock blocks with a rough fracture between them.
 
     Parameters
@@ -226,6 +226,8 @@ def fracture_lattices(shape, size, height, heights, origin=(0.0, 0.0), top=None,
     bottom : z of the lower block's bottom; default ``-height`` (a lower face of zero mean)
     grading : ratio of successive layer thicknesses away from the fracture (1: uniform;
         > 1: thin layers at the fracture)
+    axes : (xs, ys) node coordinates from the origin, increasing from 0 to ``size`` (default
+        uniform)
 
     The lower block spans ``z = bottom`` .. lower(x, y) (faces ``bottom``, ``fracture_lower``),
     the upper block upper(x, y) .. ``top`` (faces ``fracture_upper``, ``top``); both have
@@ -244,15 +246,15 @@ def fracture_lattices(shape, size, height, heights, origin=(0.0, 0.0), top=None,
     if np.any(upper < lower):
         raise ValueError(f"the surfaces cross: upper - lower down to {np.min(upper - lower):.3g}")
     bottom = -float(height) if bottom is None else float(bottom)
-    top = surface_mean(upper, size) + float(height) if top is None else float(top)
+    xs, ys = axes if axes is not None else (np.linspace(0.0, size[0], nx + 1), np.linspace(0.0, size[1], ny + 1))
+    top = surface_mean(upper, size, (xs, ys)) + float(height) if top is None else float(top)
     if not np.all(lower > bottom):
         raise ValueError(f"the lower surface reaches below the bottom z = {bottom:g} (min {lower.min():.3g}); "
                          f"increase height")
     if not np.all(upper < top):
         raise ValueError(f"the upper surface reaches above the top z = {top:g} (max {upper.max():.3g}); "
                          f"increase height")
-    xs = origin[0] + np.linspace(0.0, size[0], nx + 1)
-    ys = origin[1] + np.linspace(0.0, size[1], ny + 1)
+    xs, ys = origin[0] + np.asarray(xs, float), origin[1] + np.asarray(ys, float)
     sides = ("xmin", "xmax", "ymin", "ymax")
     low = _layered(xs, ys, np.full_like(lower, bottom), lower, nz, grading, True, sides + ("bottom", "fracture_lower"),
                    BLOCK_TAGS["lower_block"])
@@ -261,17 +263,30 @@ def fracture_lattices(shape, size, height, heights, origin=(0.0, 0.0), top=None,
     return low, up
 
 
-def mortar_lattices(shape, size, height, heights, ratio, origin=(0.0, 0.0), top=None, bottom=None) -> Lattices:
+def stations(cells: int, stride: int) -> np.ndarray:
+    """The node indices of a row of `cells` cells taken `stride` at a time: 0, stride, 2 stride,
+    ... and `cells`, round(cells / stride) (at least one) coarse cells, the last taking the
+    remainder (from stride / 2 to 3 stride / 2 cells; every ``stride``-th node when it divides)."""
+    n = max(1, int(np.floor(cells / stride + 0.5)))
+    return np.append(stride * np.arange(n), cells)
+
+
+def mortar_lattices(shape, size, height, heights, ratio, origin=(0.0, 0.0), top=None, bottom=None,
+                    axes=None) -> Lattices:
     """Two blocks around a fracture with non-matching faces, for mortar contact: the lower
     block on the (nx, ny, nz) lattice, the upper on one ``ratio`` times coarser in x and y
-    (its face the upper heights at every ratio-th node; ratio divides nx and ny), both in one
-    mesh (the upper block's points follow the lower's). ``top`` defaults to the mean of the
-    full upper surface plus ``height``; the other arguments as in :func:`fracture_lattices`."""
+    (its nodes the lower lattice's :func:`stations`: every ratio-th node, the last cell taking the
+    remainder; its face the upper heights there), both in one mesh (the upper block's points
+    follow the lower's). ``top`` defaults to the mean of the full upper surface plus
+    ``height``; the other arguments as in :func:`fracture_lattices`."""
     nx, ny, nz = (int(n) for n in shape)
     lower, upper = (np.asarray(h, float) for h in heights)
+    xs, ys = axes if axes is not None else (np.linspace(0.0, size[0], nx + 1), np.linspace(0.0, size[1], ny + 1))
     if top is None:
-        top = surface_mean(upper, size) + float(height)
-    fine = fracture_lattices((nx, ny, nz), size, height, (lower, upper), origin, top=top, bottom=bottom)[0]
-    coarse = fracture_lattices((nx // ratio, ny // ratio, nz), size, height, (lower[::ratio, ::ratio],
-                               upper[::ratio, ::ratio]), origin, top=top, bottom=bottom)[1]
+        top = surface_mean(upper, size, (xs, ys)) + float(height)
+    fine = fracture_lattices((nx, ny, nz), size, height, (lower, upper), origin, top=top, bottom=bottom,
+                             axes=(xs, ys))[0]
+    i, j = stations(nx, ratio), stations(ny, ratio)
+    coarse = fracture_lattices((len(i) - 1, len(j) - 1, nz), size, height, (lower[np.ix_(i, j)], upper[np.ix_(i, j)]),
+                               origin, top=top, bottom=bottom, axes=(np.asarray(xs)[i], np.asarray(ys)[j]))[1]
     return Lattices((fine, coarse), FACE_TAGS, BLOCK_TAGS)

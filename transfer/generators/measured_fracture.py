@@ -1,14 +1,21 @@
-"""Two rock blocks around a measured fracture: the faces from height maps (profilometer
-scans, :mod:`.height_maps`) instead of synthetic ones, meshed as the synthetic fractures are
-(:func:`~transfer.generators.blocks.mortar_lattices`, :func:`~transfer.generators.blocks.fracture_blocks`).
+"""Two rock blocks around a measured fracture: the faces from height maps (profilometer scans,
+:mod:`.height_maps`) instead of synthetic ones, meshed as the synthetic fractures are
+(:func:`~transfer.generators.blocks.mortar_lattices`,
+:func:`~transfer.generators.blocks.fracture_blocks`).
 
-The lattice's nodes are map nodes: every ``coarsen``-th one in x and y (sampled, not
-averaged), so the faces' heights at the lattice nodes are the map's; the upper face's lattice
-is ``ratio`` times coarser again (non-matching faces, for mortar contact). Where the map's
-aperture ``upper - lower`` is below ``min_aperture`` the upper face is raised to
-``lower + min_aperture``; faces that interpenetrate by more than ``tolerance`` are refused.
-Each block is ``height`` thick from its face's mean plane; the rectangle is the map's
-extent, from its origin ((0, 0) for an ``.npz``).
+A map of any node count: the lattice's nodes are map nodes, every ``coarsen``-th one in x and y
+(sampled, not averaged), the last lattice cell taking the remainder of the map's cells
+(:func:`~transfer.generators.blocks.stations`: from half to one and a half ``coarsen``), so the
+faces' heights at the lattice nodes are the map's and the rectangle is the map's extent; the
+upper face's lattice is ``ratio`` times coarser again the same way (non-matching faces, for
+mortar contact). ``periodic``: the map is one period of a periodic surface (its last row and
+column do not repeat the first), closed by its first row and column: n nodes span n cells.
+Where the aperture ``upper - lower`` is below ``min_aperture`` the upper face is raised to
+``lower + min_aperture``, overlaps included. With ``min_aperture = 0`` faces that
+interpenetrate by more than ``tolerance`` (default :data:`RELATIVE_TOLERANCE` of the larger
+face's RMS height: the round-off of a pair in first contact) are refused, smaller overlaps
+closed to touching. Each block is ``height`` thick from its face's mean plane; the rectangle
+starts at the map's origin ((0, 0) for an ``.npz``).
 """
 
 from __future__ import annotations
@@ -16,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import number
-from .blocks import FACE_TAGS, Block, lattice_block, mortar_lattices
+from .blocks import FACE_TAGS, Block, lattice_block, mortar_lattices, stations
 from .lattices import Lattices
 from .height_maps import read_npz, read_xyz
 from .surfaces import surface_mean
@@ -29,12 +36,17 @@ PARAMETERS = {"surfaces": ".npz file with arrays lower, upper (heights [m], (ny,
               "upper": "XYZ file of the upper face, on the lower face's grid",
               "height": "each block's thickness from its face's mean plane [m]",
               "layers": "layers of tetrahedra per block (default 4)",
-              "coarsen": "the lattice takes every coarsen-th map node in x and y (default 1: the map's grid)",
+              "coarsen": "the lattice takes every coarsen-th map node in x and y, the last cell the remainder "
+                         "(default 1: the map's grid)",
               "ratio": "the upper face's lattice is ratio times coarser (non-matching faces; default 1)",
+              "periodic": "true: the map is one period, closed by its first row and column (default false)",
               "min_aperture": "smaller apertures are raised to it by lifting the upper face [m] (default 0)",
-              "tolerance": "the faces may interpenetrate by this much before the map is refused [m] (default 0)"}
+              "tolerance": "after the raise, the faces may interpenetrate by this much before the map is refused "
+                           "[m] (default 1e-9 of the larger face's RMS height)"}
 DEFAULTS = {"surfaces": None, "lower": None, "upper": None, "layers": 4, "coarsen": 1, "ratio": 1,
-            "min_aperture": 0.0, "tolerance": 0.0}
+            "periodic": False, "min_aperture": 0.0, "tolerance": None}
+#: the default tolerance, a fraction of the larger face's RMS height (round-off of touching faces)
+RELATIVE_TOLERANCE = 1e-9
 #: parameters naming files: relative to the case directory (the scene resolves them)
 FILES = ("surfaces", "lower", "upper")
 FACES = dict(FACE_TAGS)
@@ -71,13 +83,26 @@ def read_faces(p: dict) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
     return lower.T, upper.T, spacing, origin
 
 
-def _lattice(p: dict, nodes: tuple) -> tuple[int, int]:
-    """Lattice cells (nx, ny) of the lower face: the map's cells over ``coarsen``."""
-    stride = p["coarsen"] * p["ratio"]
-    cells = [n - 1 for n in nodes]
-    if any(c % stride for c in cells):
-        raise ValueError(f"coarsen: coarsen x ratio = {stride} must divide the map's {cells[0]} x {cells[1]} cells")
-    return cells[0] // p["coarsen"], cells[1] // p["coarsen"]
+def closed_map(p: dict) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
+    """:func:`read_faces`, closed by its first row and column when ``periodic``."""
+    lower, upper, spacing, origin = read_faces(p)
+    if p["periodic"]:
+        if all(np.array_equal(h[0], h[-1]) and np.array_equal(h[:, 0], h[:, -1]) and np.ptp(h) > 0
+               for h in (lower, upper)):
+            raise ValueError("periodic: the map's last row and column repeat its first already (a closed map): "
+                             "closing it again would repeat them; leave periodic false")
+        lower, upper = (np.pad(h, ((0, 1), (0, 1)), mode="wrap") for h in (lower, upper))
+    return lower, upper, spacing, origin
+
+
+def raised(lower: np.ndarray, upper: np.ndarray, min_aperture: float) -> np.ndarray:
+    """The upper face lifted to ``lower + min_aperture`` where the aperture is smaller."""
+    return np.where(upper - lower < min_aperture, lower + min_aperture, upper)
+
+
+def _lattice(p: dict, nodes: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """The lower face's lattice nodes in x and y, as map node indices."""
+    return stations(nodes[0] - 1, p["coarsen"]), stations(nodes[1] - 1, p["coarsen"])
 
 
 def check(p: dict) -> dict:
@@ -86,43 +111,77 @@ def check(p: dict) -> dict:
         raise ValueError("surfaces: give either surfaces (an .npz of both faces) or lower and upper (XYZ files)")
     if out["surfaces"] is None and (out["lower"] is None or out["upper"] is None):
         raise ValueError(f"{'upper' if out['upper'] is None else 'lower'}: missing (the other face's XYZ file)")
+    if not isinstance(p["periodic"], bool):
+        raise ValueError(f"periodic: must be true or false, got {p['periodic']!r}")
     out.update({"height": number(p, "height", positive=True), "min_aperture": number(p, "min_aperture", minimum=0.0),
-                "tolerance": number(p, "tolerance", minimum=0.0)})
+                "periodic": p["periodic"]})
     out.update({k: number(p, k, minimum=1, integer=True) for k in ("layers", "coarsen", "ratio")})
-    lower, upper, spacing, _ = read_faces(out)
-    _lattice(out, lower.shape)
-    gap = upper - lower
+    lower, upper, spacing, _ = closed_map(out)
+    default = p["tolerance"] is None
+    out["tolerance"] = (RELATIVE_TOLERANCE * max(float(np.std(lower)), float(np.std(upper))) if default
+                        else number(p, "tolerance", minimum=0.0))
+    gap = (raised(lower, upper, out["min_aperture"]) if out["min_aperture"] > 0 else upper) - lower
     if gap.min() < -out["tolerance"]:
         i, j = np.unravel_index(np.argmin(gap), gap.shape)
         raise ValueError(f"{'surfaces' if out['surfaces'] else 'upper'}: the faces interpenetrate by {-gap.min():.6g} m "
-                         f"(more than the tolerance {out['tolerance']:g} m) at x = {i * spacing[0]:.6g}, "
-                         f"y = {j * spacing[1]:.6g} m from the map's origin")
+                         f"(more than the tolerance {out['tolerance']:g} m"
+                         f"{f', {RELATIVE_TOLERANCE:g} of the RMS height' if default else ''}) at x = "
+                         f"{i * spacing[0]:.6g}, y = {j * spacing[1]:.6g} m from the map's origin; raise them with "
+                         f"min_aperture or accept them with tolerance")
     return out
 
 
 def cells(p: dict) -> int:
-    nx, ny = _lattice(p, read_faces(p)[0].shape)
-    r, nz = p["ratio"], p["layers"]
-    return 6 * nx * ny * nz + 6 * (nx // r) * (ny // r) * nz
+    nx, ny = (len(s) - 1 for s in _lattice(p, closed_map(p)[0].shape))
+    ux, uy = len(stations(nx, p["ratio"])) - 1, len(stations(ny, p["ratio"])) - 1
+    return 6 * (nx * ny + ux * uy) * p["layers"]
+
+
+def _cells_note(nodes: np.ndarray) -> str:
+    """How many map cells the lattice cells of one axis span: "8" or "8, the last 7"."""
+    steps = np.diff(nodes)
+    return f"{steps[0]}" if np.all(steps == steps[0]) else f"{steps[0]}, the last {steps[-1]}"
 
 
 def _parts(p: dict) -> tuple[Lattices, dict]:
     """The two blocks by index and the ``info`` of :func:`mesh`."""
-    lower, upper, spacing, origin = read_faces(p)
-    raised = upper - lower < p["min_aperture"]
-    upper = np.where(raised, lower + p["min_aperture"], upper)
-    nx, ny = _lattice(p, lower.shape)
-    c = p["coarsen"]
+    lower, upper, spacing, origin = closed_map(p)
+    up_map = raised(lower, upper, p["min_aperture"])
+    i, j = _lattice(p, lower.shape)
     size = ((lower.shape[0] - 1) * spacing[0], (lower.shape[1] - 1) * spacing[1])
-    low, up = lower[::c, ::c], upper[::c, ::c]
-    lattices = mortar_lattices((nx, ny, p["layers"]), size, p["height"], (low, up), p["ratio"], origin,
-                               bottom=surface_mean(low, size) - p["height"])
+    axes = (i * spacing[0], j * spacing[1])
+    low, up = lower[np.ix_(i, j)], up_map[np.ix_(i, j)]
+    lattices = mortar_lattices((len(i) - 1, len(j) - 1, p["layers"]), size, p["height"], (low, up), p["ratio"],
+                               origin, bottom=surface_mean(low, size, axes) - p["height"], axes=axes)
     gap = up - low
-    info = {"map_nodes": f"{lower.shape[0]} x {lower.shape[1]}", "map_spacing": f"{spacing[0]:g} x {spacing[1]:g} m",
-            "lattice": f"{nx} x {ny}", "mean_aperture": surface_mean(gap, size), "min_aperture": float(gap.min()),
-            "max_initial_aperture": float(gap.max()), "raised_nodes": int(raised.sum()),
-            "cross_section": size[0] * size[1]}
+    lift = up_map - upper
+    info = {"map_nodes": f"{lower.shape[0] - p['periodic']} x {lower.shape[1] - p['periodic']}",
+            **({"periodic": f"closed by its first row and column: {len(lower) - 1} x {len(lower[0]) - 1} cells, "
+                            f"{size[0]:g} x {size[1]:g} m"} if p["periodic"] else {}),
+            "map_spacing": f"{spacing[0]:g} x {spacing[1]:g} m",
+            "lattice": f"{len(i) - 1} x {len(j) - 1}, map cells per lattice cell {_cells_note(i)} (x), "
+                       f"{_cells_note(j)} (y)",
+            "mean_aperture": surface_mean(gap, size, axes), "min_aperture": float(gap.min()),
+            "max_initial_aperture": float(gap.max()), "raised_nodes": int(np.sum(lift > 0)),
+            "largest_lift": float(lift.max()), "cross_section": size[0] * size[1]}
     return lattices, info
+
+
+def notes(p: dict) -> list[str]:
+    """What was done to the map beyond sampling it: a remainder cell, the periodic closure, the
+    raised apertures (for the plan and the run's summary)."""
+    info = _parts(p)[1]
+    out = []
+    if "the last" in info["lattice"] or p["periodic"]:
+        closed = f", periodic, {info['periodic']}" if p["periodic"] else ""
+        out.append(f"measured_fracture: map of {info['map_nodes']} nodes{closed}; lattice {info['lattice']}")
+    if info["raised_nodes"] and p["min_aperture"] > 0:
+        out.append(f"measured_fracture: {info['raised_nodes']} map nodes' apertures raised to min_aperture "
+                   f"{p['min_aperture']:g} m (the upper face lifted by up to {info['largest_lift']:.3g} m)")
+    elif info["raised_nodes"]:
+        out.append(f"measured_fracture: {info['raised_nodes']} map nodes' overlaps closed to touching (up to "
+                   f"{info['largest_lift']:.3g} m, within the tolerance {p['tolerance']:.3g} m)")
+    return out
 
 
 def lattices(p: dict) -> Lattices:

@@ -94,33 +94,31 @@ def _synthesis(shape, size, hurst, cutoff, seed, periodic, pad, mismatch_length=
     return out
 
 
-def _triangles2d(nx, ny) -> np.ndarray:
-    """Triangles of the node grid (flat index i*(ny+1)+j), squares split along (i,j)-(i+1,j+1)."""
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-    a = (i * (ny + 1) + j).ravel()
-    b, c, d = a + (ny + 1), a + (ny + 1) + 1, a + 1  # (i+1,j), (i+1,j+1), (i,j+1)
-    return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-
-
-def node_weights(shape, size) -> np.ndarray:
+def node_weights(shape, size, axes=None) -> np.ndarray:
     """Quadrature weights (nx+1, ny+1) integrating the piecewise-linear interpolant of a
-    node-grid field exactly, on the triangulation the block meshes use (sum = Lx*Ly)."""
+    node-grid field exactly, on the triangulation the block meshes use (sum = Lx*Ly); ``axes``:
+    the node coordinates (xs, ys) of a grid that is not uniform (its extent is ``size``)."""
     nx, ny = _grid_shape(shape)
-    area = size[0] * size[1] / (2 * nx * ny)
-    w = np.zeros((nx + 1) * (ny + 1))
-    np.add.at(w, _triangles2d(nx, ny).ravel(), area / 3.0)
-    return w.reshape(nx + 1, ny + 1)
+    xs, ys = axes if axes is not None else (np.linspace(0.0, size[0], nx + 1), np.linspace(0.0, size[1], ny + 1))
+    cell = np.outer(np.diff(xs), np.diff(ys))  # each square in two triangles along (i,j)-(i+1,j+1)
+    w = np.zeros((nx + 1, ny + 1))
+    w[:-1, :-1] += cell / 3.0  # the diagonal's ends are in both triangles
+    w[1:, 1:] += cell / 3.0
+    w[1:, :-1] += cell / 6.0
+    w[:-1, 1:] += cell / 6.0
+    return w
 
 
-def surface_integral(heights, size) -> float:
-    """Integral over the rectangle of the piecewise-linear interpolant of a node-grid field."""
+def surface_integral(heights, size, axes=None) -> float:
+    """Integral over the rectangle of the piecewise-linear interpolant of a node-grid field
+    (``axes``: as in :func:`node_weights`)."""
     h = np.asarray(heights, float)
-    return float(np.sum(node_weights((h.shape[0] - 1, h.shape[1] - 1), size) * h))
+    return float(np.sum(node_weights((h.shape[0] - 1, h.shape[1] - 1), size, axes) * h))
 
 
-def surface_mean(heights, size=(1.0, 1.0)) -> float:
+def surface_mean(heights, size=(1.0, 1.0), axes=None) -> float:
     """Area-weighted mean of a node-grid field (:func:`surface_integral` / area)."""
-    return surface_integral(heights, size) / (size[0] * size[1])
+    return surface_integral(heights, size, axes) / (size[0] * size[1])
 
 
 def rough_surface(shape, size=(1.0, 1.0), hurst=0.8, rms=1.0, seed=None, cutoff=None,
