@@ -335,6 +335,9 @@ def _terminate(signum, frame):
 
 
 def main(argv: list[str] | None = None) -> int:
+    from coupler.protocol.mpi import confine
+
+    confine()  # before MPI starts in this process: it listens on loopback only (coupler/protocol/mpi.py)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
