@@ -113,7 +113,8 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     root = comm is None or comm.rank == 0
     plan = make_plan(scene)
     run_class.admit(scene, plan, comm)
-    log(f"memory: {check_memory(scene, estimate(scene, comm.size if comm is not None else 1))}")
+    ranks = comm.size if comm is not None else 1
+    log(f"memory: {check_memory(scene, estimate(scene, ranks), ranks)}")
     out = Path(scene.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     check_inputs_kept(scene, plan, out)
