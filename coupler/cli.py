@@ -339,9 +339,11 @@ def _terminate(signum, frame):
 
 def main(argv: list[str] | None = None) -> int:
     from coupler.protocol.mpi import confine
+    from coupler.protocol.mpi_session import mpi_session
 
-    confine()  # before MPI starts in this process: it listens on loopback only (coupler/protocol/mpi.py)
-    return _main(argv)
+    with mpi_session():  # the run's own Open MPI files, removed at its end
+        confine()  # before MPI starts in this process: it listens on loopback only (coupler/protocol/mpi.py)
+        return _main(argv)
 
 
 def _main(argv: list[str] | None) -> int:

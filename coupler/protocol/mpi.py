@@ -21,7 +21,8 @@ mpirun and whatever else is started with them.
 A process of ours that initialises MPI itself (``varcouple``'s own process: mpi4py, petsc4py and
 dolfinx do on import) reads them from its own environment: :func:`confine` puts them there
 first (without them Open MPI's singleton listened on ``0.0.0.0:1024`` and forked an ``orted``
-listening on all interfaces).
+listening on all interfaces). With ``VARCOUPLE_MPI_SESSION`` (the run's, :mod:`.mpi_session`) the
+session directory and the shared-memory segments go there.
 tests/coupler/test_mpi_loopback.py reads every listening socket of the processes a run starts.
 """
 
@@ -30,6 +31,8 @@ from __future__ import annotations
 import os
 from importlib import resources
 from typing import Mapping, MutableMapping
+
+from coupler.protocol.mpi_session import SESSION_VAR, shared_memory_dir
 
 INTERFACES_VAR = "VARCOUPLE_MPI_INTERFACES"
 
@@ -47,6 +50,10 @@ def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] 
     for name in interfaces:
         if any(c.isspace() or c == "," for c in name):
             raise ValueError(f"MPI interface {name!r}: one interface name or CIDR network per entry")
+    session = out.get(SESSION_VAR)
+    if session:  # this run's own session directory and shared memory (coupler/protocol/mpi_session.py)
+        out.update({"OMPI_MCA_orte_tmpdir_base": session,
+                    "OMPI_MCA_btl_vader_backing_directory": shared_memory_dir(session)})
     defaults = {"pml": "ob1", "ess_singleton_isolated": "1"}
     if interfaces:
         names = ",".join(interfaces)
