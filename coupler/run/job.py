@@ -150,11 +150,12 @@ def relaunch(argv: list[str], scene, ranks: int) -> int:
     except Terminated:
         job.stop(signal.SIGTERM)
         raise
-    except KeyboardInterrupt:  # mpirun had the SIGINT too, and passes it to the ranks
+    except KeyboardInterrupt:  # Ctrl-C reached mpirun too (same process group), which passes it to the ranks
         try:
             job.popen.wait(GRACE)
-        finally:
-            job.stop(signal.SIGTERM)
+        except subprocess.TimeoutExpired:  # it did not (a SIGINT to this process alone)
+            pass
+        job.stop(signal.SIGTERM)
         raise
     left = job.stop_left()
     out = Path(scene.output_dir)
