@@ -30,8 +30,9 @@ from coupler.run.launch import alive, descendants
 from coupler.run.outdir import LOCK
 from coupler.run.preflight import check_cores, check_memory, estimate
 
-#: seconds between two looks at the job's processes, and given to them to stop on SIGTERM
-LOOK, GRACE = 0.2, 10.0
+#: seconds between two looks at the ranks, between two searches for the job's processes, and
+#: given to them to stop on SIGTERM
+LOOK, SEARCH, GRACE = 0.05, 1.0, 10.0
 
 
 def _rank(pid: int) -> int | None:
@@ -57,8 +58,8 @@ def _started(pid: int) -> str | None:
 
 class Job:
     """``mpirun -n ranks`` of `command` (with the one-host or named-interface MPI settings),
-    watched: :attr:`ranks` (rank -> pid), every process seen under mpirun, and the first rank
-    seen gone while mpirun ran (:attr:`first_gone`)."""
+    watched: :attr:`ranks` (rank -> pid), every process seen under mpirun (:attr:`seen`), and the
+    first rank seen gone while mpirun ran (:attr:`first_gone`)."""
 
     def __init__(self, command: list[str], ranks: int):
         mpirun = shutil.which("mpirun")
@@ -90,13 +91,17 @@ class Job:
             sys.stderr.buffer.write(line)
         sys.stderr.flush()
 
-    def look(self) -> None:
+    def search(self) -> None:
+        """Note the processes under mpirun, and which is which rank."""
+        known = set(self.ranks.values())
         for pid in descendants(self.popen.pid):
             if pid not in self.seen and (started := _started(pid)) is not None:
                 self.seen[pid] = started
-                rank = _rank(pid)
-                if rank is not None and rank not in self.ranks:
-                    self.ranks[rank] = pid
+            if pid not in known and (rank := _rank(pid)) is not None:  # (mpirun's fork before the exec: not yet)
+                self.ranks.setdefault(rank, pid)
+
+    def look(self) -> None:
+        """Note the first rank gone while mpirun runs."""
         if self.first_gone is None:
             gone = [r for r, pid in sorted(self.ranks.items()) if not self._alive(pid)]
             if gone and self.popen.poll() is None:
@@ -106,7 +111,11 @@ class Job:
         return alive(pid) and _started(pid) == self.seen[pid]
 
     def wait(self) -> int:
+        searched = -SEARCH
         while self.popen.poll() is None:
+            if time.monotonic() - searched >= SEARCH:
+                self.search()
+                searched = time.monotonic()
             self.look()
             time.sleep(LOOK)
         return self.popen.returncode
@@ -166,6 +175,8 @@ def relaunch(argv: list[str], scene, ranks: int) -> int:
     if job.first_gone is not None:
         who = f"coupler rank {job.first_gone} (pid {job.ranks[job.first_gone]}) died while the other ranks ran"
         how = f"mpirun {describe_exit(code)}"
+    elif code >= 0:  # mpirun ended by itself, its ranks all gone between two looks
+        who, how = "a coupler rank died", f"mpirun {describe_exit(code)}"
     else:
         who = f"the coupler's mpirun (pid {job.popen.pid}) {describe_exit(code)}"
         how = f"its ranks {'were stopped' if left else 'ended with it'}"

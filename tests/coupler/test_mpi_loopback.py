@@ -229,7 +229,7 @@ def test_a_default_run_listens_on_loopback_only(tmp_path):
     case = tmp_path / "case"
     shutil.copytree(ROOT / "cases" / "standin_flow", case)
     scene = case / "scene.toml"
-    scene.write_text(scene.read_text().replace("steps = 4", "steps = 60"))
+    scene.write_text(scene.read_text().replace("steps = 4", "steps = 30"))
     seen, with_mpi = sample_listeners(["run", case, "--output", tmp_path / "out"], tmp_path)
     assert with_mpi > 3, "MPI never seen loaded in the coupler: the test saw nothing"
     assert not seen, seen
