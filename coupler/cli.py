@@ -203,7 +203,7 @@ def check(args: argparse.Namespace) -> int:
     (``--quick``: the scene alone)."""
     from coupler import scene as scenes
     from coupler.plan.plan import make_plan
-    from coupler.run.preflight import check_memory, estimate, first_step
+    from coupler.run.preflight import check_cores, check_memory, estimate, first_step
 
     scene = scenes.load(args.case)
     print(f"scene         {scene.path}: valid")
@@ -215,6 +215,7 @@ def check(args: argparse.Namespace) -> int:
 
         print(f"check         {scene.check['kind']}: {KINDS[scene.check['kind']].DESCRIPTION} "
               f"(tolerance {scene.check['tolerance']:g})")
+    check_cores(scene, scene.coupling["ranks"])
     estimates = estimate(scene)
     print("size          " + "; ".join(f"{e.name} {e.cells:,} cells" for e in estimates if e.cells))
     print(f"memory        {check_memory(scene, estimates)}")
@@ -248,13 +249,15 @@ def run(args: argparse.Namespace) -> int:
     from coupler.errors import EXIT_CODES
     from coupler.run.execute import execute
 
-    from coupler.run.execute import coupler_ranks, job_size, relaunch
+    from coupler.run.execute import coupler_ranks, job_size
+    from coupler.run.job import relaunch
 
     start = time.perf_counter()
     scene = scenes.load(args.case, output=args.output)
     ranks = coupler_ranks(scene)
     if ranks > 1 and job_size() == 1:  # [coupling] ranks = P: this command again on P ranks
-        return relaunch(["run", args.case] + (["--output", args.output] if args.output is not None else []), ranks)
+        return relaunch(["run", args.case] + (["--output", args.output] if args.output is not None else []), scene,
+                        ranks)
     origin = "--output" if args.output is not None else f"{scene.path}: [output] directory"
     summary = execute(scene, origin, log=_log)
     if not summary.get("check", {}).get("passed", True):
@@ -349,6 +352,15 @@ def _terminate(signum, frame):
 
 
 def main(argv: list[str] | None = None) -> int:
+    from coupler.protocol.mpi import confine
+    from coupler.protocol.mpi_session import mpi_session
+
+    with mpi_session():  # the run's own Open MPI files, removed at its end
+        confine()  # before MPI starts in this process: it listens on loopback only (coupler/protocol/mpi.py)
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

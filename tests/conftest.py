@@ -11,13 +11,17 @@ import os
 import uuid
 import warnings
 
-import numpy as np
-import pytest
+from coupler.protocol.mpi import confine
 
-from transfer import FunctionSpace, StructuredGrid
-from transfer.generate import box_hexahedra, box_tetrahedra
+confine()  # before any test imports mpi4py: this process and the mpiruns it starts listen on loopback only
 
-from vc_helpers import SHIFT, deliver_stopping_signals, stopping_signals_not_delivered
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from transfer import FunctionSpace, StructuredGrid  # noqa: E402
+from transfer.generate import box_hexahedra, box_tetrahedra  # noqa: E402
+
+from vc_helpers import SHIFT, deliver_stopping_signals, stopping_signals_not_delivered  # noqa: E402
 
 
 @pytest.fixture(params=["l2", "pseudo_l2"])

@@ -18,6 +18,11 @@ whatever ``oob_tcp_if_include`` says (Open MPI 4.1, ``orte/mca/oob/tcp/oob_tcp_l
 ``INADDR_ANY``); on one host the settings preload a small library (``LD_PRELOAD``:
 ``_loopback/loopback_bind.c``, built with the kernels) that binds such sockets to loopback, in
 mpirun and whatever else is started with them.
+A process of ours that initialises MPI itself (``varcouple``'s own process: mpi4py, petsc4py and
+dolfinx do on import) reads them from its own environment: :func:`confine` puts them there
+first (without them Open MPI's singleton listened on ``0.0.0.0:1024`` and forked an ``orted``
+listening on all interfaces). With ``VARCOUPLE_MPI_SESSION`` (the run's, :mod:`.mpi_session`) the
+session directory and the shared-memory segments go there.
 tests/coupler/test_mpi_loopback.py reads every listening socket of the processes a run starts.
 """
 
@@ -25,7 +30,9 @@ from __future__ import annotations
 
 import os
 from importlib import resources
-from typing import Mapping
+from typing import Mapping, MutableMapping
+
+from coupler.protocol.mpi_session import SESSION_VAR, shared_memory_dir
 
 INTERFACES_VAR = "VARCOUPLE_MPI_INTERFACES"
 
@@ -43,6 +50,10 @@ def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] 
     for name in interfaces:
         if any(c.isspace() or c == "," for c in name):
             raise ValueError(f"MPI interface {name!r}: one interface name or CIDR network per entry")
+    session = out.get(SESSION_VAR)
+    if session:  # this run's own session directory and shared memory (coupler/protocol/mpi_session.py)
+        out.update({"OMPI_MCA_orte_tmpdir_base": session,
+                    "OMPI_MCA_btl_vader_backing_directory": shared_memory_dir(session)})
     defaults = {"pml": "ob1", "ess_singleton_isolated": "1"}
     if interfaces:
         names = ",".join(interfaces)
@@ -62,6 +73,18 @@ def mpi_environment(interfaces: list[str] | None = None, env: Mapping[str, str] 
     return out
 
 
+def confine(env: MutableMapping[str, str] | None = None) -> None:
+    """Put the settings of :func:`mpi_environment` into ``env`` (default ``os.environ``: this
+    process's own, which Open MPI reads when this process initialises MPI, so call it before
+    anything imports mpi4py, petsc4py or dolfinx; the processes it starts inherit them). In a
+    process mpirun started, the settings its job was given stay; the missing ones are added."""
+    env = os.environ if env is None else env
+    settings = mpi_environment(env=env)
+    if in_job(env):
+        settings = {key: value for key, value in settings.items() if key not in env}
+    env.update(settings)
+
+
 #: what mpirun tells the processes of its job (Open MPI, PMIx): a process started by one of them
 #: (a participant of a coupler on several ranks) must not inherit it, or it would join that job
 JOB_VARIABLES = ("OMPI_", "PMIX_", "OPAL_", "ORTE_", "HWLOC_")
@@ -70,9 +93,14 @@ JOB_VARIABLES = ("OMPI_", "PMIX_", "OPAL_", "ORTE_", "HWLOC_")
 def outside_job(env: Mapping[str, str]) -> dict[str, str]:
     """A copy of `env` without the variables of the MPI job it runs in, if any (then every
     ``OMPI_*`` goes: mpirun sets its own ``OMPI_MCA_*`` among them)."""
-    if "OMPI_COMM_WORLD_SIZE" not in env and "PMIX_RANK" not in env:
+    if not in_job(env):
         return dict(env)
     return {k: v for k, v in env.items() if not k.startswith(JOB_VARIABLES)}
+
+
+def in_job(env: Mapping[str, str]) -> bool:
+    """`env` is that of a process mpirun started."""
+    return "OMPI_COMM_WORLD_SIZE" in env or "PMIX_RANK" in env
 
 
 def loopback_library() -> str | None:

@@ -4,13 +4,9 @@
 from __future__ import annotations
 
 import os
-import shutil
-import subprocess
-import sys
 from contextlib import ExitStack, nullcontext
 
 from coupler.errors import CouplerError, NotConverged, RunFailed, SceneError, one_line
-from coupler.protocol.mpi import mpi_environment
 from coupler.protocol.transport import new_run_id
 from coupler.run.outdir import OutputLock, prepare
 from transfer import TransferError
@@ -32,15 +28,6 @@ def coupler_ranks(scene) -> int:
         raise SceneError(f"{scene.path}: [coupling] ranks: {key}, but this coupler runs on {job} MPI ranks "
                          f"(mpirun -n {job}): give one of them, or the same number")
     return job if job > 1 else key
-
-
-def relaunch(argv: list[str], ranks: int) -> int:
-    """This ``varcouple`` command line (`argv`) under ``mpirun -n ranks``; its exit code."""
-    mpirun = shutil.which("mpirun")
-    if mpirun is None:
-        raise CouplerError(f"[coupling] ranks = {ranks} needs mpirun (Open MPI), which is not installed")
-    command = [mpirun, "-n", str(ranks), "--oversubscribe", sys.executable, "-m", "coupler.cli", *argv]
-    return subprocess.run(command, env=dict(mpi_environment(), OMP_NUM_THREADS="1")).returncode
 
 
 def execute(scene, origin: str, log=print) -> dict:

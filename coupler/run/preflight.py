@@ -17,8 +17,11 @@ each answer).
 
 A scene whose estimate exceeds the memory available (the smallest of the machine's
 MemAvailable, the cgroup's memory.max, the address-space limit and ``[resources]
-memory_limit``) is refused naming the key that makes it large; ``[resources] check_memory
-= false`` runs it anyway. :func:`coupler.run.runner.rehearse` then starts the participants
+memory_limit``) is refused naming the key that makes it large (``[coupling] ranks`` when the
+scene would fit on one coupler rank); ``[resources] check_memory = false`` runs it anyway. The
+coupler's ranks are also held to :data:`RANKS_PER_CORE` per core this process may run on
+(``VARCOUPLE_RANKS_PER_CORE`` raises it, :func:`check_cores`); ``varcouple run`` checks both
+before it starts the ranks. :func:`coupler.run.runner.rehearse` then starts the participants
 and builds the operators without advancing anything: the participants' own validation
 (mesh readable, every loaded boundary selects facets, tags present) and the overlap of their
 meshes reach the user before a run is launched.
@@ -38,6 +41,9 @@ MB = 2**20
 #: (fixed bytes per coupler rank, bytes per cell) of the coupler's part for the solid and for the
 #: fluid (bench/ranks.py: 159-207 MB per rank on the small scene, of it 130 MB before any mesh)
 COSTS = {"coupler_solid": (150 * MB, 2000), "coupler_fluid": (0, 300)}
+#: coupler ranks allowed per core (each rank polls while it waits: many more than the cores only
+#: share them, and an MPI job of hundreds of ranks takes minutes to start); the variable raises it
+RANKS_PER_CORE, RANKS_PER_CORE_VAR = 4, "VARCOUPLE_RANKS_PER_CORE"
 
 
 #: a first step may take this many times the estimate (the spread of bench/first_step.py's runs
@@ -149,14 +155,20 @@ def _size(n: float) -> str:
     return f"{n / 1024:.3g} kB"
 
 
-def check_memory(scene, estimates: list[Estimate]) -> str:
-    """SceneError unless the estimates fit in the available memory (or the scene says not to
-    check); the line describing the estimate otherwise."""
+def check_memory(scene, estimates: list[Estimate], ranks: int | None = None) -> str:
+    """SceneError unless the estimates (of the coupler on `ranks`, default ``[coupling] ranks``)
+    fit in the available memory (or the scene says not to check); the line describing the
+    estimate otherwise."""
     total = sum(e.bytes for e in estimates)
     available, source = available_memory(scene.resources["memory_limit"])
     parts = ", ".join(f"{e.name} {_size(e.bytes)}" for e in estimates)
     line = f"about {_size(total)} ({parts}); {_size(available)} available ({source})"
     if total > available and scene.resources["check_memory"]:
+        ranks = ranks or scene.coupling["ranks"]
+        if ranks > 1 and sum(e.bytes for e in estimate(scene, 1)) <= available:
+            raise SceneError(f"{scene.path}: [coupling] ranks = {ranks}: about {_size(COSTS['coupler_solid'][0])} "
+                             f"per coupler rank, the run would need {line}; give fewer ranks, or set "
+                             f"[resources] check_memory = false to run it anyway")
         big = max((e for e in estimates if e.cells), key=lambda e: e.bytes)
         raise SceneError(f"{big.key}: {big.cells:,} {big.name} cells: the run would need {line}; make it "
                          f"smaller, or set [resources] check_memory = false to run it anyway")
@@ -174,11 +186,11 @@ def first_step(scene, estimates: list[Estimate]) -> tuple[str | None, str | None
         return None, None
     cells = next(e.cells for e in estimates if e.name == "solid")
     core = rule[0] * (cells / 1e4) ** rule[1]
-    load, cores = os.getloadavg()[0], os.cpu_count() or 1
-    seconds = core * max(1.0, load / cores)
+    load, n = os.getloadavg()[0], cores()
+    seconds = core * max(1.0, load / n)
     timeout = scene.messaging["timeout"]
     line = (f"the solid's first load step with contact about {seconds:,.1f} s ({cells:,} cells: {core:,.1f} s on a "
-            f"core of its own by the rule of {solid.spec.kind}, load {load:.1f} on {cores} cores); [messaging] "
+            f"core of its own by the rule of {solid.spec.kind}, load {load:.1f} on {n} cores); [messaging] "
             f"timeout {timeout:g} s")
     if MARGIN * seconds <= timeout:
         return line, None
@@ -186,3 +198,25 @@ def first_step(scene, estimates: list[Estimate]) -> tuple[str | None, str | None
     return line, (f"{scene.path}: the solid's first load step may take about {seconds:,.1f} s ({cells:,} cells) and "
                   f"up to {MARGIN:g} times that, more than [messaging] timeout = {timeout:g} s, after which the run "
                   f"stops (exit 4); set [messaging] timeout = {value} in the scene")
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def check_cores(scene, ranks: int) -> None:
+    """SceneError naming ``[coupling] ranks`` when the coupler's `ranks` are more than
+    :data:`RANKS_PER_CORE` (or ``VARCOUPLE_RANKS_PER_CORE``) per core."""
+    text = os.environ.get(RANKS_PER_CORE_VAR, "")
+    try:
+        per_core = int(text) if text else RANKS_PER_CORE
+    except ValueError:
+        raise SceneError(f"{RANKS_PER_CORE_VAR}={text!r}: not an integer") from None
+    if ranks > per_core * cores():
+        raise SceneError(f"{scene.path}: [coupling] ranks = {ranks}: more than {per_core} coupler ranks per core "
+                         f"({cores()} cores here, at most {per_core * cores()}); give fewer ranks, or set "
+                         f"{RANKS_PER_CORE_VAR} to allow more per core")

@@ -1,6 +1,6 @@
 """The coupler on P MPI ranks (docs/scaling.md, step 3): ``mpirun -n P varcouple run CASE``,
 or ``[coupling] ranks = P`` (``varcouple run`` then starts itself under ``mpirun -n P``:
-:func:`coupler.run.execute.relaunch`).
+:func:`coupler.run.job.relaunch`).
 
 Every rank runs the same plan and loop (:class:`RanksRun`). Rank 0 starts the participants and
 keeps their control verbs (announce, configure, save/restore, finish); every rank listens on its

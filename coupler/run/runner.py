@@ -114,8 +114,9 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     root = comm is None or comm.rank == 0
     plan = make_plan(scene)
     run_class.admit(scene, plan, comm)
-    estimates = estimate(scene, comm.size if comm is not None else 1)
-    log(f"memory: {check_memory(scene, estimates)}")
+    ranks = comm.size if comm is not None else 1
+    estimates = estimate(scene, ranks)
+    log(f"memory: {check_memory(scene, estimates, ranks)}")
     warning = first_step(scene, estimates)[1]
     if warning:
         log(f"warning: {warning}")

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from cli_helpers import assert_clean_error, run_cli
+from coupler.run import preflight
 from transfer.generators.height_maps import read_npz, write_npz, write_xyz
 from transfer.generators.surfaces import fracture_pair
 from vc_helpers import CASES, copy_case
@@ -67,7 +68,7 @@ def test_check_warns_when_the_first_step_may_outlast_the_messaging_timeout(capsy
     [messaging] timeout and a value; with that value set the warning is gone. The shipped scene
     (timeout 300 s by default) is not warned about. The estimate grows with the machine's load
     per core (here fixed: 2 cores, load 1, then 8)."""
-    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(preflight, "cores", lambda: 2)
     monkeypatch.setattr(os, "getloadavg", lambda: (1.0, 1.0, 1.0))
     code, out, _ = run_cli(capsys, "check", "--quick", CASES / "measured_fracture")
     assert code == 0 and "time          the solid's first load step with contact about" in out

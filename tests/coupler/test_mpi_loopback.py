@@ -1,4 +1,4 @@
-"""Open MPI in a single-host run listens on no network interface (coupler/mpi_env.py): not the
+"""Open MPI in a single-host run listens on no network interface (coupler/protocol/mpi.py): not the
 ranks of a participant under mpirun, not a single process that initialises MPI (the solid with
 one rank), not the OpenFOAM solver's ranks; mpirun's wire-up goes over loopback.
 Sockets are read from /proc (/proc/<pid>/fd and /proc/net/tcp, tcp6)."""
@@ -22,7 +22,7 @@ import pytest
 
 from coupler.run.launch import Launcher, descendants
 from coupler.run.client import CouplerSession
-from coupler.protocol.mpi import INTERFACES_VAR, loopback_library, mpi_environment
+from coupler.protocol.mpi import INTERFACES_VAR, confine, loopback_library, mpi_environment
 from fluid_openfoam.case import CaseSpec
 from fluid_openfoam.parallel import Decomposition
 from fluid_openfoam.solver import OpenFOAMSolver
@@ -196,3 +196,74 @@ def test_named_interfaces_for_several_hosts():
     assert mpi_environment(["eth0"], env=single)["OMPI_MCA_oob_tcp_if_include"] == "eth0"
     with pytest.raises(ValueError):
         mpi_environment(["eth0 eth1"], env={})
+
+
+def sample_listeners(argv, cwd, seconds: float = 120):
+    """Run ``varcouple ARGV`` to its end, reading the listening sockets of its process and all
+    its descendants every 50 ms; (the non-loopback listeners seen, how many readings found
+    Open MPI loaded in the varcouple process). It must exit 0."""
+    proc = subprocess.Popen([sys.executable, "-m", "coupler.cli", *map(str, argv)], cwd=cwd,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    seen, with_mpi, t0 = {}, 0, time.monotonic()
+    try:
+        while proc.poll() is None and time.monotonic() - t0 < seconds:
+            tree = [proc.pid, *descendants(proc.pid)]
+            try:
+                with_mpi += "libmpi" in Path(f"/proc/{proc.pid}/maps").read_text()
+            except OSError:
+                pass
+            for pid, socks in exposed(listeners(tree)).items():
+                seen[f"{comm(pid)}[{pid}]"] = socks
+            time.sleep(0.05)
+    finally:
+        proc.kill()
+        err = proc.communicate()[1]
+    assert proc.returncode == 0, err[-2000:]
+    return seen, with_mpi
+
+
+def test_a_default_run_listens_on_loopback_only(tmp_path):
+    """``varcouple run`` on one rank: the coupler initialises MPI itself (petsc4py), as Open MPI's
+    singleton, which listened on 0.0.0.0:1024 and [::]:1024 and forked an orted listening on all
+    interfaces; no process of the run listens beyond loopback now."""
+    case = tmp_path / "case"
+    shutil.copytree(ROOT / "cases" / "standin_flow", case)
+    scene = case / "scene.toml"
+    scene.write_text(scene.read_text().replace("steps = 4", "steps = 30"))
+    seen, with_mpi = sample_listeners(["run", case, "--output", tmp_path / "out"], tmp_path)
+    assert with_mpi > 3, "MPI never seen loaded in the coupler: the test saw nothing"
+    assert not seen, seen
+
+
+def test_check_listens_on_loopback_only(tmp_path):
+    """``varcouple check`` builds the operators in its own process (MPI, singleton) and starts
+    the participants: all on loopback only."""
+    seen, with_mpi = sample_listeners(["check", ROOT / "cases" / "standin_flow"], tmp_path)
+    assert with_mpi > 3, "MPI never seen loaded in the coupler: the test saw nothing"
+    assert not seen, seen
+
+
+def test_the_test_process_itself_listens_on_loopback_only():
+    """The tests initialise MPI in pytest's own process (tests/conftest.py confines it first)."""
+    from mpi4py import MPI
+
+    MPI.COMM_WORLD.Barrier()
+    tree = [os.getpid(), *descendants(os.getpid())]
+    assert [comm(p) for p in tree if comm(p) == "orted"] == []
+    assert not exposed(listeners(tree))
+
+
+def test_confine_sets_this_process_and_keeps_a_jobs_settings():
+    """:func:`confine` writes the one-host settings into the environment given; in a process
+    mpirun started, the settings of its job stay and only the missing ones are added."""
+    alone = {"PATH": "/bin"}
+    confine(alone)
+    assert alone["OMPI_MCA_btl"] == "self,vader" and alone["OMPI_MCA_ess_singleton_isolated"] == "1"
+    assert alone["PATH"] == "/bin"
+    job = {"OMPI_COMM_WORLD_SIZE": "2", "OMPI_MCA_btl": "self,tcp", "OMPI_MCA_orte_ess_num_procs": "2"}
+    confine(job)
+    assert job["OMPI_MCA_btl"] == "self,tcp" and job["OMPI_MCA_orte_ess_num_procs"] == "2"
+    assert job["OMPI_MCA_oob_tcp_if_include"] == "lo" and job["OMPI_COMM_WORLD_SIZE"] == "2"
+    named = {INTERFACES_VAR: "eth0", "OMPI_MCA_btl": "self,vader"}
+    confine(named)
+    assert named["OMPI_MCA_btl_tcp_if_include"] == "eth0" and named["OMPI_MCA_btl"] == "self,vader,tcp"
