@@ -1,6 +1,6 @@
-"""``mpirun -n 2 varcouple transfer``: the meshes read and partitioned on every rank, the
-operator assembled and applied on both, and rank 0 writes the file the serial run writes
-(fields equal to 1e-12, the same uncovered dofs); an input error is said once."""
+"""``mpirun -n 2 varcouple transfer``: rank 0 reads the two files, once, and sends the other
+rank its parts; the operator is assembled and applied on both, and rank 0 writes the file the
+serial run writes (fields equal to 1e-12, the same uncovered dofs); an input error is said once."""
 
 from __future__ import annotations
 
@@ -52,6 +52,8 @@ def test_two_ranks_write_the_serial_file(files, name, kind, method):
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert proc.stdout.count("wrote ") == 1  # rank 0 alone reports and writes
         assert ("x 2 MPI ranks" in proc.stdout) == (ranks == 2)
+        if ranks == 2:  # the files are opened by rank 0 alone, each once
+            assert "read    files opened per rank [2, 0]" in proc.stdout
         outputs[ranks] = meshio.read(out)
     serial, mpi = outputs[1], outputs[2]
     np.testing.assert_array_equal(serial.points, mpi.points)
@@ -69,3 +71,53 @@ def test_an_input_error_is_said_once(files):
     assert proc.returncode == 2
     assert proc.stderr.count("varcouple: error:") == 1
     assert "src.vtu: no field 'nope'" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def write_pieces(mesh, path, count, point_data=None):
+    """`mesh` cut in `count` slabs of cells, each a .vtu piece with its points, and the .pvtu naming them."""
+    from coupler.output.results import _layout, _pvtu
+    from transfer.partition import slabs
+
+    owner, names = slabs(mesh, count, axis=0), []
+    for i in range(count):
+        cells = mesh.cells[owner == i]
+        used, local = np.unique(cells, return_inverse=True)
+        piece = meshio.Mesh(mesh.points[used], [("tetra", local.reshape(cells.shape))],
+                            point_data={k: v[used] for k, v in (point_data or {}).items()})
+        names.append(f"{path.stem}_p{i}.vtu")
+        meshio.write(path.parent / names[-1], piece)
+    path.write_text(_pvtu(_layout(piece), names))
+
+
+def by_coordinates(m: meshio.Mesh, name: str) -> np.ndarray:
+    """The point field `name` of `m` in the lexicographic order of the points."""
+    return m.point_data[name][np.lexsort(m.points.T[::-1])]
+
+
+def test_pieces_are_read_by_their_ranks(files, tmp_path):
+    """SRC and DST as .pvtu of 3 pieces each: rank 0 opens pieces 0 and 1 of each, rank 1 piece 2;
+    the output is the same on 1 and 2 ranks and is the whole-file run's, point by point."""
+    src, dst = meshio.read(files / "src.vtu"), meshio.read(files / "dst.vtu")
+    from transfer import Mesh
+
+    write_pieces(Mesh.from_meshio(src), tmp_path / "src.pvtu", 3, {"u": src.point_data["u"]})
+    write_pieces(Mesh.from_meshio(dst), tmp_path / "dst.pvtu", 3)
+    outputs = {}
+    for ranks in (1, 2):
+        out = tmp_path / f"out_{ranks}.vtu"
+        proc = varcouple(tmp_path / "src.pvtu", tmp_path / "dst.pvtu", "--field", "u", "-o", out, ranks=ranks)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert f"read    files opened per rank {[6] if ranks == 1 else [4, 2]}" in proc.stdout
+        outputs[ranks] = meshio.read(out)
+    whole = files / "whole.vtu"
+    assert varcouple(files / "src.vtu", files / "dst.vtu", "--field", "u", "-o", whole).returncode == 0
+    serial, mpi, whole = outputs[1], outputs[2], meshio.read(whole)
+    assert len(serial.points) == len(whole.points) and len(serial.cells[0].data) == len(whole.cells[0].data)
+    np.testing.assert_array_equal(serial.points, mpi.points)
+    np.testing.assert_array_equal(serial.cells[0].data, mpi.cells[0].data)
+    for a, b in ((serial, mpi), (serial, whole)):
+        np.testing.assert_array_equal(*(m.points[np.lexsort(m.points.T[::-1])] for m in (a, b)))
+        np.testing.assert_array_equal(by_coordinates(a, "covered"), by_coordinates(b, "covered"))
+        u, v = by_coordinates(a, "u"), by_coordinates(b, "u")
+        np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
+        assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
