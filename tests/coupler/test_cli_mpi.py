@@ -73,22 +73,6 @@ def test_an_input_error_is_said_once(files):
     assert "src.vtu: no field 'nope'" in proc.stderr and "Traceback" not in proc.stderr
 
 
-def write_pieces(mesh, path, count, point_data=None):
-    """`mesh` cut in `count` slabs of cells, each a .vtu piece with its points, and the .pvtu naming them."""
-    from coupler.output.results import _layout, _pvtu
-    from transfer.partition import slabs
-
-    owner, names = slabs(mesh, count, axis=0), []
-    for i in range(count):
-        cells = mesh.cells[owner == i]
-        used, local = np.unique(cells, return_inverse=True)
-        piece = meshio.Mesh(mesh.points[used], [("tetra", local.reshape(cells.shape))],
-                            point_data={k: v[used] for k, v in (point_data or {}).items()})
-        names.append(f"{path.stem}_p{i}.vtu")
-        meshio.write(path.parent / names[-1], piece)
-    path.write_text(_pvtu(_layout(piece), names))
-
-
 def by_coordinates(m: meshio.Mesh, name: str) -> np.ndarray:
     """The point field `name` of `m` in the lexicographic order of the points."""
     return m.point_data[name][np.lexsort(m.points.T[::-1])]
@@ -97,11 +81,13 @@ def by_coordinates(m: meshio.Mesh, name: str) -> np.ndarray:
 def test_pieces_are_read_by_their_ranks(files, tmp_path):
     """SRC and DST as .pvtu of 3 pieces each: rank 0 opens pieces 0 and 1 of each, rank 1 piece 2;
     the output is the same on 1 and 2 ranks and is the whole-file run's, point by point."""
-    src, dst = meshio.read(files / "src.vtu"), meshio.read(files / "dst.vtu")
+    from coupler.output.results import write_pieces
     from transfer import Mesh
+    from transfer.partition import slabs
 
-    write_pieces(Mesh.from_meshio(src), tmp_path / "src.pvtu", 3, {"u": src.point_data["u"]})
-    write_pieces(Mesh.from_meshio(dst), tmp_path / "dst.pvtu", 3)
+    for name in ("src", "dst"):
+        mesh = meshio.read(files / f"{name}.vtu")
+        write_pieces(mesh, tmp_path / f"{name}.pvtu", slabs(Mesh.from_meshio(mesh), 3, axis=0))
     outputs = {}
     for ranks in (1, 2):
         out = tmp_path / f"out_{ranks}.vtu"
