@@ -74,8 +74,9 @@ def _mpi_job() -> tuple[int, int]:
 def transfer(args: argparse.Namespace) -> int:
     """Transfer one field from SRC to DST and write DST with it to OUT. Under
     ``mpirun -n N`` rank 0 reads both files, once, and sends every rank its part of each mesh
-    (coordinate bisection, the two meshes cut independently); the operator is assembled and
-    applied on the N ranks and rank 0 writes the same file as a serial run."""
+    (coordinate bisection, the two meshes cut independently), while a ``.pvtu`` is read in
+    parts, each rank its own pieces; the operator is assembled and applied on the N ranks and
+    rank 0 writes the same file as a serial run."""
     from transfer import TransferError
 
     from coupler.errors import CouplerError

@@ -107,3 +107,19 @@ def test_pieces_are_read_by_their_ranks(files, tmp_path):
         u, v = by_coordinates(a, "u"), by_coordinates(b, "u")
         np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
         assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
+
+
+def test_a_bad_piece_on_rank_1_is_said_once_by_rank_0(files, tmp_path):
+    """The third piece (rank 1's) is missing: every rank stops with exit 2, rank 0 says which."""
+    from coupler.output.results import write_pieces
+    from transfer import Mesh
+    from transfer.partition import slabs
+
+    mesh = meshio.read(files / "src.vtu")
+    write_pieces(mesh, tmp_path / "src.pvtu", slabs(Mesh.from_meshio(mesh), 3, axis=0))
+    (tmp_path / "src_p2.vtu").unlink()
+    proc = varcouple(tmp_path / "src.pvtu", files / "dst.vtu", "--field", "u", "-o", tmp_path / "x.vtu", ranks=2)
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert proc.stderr.count("varcouple: error:") == 1
+    assert "src_p2.vtu: file not found" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "x.vtu").exists()
