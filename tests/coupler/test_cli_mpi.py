@@ -73,38 +73,44 @@ def test_an_input_error_is_said_once(files):
     assert "src.vtu: no field 'nope'" in proc.stderr and "Traceback" not in proc.stderr
 
 
-def by_coordinates(m: meshio.Mesh, name: str) -> np.ndarray:
-    """The point field `name` of `m` in the lexicographic order of the points."""
-    return m.point_data[name][np.lexsort(m.points.T[::-1])]
+def by_coordinates(m: meshio.Mesh, name: str, kind: str) -> np.ndarray:
+    """The point (cell) field `name` of `m` in the lexicographic order of the points (cell centres)."""
+    if kind == "point":
+        return m.point_data[name][np.lexsort(m.points.T[::-1])]
+    return m.cell_data[name][0][np.lexsort(m.points[m.cells[0].data].mean(axis=1).T[::-1])]
 
 
-def test_pieces_are_read_by_their_ranks(files, tmp_path):
+@pytest.mark.parametrize("name, kind, method", [("u", "point", "l2"), ("k", "cell", "pseudo_l2")])
+def test_pieces_are_read_by_their_ranks(files, tmp_path, name, kind, method):
     """SRC and DST as .pvtu of 3 pieces each: rank 0 opens pieces 0 and 1 of each, rank 1 piece 2;
-    the output is the same on 1 and 2 ranks and is the whole-file run's, point by point."""
+    the output is the same on 1 and 2 ranks and is the whole-file run's, point by point (cell by cell)."""
     from coupler.output.results import write_pieces
     from transfer import Mesh
     from transfer.partition import slabs
 
-    for name in ("src", "dst"):
-        mesh = meshio.read(files / f"{name}.vtu")
-        write_pieces(mesh, tmp_path / f"{name}.pvtu", slabs(Mesh.from_meshio(mesh), 3, axis=0))
+    for file in ("src", "dst"):
+        mesh = meshio.read(files / f"{file}.vtu")
+        write_pieces(mesh, tmp_path / f"{file}.pvtu", slabs(Mesh.from_meshio(mesh), 3, axis=0))
     outputs = {}
     for ranks in (1, 2):
         out = tmp_path / f"out_{ranks}.vtu"
-        proc = varcouple(tmp_path / "src.pvtu", tmp_path / "dst.pvtu", "--field", "u", "-o", out, ranks=ranks)
+        proc = varcouple(tmp_path / "src.pvtu", tmp_path / "dst.pvtu", "--field", name, "-o", out,
+                         "--method", method, ranks=ranks)
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert f"read    files opened per rank {[6] if ranks == 1 else [4, 2]}" in proc.stdout
         outputs[ranks] = meshio.read(out)
-    whole = files / "whole.vtu"
-    assert varcouple(files / "src.vtu", files / "dst.vtu", "--field", "u", "-o", whole).returncode == 0
+    whole = tmp_path / "whole.vtu"
+    proc = varcouple(files / "src.vtu", files / "dst.vtu", "--field", name, "-o", whole, "--method", method)
+    assert proc.returncode == 0, proc.stderr[-3000:]
     serial, mpi, whole = outputs[1], outputs[2], meshio.read(whole)
     assert len(serial.points) == len(whole.points) and len(serial.cells[0].data) == len(whole.cells[0].data)
     np.testing.assert_array_equal(serial.points, mpi.points)
     np.testing.assert_array_equal(serial.cells[0].data, mpi.cells[0].data)
     for a, b in ((serial, mpi), (serial, whole)):
         np.testing.assert_array_equal(*(m.points[np.lexsort(m.points.T[::-1])] for m in (a, b)))
-        np.testing.assert_array_equal(by_coordinates(a, "covered"), by_coordinates(b, "covered"))
-        u, v = by_coordinates(a, "u"), by_coordinates(b, "u")
+        np.testing.assert_array_equal(by_coordinates(a, "covered", kind), by_coordinates(b, "covered", kind))
+        u, v = by_coordinates(a, name, kind), by_coordinates(b, name, kind)
+        assert 0 < np.isnan(u).reshape(len(u), -1).any(axis=1).sum() < len(u)  # the target sticks out: NaN there
         np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
         assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
 
