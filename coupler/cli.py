@@ -136,7 +136,7 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
         except QuadratureError as exc:
             raise CouplerError(f"--quadrature-degree: {exc}") from None
     check_writable(args.output, inputs=(args.source, args.target))
-    if ranks > 1 or is_pieces(args.source) or is_pieces(args.target):  # a .pvtu is read in parts, on any ranks
+    if ranks > 1 or is_pieces(args.source) or is_pieces(args.target):  # .pvtu, .xdmf: read in parts, on any ranks
         p, target, field = _project_distributed(args, say)
         if p is None:
             return 0
@@ -203,7 +203,7 @@ def _project_distributed(args, say):
     from coupler.run.projection import Projection
 
     comm = MPI.COMM_WORLD
-    pieces = {key: Pieces.read(getattr(args, key), comm) for key in ("source", "target")
+    pieces = {key: Pieces.open(getattr(args, key), comm) for key in ("source", "target")
               if is_pieces(getattr(args, key))}
     if not pieces:
         source, target, field = _on_root(comm, lambda: _read(args, say)) or (None, None, None)

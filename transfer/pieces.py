@@ -1,4 +1,6 @@
-"""A ``.pvtu`` file read in parts: the ranks of an MPI job each read their own pieces.
+"""A ``.pvtu`` file read in parts: the ranks of an MPI job each read their own pieces;
+an XDMF + HDF5 mesh in dolfinx's layout (``python -m solid_fenicsx.convert``) likewise, each
+rank its own rows (:meth:`Pieces.rows`).
 
 The pieces a ``.pvtu`` names (``<Piece Source="..."/>``, paths relative to it) are shared
 out in order, a run of consecutive pieces per rank (rank 0 has the first). A piece is a
@@ -16,13 +18,33 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MeshFileError
+from .errors import MeshFileError, TransferError
 from .mesh import CELL_TYPES, Mesh
 from .spaces import FAMILIES
 
 
 def is_pieces(path) -> bool:
-    return str(path).lower().endswith(".pvtu")
+    """`path` is read in parts (a .pvtu or an .xdmf)."""
+    return str(path).lower().endswith((".pvtu", ".xdmf"))
+
+
+def _datasets(path) -> tuple[Path, str, str]:
+    """(HDF5 file, topology dataset, geometry dataset) of the grid ``mesh`` of the XDMF `path`."""
+    from .xdmf import MESH, layout
+
+    path = Path(path)
+    try:
+        found = layout(path)
+    except ValueError as exc:
+        raise MeshFileError(f"{path}: {exc}") from None
+    if found is None:
+        raise MeshFileError(f"{path}: no grid {MESH!r} (dolfinx's layout); write it with "
+                            f"python -m solid_fenicsx.convert")
+    grid = next(g for g in ET.parse(path).getroot().find("Domain").findall("Grid") if g.get("Name") == MESH)
+    items = [grid.find(f"{part}/DataItem") for part in ("Topology", "Geometry")]
+    if any(item is None or ":" not in (item.text or "") for item in items):
+        raise MeshFileError(f"{path}: grid {MESH!r}: topology and geometry must be HDF5 data items")
+    return (path.with_suffix(".h5"), *(item.text.strip().split(":", 1)[1] for item in items))
 
 
 def sources(path) -> list[Path]:
@@ -100,11 +122,11 @@ def numbering(points: np.ndarray, comm) -> tuple[np.ndarray, int]:
 
 
 def _agreed(comm, work):
-    """`work()` on every rank; a MeshFileError on any fails every rank with the first message."""
+    """`work()` on every rank; a TransferError on any fails every rank with the first message."""
     failure, result = None, None
     try:
         result = work()
-    except MeshFileError as exc:
+    except TransferError as exc:  # a bad file, or a mesh error naming it
         failure = str(exc)
     failures = [f for f in comm.allgather(failure) if f]
     if failures:
@@ -125,6 +147,43 @@ class Pieces:
     num_points: int
     num_cells: int
     comm: object
+
+    @classmethod
+    def open(cls, path, comm) -> "Pieces":
+        """This rank's part of the .pvtu or .xdmf `path` (collective)."""
+        return cls.rows(path, comm) if str(path).lower().endswith(".xdmf") else cls.read(path, comm)
+
+    @classmethod
+    def rows(cls, path, comm) -> "Pieces":
+        """This rank's rows of an XDMF + HDF5 tet mesh in dolfinx's layout: topology rows
+        r n / P to (r + 1) n / P and the geometry rows they use; the global ids are the row
+        numbers, the file's own numbering (collective)."""
+        import h5py
+        import meshio
+
+        from .meshfile import MeshFile
+
+        h5, topology, geometry = _agreed(comm, lambda: _datasets(path))
+
+        def read():
+            try:
+                with h5py.File(h5, "r") as f:
+                    n, m = f[topology].shape[0], f[geometry].shape[0]
+                    lo, hi = comm.rank * n // comm.size, (comm.rank + 1) * n // comm.size
+                    cells = np.asarray(f[topology][lo:hi], np.int64)
+                    used, local = np.unique(cells, return_inverse=True)
+                    points = np.asarray(f[geometry][used] if len(used) else np.zeros((0, 3)), np.float64)
+            except (OSError, KeyError) as exc:
+                raise MeshFileError(f"{path}: cannot read {h5.name}: {exc}") from None
+            MeshFile.reads += 1
+            local = local.reshape(cells.shape)
+            mesh = (Mesh(points, local, "tetra", name=str(path), reorient=True) if len(cells) else
+                    Mesh.empty("tetra", str(path)))
+            return MeshFile(str(path), meshio.Mesh(points, [("tetra", mesh.cells)]), mesh, [0]), used, lo, n, m
+
+        held, used, lo, n, m = _agreed(comm, read)
+        return cls(str(path), [held] if held.mesh.num_cells else [], "tetra", used,
+                   lo + np.arange(held.mesh.num_cells, dtype=np.int64), m, n, comm)
 
     @classmethod
     def read(cls, path, comm) -> "Pieces":

@@ -129,3 +129,29 @@ def test_a_bad_piece_on_rank_1_is_said_once_by_rank_0(files, tmp_path):
     assert proc.stderr.count("varcouple: error:") == 1
     assert "src_p2.vtu: file not found" in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "x.vtu").exists()
+
+
+def test_an_xdmf_target_is_read_by_rows(files, tmp_path):
+    """DST converted to XDMF + HDF5 by ``mpirun -n 2 python -m solid_fenicsx.convert``: each rank
+    reads its own topology rows and the points they use (rank 0 also opens SRC: [2, 1]); the
+    output is the same on 1 and 2 ranks and is the .vtu run's, point by point."""
+    pytest.importorskip("dolfinx")
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    subprocess.run(["mpirun", "-n", "2", "--oversubscribe", sys.executable, "-m", "solid_fenicsx.convert",
+                    str(files / "dst.vtu"), str(tmp_path / "dst.xdmf")], check=True, env=env, cwd=ROOT,
+                   capture_output=True, timeout=180)
+    outputs = {}
+    for ranks, opened in ((1, [2]), (2, [2, 1]), (0, None)):
+        out = tmp_path / f"out_{ranks}.vtu"
+        target = files / "dst.vtu" if ranks == 0 else tmp_path / "dst.xdmf"  # 0: the .vtu, serially
+        proc = varcouple(files / "src.vtu", target, "--field", "u", "-o", out, ranks=max(ranks, 1))
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert opened is None or f"read    files opened per rank {opened}" in proc.stdout
+        outputs[ranks] = meshio.read(out)
+    np.testing.assert_array_equal(outputs[1].points, outputs[2].points)
+    np.testing.assert_array_equal(outputs[1].cells[0].data, outputs[2].cells[0].data)
+    for a, b in ((outputs[1], outputs[2]), (outputs[1], outputs[0])):
+        np.testing.assert_array_equal(*(m.points[np.lexsort(m.points.T[::-1])] for m in (a, b)))
+        u, v = by_coordinates(a, "u", "point"), by_coordinates(b, "u", "point")
+        np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
+        assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
