@@ -123,7 +123,7 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
     import numpy as np
 
     from transfer import QuadratureError
-    from transfer.pieces import is_pieces
+    from transfer.pieces import read_in_parts
     from transfer.quadrature import check_degree
 
     from coupler.errors import CouplerError
@@ -136,7 +136,7 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
         except QuadratureError as exc:
             raise CouplerError(f"--quadrature-degree: {exc}") from None
     check_writable(args.output, inputs=(args.source, args.target))
-    if ranks > 1 or is_pieces(args.source) or is_pieces(args.target):  # .pvtu, .xdmf: read in parts, on any ranks
+    if ranks > 1 or read_in_parts(args.source) or read_in_parts(args.target):  # .pvtu, .xdmf: read in parts, on any ranks
         p, target, field = _project_distributed(args, say)
         if p is None:
             return 0
@@ -198,13 +198,13 @@ def _project_distributed(args, say):
     from transfer.distributed import gather, scatter
     from transfer.mesh import Mesh
     from transfer.meshfile import MeshFile, MeshFileField, family
-    from transfer.pieces import Pieces, is_pieces
+    from transfer.pieces import Pieces, read_in_parts
 
     from coupler.run.projection import Projection
 
     comm = MPI.COMM_WORLD
     pieces = {key: Pieces.open(getattr(args, key), comm) for key in ("source", "target")
-              if is_pieces(getattr(args, key))}
+              if read_in_parts(getattr(args, key))}
     if not pieces:
         source, target, field = _on_root(comm, lambda: _read(args, say)) or (None, None, None)
     else:

@@ -23,7 +23,7 @@ from .mesh import CELL_TYPES, Mesh
 from .spaces import FAMILIES
 
 
-def is_pieces(path) -> bool:
+def read_in_parts(path) -> bool:
     """`path` is read in parts (a .pvtu or an .xdmf)."""
     return str(path).lower().endswith((".pvtu", ".xdmf"))
 
