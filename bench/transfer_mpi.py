@@ -6,6 +6,15 @@ travels (cells and bytes per rank) and the memory per element, for docs/scaling.
 
     .venv/bin/python bench/transfer_mpi.py                 # 48k x 83k tets, 1 and 2 ranks
     .venv/bin/python bench/transfer_mpi.py --quick -o t.json
+    .venv/bin/python bench/transfer_mpi.py --cli           # `varcouple transfer` end to end, 94k x 118k tets
+
+With --cli: the command as a user runs it, on one rank and under ``mpirun -n 2``, the files
+written first (a P1 field on the source), as .vtu (rank 0 reads them and sends the parts)
+and as .pvtu of 2 pieces (each rank reads its own): the wall time from start to exit and
+each rank's peak resident memory (/usr/bin/time) above the same command's on a 750 x 1,296
+tet pair (the interpreter, MPI and PETSc: what the process costs whatever the mesh), as
+ratios against the one-rank .vtu run of the same benchmark, and the output files compared
+with its (equal to 1e-12).
 
 Both codes cut both meshes by the same coordinate bisection (bench/supermesh_parallel.py
 writes the same parts for libsupermesh). Times are the slowest rank's, the minimum over
@@ -35,7 +44,10 @@ if str(ROOT) not in sys.path:
 DEFAULT_OUTPUT = ROOT / "bench" / "results" / "transfer_mpi.json"
 GOAL_EFFICIENCY = 0.90
 #: lattice cells per axis (6 tets per cube) of the source and the target
-SIZES = {"small": (20, 24), "quick": (5, 6)}
+SIZES = {"small": (20, 24), "quick": (5, 6), "cli": (25, 27)}
+CLI_OUTPUT = ROOT / "bench" / "results" / "transfer_cli_mpi.json"
+#: goals of issue 32 item 3 (on a quiet machine): time T(1) / T(2), and peak memory per rank against one rank's
+GOAL_CLI_SPEEDUP, GOAL_CLI_MEMORY = 1.6, 0.6
 RANKS = (1, 2)
 
 
@@ -115,9 +127,121 @@ def _efficiency(seconds: dict) -> float | None:
     return seconds[1] / (2 * seconds[2])
 
 
+def _command(src: Path, dst: Path, out: Path, ranks: int, files: Path) -> dict:
+    """`varcouple transfer` on `ranks` (1: without mpirun): wall seconds to exit, peak RSS of each rank."""
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    for old in files.glob("rss_*"):
+        old.unlink()
+    timed = f'exec /usr/bin/time -f %M -o {files}/rss_${{OMPI_COMM_WORLD_RANK:-0}} "$@"'
+    cmd = ["sh", "-c", timed, "sh", sys.executable, "-m", "coupler.cli", "transfer", str(src), str(dst),
+           "--field", "u", "-o", str(out)]
+    if ranks > 1:
+        cmd = ["mpirun", "-n", str(ranks), "--oversubscribe", "--bind-to", "none", *cmd]
+    start = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=3600)
+    seconds = time.perf_counter() - start
+    if proc.returncode:
+        raise RuntimeError(f"{' '.join(cmd)} failed: {proc.stderr[-2000:]}")
+    peaks = [1024 * int((files / f"rss_{r}").read_text().split()[-1]) for r in range(ranks)]  # KB, rank by rank
+    return {"seconds": seconds, "peak_rss_bytes": peaks, "load_average": list(os.getloadavg())}
+
+
+def _write_inputs(size: str, files: Path) -> tuple[int, int]:
+    """The source (with the P1 field u) and the target of `size` as .vtu and as .pvtu of 2 pieces
+    (bisection, as a coupler on 2 ranks writes them) in `files`; their numbers of tets."""
+    import meshio
+
+    from coupler.output.results import write_pieces
+    from transfer import Mesh
+    from transfer.partition import bisection
+
+    files.mkdir(exist_ok=True)
+    src, dst = meshes(size)
+    u = np.sin(3 * src.points[:, 0]) + src.points[:, 1]
+    for name, mesh, data in (("src", src, {"u": u}), ("dst", dst, {})):
+        whole = meshio.Mesh(mesh.points, [("tetra", mesh.cells)], point_data=data)
+        meshio.write(files / f"{name}.vtu", whole)
+        write_pieces(whole, files / f"{name}.pvtu", bisection(Mesh.from_meshio(whole), 2))
+    return src.num_cells, dst.num_cells
+
+
+#: (label, ranks, input format) of the --cli runs; the first is the baseline
+CLI_RUNS = (("vtu_1", 1, "vtu"), ("vtu_2", 2, "vtu"), ("pvtu_1", 1, "pvtu"), ("pvtu_2", 2, "pvtu"))
+
+
+def _by_coordinates(mesh) -> np.ndarray:
+    """The output field in the lexicographic order of the points (a .pvtu's output numbers them otherwise)."""
+    return mesh.point_data["u"][np.lexsort(mesh.points.T[::-1])]
+
+
+def cli(repeat: int, size: str, output: Path) -> dict:
+    """`varcouple transfer` end to end on 1 and 2 ranks (module docstring)."""
+    import tempfile
+
+    import meshio
+
+    ns, nt = (len(m.cells) for m in meshes(size))
+    print(f"varcouple transfer: P1 -> P1, {ns:,} x {nt:,} tets, 1 and 2 ranks, repeat {repeat}; load average "
+          f"{os.getloadavg()}", flush=True)
+    result = {"benchmark": "transfer_cli_mpi", "size": size, "source_tets": ns, "target_tets": nt,
+              "load_average_at_start": list(os.getloadavg()), "goal_speedup": GOAL_CLI_SPEEDUP,
+              "goal_memory_ratio": GOAL_CLI_MEMORY, "runs": {}, "base": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        base, files = Path(tmp) / "base", Path(tmp) / "files"
+        _write_inputs("quick", base)
+        _write_inputs(size, files)
+        for label, ranks, ext in CLI_RUNS:
+            # the same command on the 750 x 1,296-tet pair: what the process costs whatever the mesh
+            result["base"][label] = _command(base / f"src.{ext}", base / f"dst.{ext}", base / "out.vtu", ranks, base)
+            runs = []
+            for _ in range(max(1, repeat)):
+                runs.append(_command(files / f"src.{ext}", files / f"dst.{ext}", files / f"out_{label}.vtu", ranks,
+                                     files))
+                print(f"  {label}: {runs[-1]['seconds']:.2f} s, peak memory of rank 0, 1.. "
+                      f"{[round(b / 1e6) for b in runs[-1]['peak_rss_bytes']]} MB (tiny pair: "
+                      f"{[round(b / 1e6) for b in result['base'][label]['peak_rss_bytes']]} MB); load average "
+                      f"{runs[-1]['load_average']}", flush=True)
+            best = min(runs, key=lambda r: r["seconds"])
+            best["peak_rss_above_base_bytes"] = [p - b for p, b in zip(best["peak_rss_bytes"],
+                                                                       result["base"][label]["peak_rss_bytes"])]
+            result["runs"][label] = {"ranks": ranks, "input": ext, "best": best, "all": runs}
+        out = {label: meshio.read(files / f"out_{label}.vtu") for label, _, _ in CLI_RUNS}
+        result["max_relative_difference"], result["same_uncovered"] = {}, {}
+        a = _by_coordinates(out["vtu_1"])
+        for label, _, _ in CLI_RUNS[1:]:
+            b = _by_coordinates(out[label])
+            result["max_relative_difference"][label] = float(np.nanmax(np.abs(a - b)) / np.nanmax(np.abs(a)))
+            result["same_uncovered"][label] = bool(np.array_equal(np.isnan(a), np.isnan(b)))
+    one = result["runs"]["vtu_1"]["best"]
+    result["speedup"] = {label: one["seconds"] / result["runs"][label]["best"]["seconds"] for label, _, _ in CLI_RUNS[1:]}
+    result["memory_ratio_per_rank"] = {label: [p / one["peak_rss_above_base_bytes"][0]
+                                               for p in result["runs"][label]["best"]["peak_rss_above_base_bytes"]]
+                                       for label, _, _ in CLI_RUNS[1:]}
+    result["load_average_at_end"] = list(os.getloadavg())
+    result["pass"] = {label: {"speedup": result["speedup"][label] >= GOAL_CLI_SPEEDUP,
+                              "memory": max(result["memory_ratio_per_rank"][label]) <= GOAL_CLI_MEMORY,
+                              "equal": result["max_relative_difference"][label] <= 1e-12
+                              and result["same_uncovered"][label]} for label, _, _ in CLI_RUNS[1:]}
+    verdict = lambda ok: "PASS" if ok else "MISS"  # noqa: E731
+    for label, _, _ in CLI_RUNS[1:]:
+        ok = result["pass"][label]
+        print(f"{label} against vtu_1: speed-up {result['speedup'][label]:.2f}x (goal {GOAL_CLI_SPEEDUP}x on a quiet "
+              f"machine): {verdict(ok['speedup'])}; peak memory above the tiny pair's, per rank / one rank's "
+              f"{[round(r, 2) for r in result['memory_ratio_per_rank'][label]]} (goal <= {GOAL_CLI_MEMORY}): "
+              f"{verdict(ok['memory'])}; output differs by {result['max_relative_difference'][label]:.1e} "
+              f"relative: {verdict(ok['equal'])}")
+    print(f"load average {result['load_average_at_end']} (2 cores)")
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {output}")
+    return result
+
+
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="tiny meshes, 1 repeat: a smoke run")
+    p.add_argument("--cli", action="store_true", help="`varcouple transfer` end to end on 1 and 2 ranks: time, "
+                                                      "peak memory per rank (bench/results/transfer_cli_mpi.json)")
     p.add_argument("--repeat", type=int, default=3, help="runs per figure, the minimum is reported (default: 3)")
     p.add_argument("-o", "--output", type=Path, default=DEFAULT_OUTPUT)
     p.add_argument("--worker", metavar="SIZE", help=argparse.SUPPRESS)
@@ -125,6 +249,9 @@ def main(argv=None) -> dict:
     if args.worker:
         worker(args.worker, args.repeat)
         return {}
+    if args.cli:
+        return cli(1 if args.quick else args.repeat, "quick" if args.quick else "cli",
+                   CLI_OUTPUT if args.output == DEFAULT_OUTPUT else args.output)
     size, repeat = ("quick", 1) if args.quick else ("small", args.repeat)
     src, dst = meshes(size)
     print(f"distributed transfer: P1 -> P1, {src.num_cells:,} x {dst.num_cells:,} tets, ranks {list(RANKS)}, "

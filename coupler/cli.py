@@ -73,9 +73,10 @@ def _mpi_job() -> tuple[int, int]:
 
 def transfer(args: argparse.Namespace) -> int:
     """Transfer one field from SRC to DST and write DST with it to OUT. Under
-    ``mpirun -n N`` every rank reads both files and takes its part of each mesh (coordinate
-    bisection, the two meshes cut independently); the operator is assembled and applied on
-    the N ranks and rank 0 writes the same file as a serial run."""
+    ``mpirun -n N`` rank 0 reads both files, once, and sends every rank its part of each mesh
+    (coordinate bisection, the two meshes cut independently), while a ``.pvtu`` is read in
+    parts, each rank its own pieces; the operator is assembled and applied on the N ranks and
+    rank 0 writes the same file as a serial run."""
     from transfer import TransferError
 
     from coupler.errors import CouplerError
@@ -86,17 +87,47 @@ def transfer(args: argparse.Namespace) -> int:
     except (CouplerError, TransferError, OSError):
         if rank == 0:
             raise
-        raise SystemExit(2) from None  # every rank finds the same error: rank 0 says it
+        raise SystemExit(2) from None  # rank 0 found the error and says it
+
+
+def _checked(args, source, target, field, say) -> None:
+    """The field `field` of `source` may go to OUT with DST's cells (`target`, a MeshFile of them)."""
+    import numpy as np
+
+    from coupler.errors import CouplerError
+
+    target.check_keeps(args.output, {field.name: (field.kind, field.values),
+                                     "covered": (field.kind, np.zeros(0, np.uint8))})
+    if field.kind == "point" and source is not None and args.field in source.raw.cell_data:
+        say(f"note: {args.field!r} is both point and cell data in {source.path}; using the point data")
+    if args.field == "covered":
+        raise CouplerError(f"{args.source}: field name 'covered' is reserved for the coverage mask of the "
+                           f"output; rename the field")
+
+
+def _read(args, say):
+    """SRC and DST read, the field found and checked against OUT's format, what they hold
+    said: (source, target, field)."""
+    from transfer.meshfile import MeshFile
+
+    source = MeshFile.read(args.source)
+    target = MeshFile.read(args.target)
+    field = source.field(args.field)
+    _checked(args, source, target, field, say)
+    say(f"source  {source.path}: {source.describe()}; {field.describe()} -> {source.space(field.kind).family}")
+    say(f"target  {target.path}: {target.describe()} -> {target.space(field.kind).family}")
+    return source, target, field
 
 
 def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
     import numpy as np
 
     from transfer import QuadratureError
+    from transfer.pieces import read_in_parts
     from transfer.quadrature import check_degree
 
     from coupler.errors import CouplerError
-    from transfer.meshfile import MeshFile, check_writable
+    from transfer.meshfile import check_writable
 
     say = print if rank == 0 else (lambda *a, **k: None)
     if args.quadrature_degree is not None:
@@ -105,28 +136,16 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
         except QuadratureError as exc:
             raise CouplerError(f"--quadrature-degree: {exc}") from None
     check_writable(args.output, inputs=(args.source, args.target))
-    source = MeshFile.read(args.source)
-    target = MeshFile.read(args.target)
-    field = source.field(args.field)
-    target.check_keeps(args.output, {field.name: (field.kind, field.values),
-                                     "covered": (field.kind, np.zeros(0, np.uint8))})
-    if field.kind == "point" and args.field in source.raw.cell_data:
-        say(f"note: {args.field!r} is both point and cell data in {source.path}; using the point data")
-    if args.field == "covered":
-        raise CouplerError(f"{source.path}: field name 'covered' is reserved for the coverage mask of the "
-                           f"output; rename the field")
-    src_space, dst_space = source.space(field.kind), target.space(field.kind)
-    say(f"source  {source.path}: {source.describe()}; {field.describe()} -> {src_space.family}")
-    say(f"target  {target.path}: {target.describe()} -> {dst_space.family}")
-    if ranks > 1:
-        p = _project_distributed(field, source.mesh, target.mesh, src_space.family, dst_space.family, args)
+    if ranks > 1 or read_in_parts(args.source) or read_in_parts(args.target):  # .pvtu, .xdmf: read in parts, on any ranks
+        p, target, field = _project_distributed(args, say)
         if p is None:
             return 0
     else:
         from coupler.run.projection import project
 
-        p = project(field, src_space, dst_space, args.method, quadrature_degree=args.quadrature_degree,
-                    threads=args.threads)
+        source, target, field = _read(args, say)
+        p = project(field, source.space(field.kind), target.space(field.kind), args.method,
+                    quadrature_degree=args.quadrature_degree, threads=args.threads)
     stats = p.operator.stats
     quadrature = stats.get("quadrature_degree")
     quadrature = "exact moments" if quadrature == "exact" else f"degree {quadrature}"
@@ -135,7 +154,7 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
     print(f"assembly {p.assembly_seconds:.3f} s (intersection kernel {p.kernel_seconds:.3f} s; "
           f"{stats.get('pairs_intersected', '?')} of {stats.get('pairs_tested', '?')} cell pairs intersect); "
           f"apply {1e3 * p.apply_seconds:.1f} ms")
-    print(f"covered {100 * p.covered_fraction:.2f}% of {dst_space.num_dofs} target dofs "
+    print(f"covered {100 * p.covered_fraction:.2f}% of {len(p.covered)} target dofs "
           f"({p.uncovered} uncovered, NaN in the output)")
     for text in p.operator.warnings:
         print(f"warning: {text}")
@@ -146,41 +165,97 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
     return 0
 
 
-def _project_distributed(field, smesh, tmesh, source_family: str, target_family: str, args):
-    """The field carried on all ranks of MPI.COMM_WORLD, each holding its part of both
-    meshes; on rank 0 the whole result (as :func:`coupler.run.projection.project` gives it),
-    None on the others."""
+def _on_root(comm, work):
+    """`work()` on rank 0, its result there (None elsewhere); when it fails, rank 0 raises its
+    error and the other ranks a CouplerError (unsaid: rank 0 says it)."""
+    from coupler.errors import CouplerError
+
+    result, failure = None, None
+    if comm.rank == 0:
+        try:
+            result = work()
+        except Exception as exc:  # noqa: BLE001 - the other ranks wait to hear it
+            failure = exc
+    if comm.bcast(failure is not None):
+        if failure is not None:
+            raise failure
+        raise CouplerError("rank 0 could not read the files")
+    return result
+
+
+def _project_distributed(args, say):
+    """The field carried on all ranks of MPI.COMM_WORLD, each holding its part of both meshes:
+    the pieces of a ``.pvtu`` it reads itself (:class:`transfer.pieces.Pieces`); another file
+    rank 0 reads, once, and sends each rank its part (:func:`transfer.distributed.scatter`).
+    Then (projection, target file, field) on rank 0, the projection as
+    :func:`coupler.run.projection.project` gives it, (None, None, None) on the others."""
     import warnings
 
-    import numpy as np
     from mpi4py import MPI
 
     import transfer.petsc  # noqa: F401 - PETSc starts before the clock: its initialisation is not assembly
     from transfer import OverlapWarning, Transfer
-    from transfer.distributed import Part, gather
-    from transfer.partition import bisection
+    from transfer.distributed import gather, scatter
+    from transfer.mesh import Mesh
+    from transfer.meshfile import MeshFile, MeshFileField, family
+    from transfer.pieces import Pieces, read_in_parts
 
     from coupler.run.projection import Projection
 
     comm = MPI.COMM_WORLD
-    ps, pt = (Part.of_cells(mesh, np.flatnonzero(bisection(mesh, comm.size) == comm.rank), family)
-              for mesh, family in ((smesh, source_family), (tmesh, target_family)))
-    u = field.flat[ps.global_dofs]
+    pieces = {key: Pieces.open(getattr(args, key), comm) for key in ("source", "target")
+              if read_in_parts(getattr(args, key))}
+    if not pieces:
+        source, target, field = _on_root(comm, lambda: _read(args, say)) or (None, None, None)
+    else:
+        files = _on_root(comm, lambda: {key: MeshFile.read(getattr(args, key)) for key in ("source", "target")
+                                        if key not in pieces}) or {}
+        field = pieces["source"].field(args.field) if "source" in pieces else _on_root(
+            comm, lambda: files["source"].field(args.field))
+        source, target = files.get("source"), files.get("target")
+        _on_root(comm, lambda: _checked(args, source, target or pieces["target"].held[0], field, say))
+        for key, what in (("source", source), ("target", target)):
+            if key in pieces:
+                p = pieces[key]
+                say(f"{key:7} {p.path}: {p.num_cells} {p.cell_type} cells, {p.num_points} points, in pieces")
+            elif what is not None:
+                say(f"{key:7} {what.path}: {what.describe()}")
+    kind, shape = comm.bcast((field.kind, field.values.shape[1:]) if comm.rank == 0 else None)
+    files = {"source": source, "target": target}
+    parts, u = {}, None
+    for key in ("source", "target"):
+        if key in pieces:
+            parts[key], first = pieces[key].part(family(Mesh.empty(pieces[key].cell_type), kind))
+            if key == "source":
+                u = field.flat[first] if kind == "point" else field.flat
+        else:
+            mesh = files[key] and files[key].mesh
+            parts[key], values = scatter(mesh, comm.bcast(mesh and family(mesh, kind)),
+                                         field and field.flat if key == "source" else None, comm)
+            u = values if key == "source" else u
+    source = files["source"] = None  # rank 0 keeps a target file alone: the output is that mesh with the field
+    field = field and MeshFileField(field.name, kind, field.values[:0])
+    reads = comm.gather(MeshFile.reads)
+    say(f"read    files opened per rank {reads}")
     start = time.perf_counter()
     with warnings.catch_warnings(action="ignore", category=OverlapWarning):
-        operator = Transfer.assemble(ps, pt, args.method, comm=comm, quadrature_degree=args.quadrature_degree,
-                                     nthreads=args.threads)
+        operator = Transfer.assemble(parts["source"], parts["target"], args.method, comm=comm,
+                                     quadrature_degree=args.quadrature_degree, nthreads=args.threads)
     assembly = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     start = time.perf_counter()
     v = operator(u)
     apply = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     conservation = operator.conservation_error(u, v)
-    values, covered = gather(pt, v, comm), gather(pt, operator.covered, comm)
+    values, covered = gather(parts["target"], v, comm), gather(parts["target"], operator.covered, comm)
+    operator_stats, operator_warnings = operator.stats, operator.warnings
+    del operator, parts
+    if "target" in pieces:
+        files["target"] = pieces["target"].whole()
     if comm.rank:
-        return None
-    whole = _Gathered(operator.stats, operator.warnings, covered)
-    return Projection(args.method, whole, values.reshape((len(values),) + field.values.shape[1:]), assembly, apply,
-                      conservation)
+        return None, None, None
+    whole = _Gathered(operator_stats, operator_warnings, covered)
+    return (Projection(args.method, whole, values.reshape((len(values),) + shape), assembly, apply, conservation),
+            files["target"], field)
 
 
 class _Gathered:

@@ -377,6 +377,31 @@ def _no_rows(target: Part) -> dict:
     return {"B": empty, "D": empty, "overlap": zeros, "measure": zeros, "pairs_tested": 0, "pairs_intersected": 0}
 
 
+def scatter(mesh: Mesh | None, family: str, values, comm, root: int = 0) -> tuple[Part, np.ndarray | None]:
+    """This rank's :class:`Part` of `mesh`, which `root` alone holds (None elsewhere), and the
+    `values` at its dofs (None if `values` is None): `root` cuts the cells by
+    :func:`transfer.partition.bisection`, as every rank would cut a mesh it held whole, and
+    sends each rank its cells, their points and global dof ids, one rank at a time (the parts
+    are not all held at once). Collective on `comm`."""
+    from .partition import bisection
+
+    if comm.rank == root:
+        owner = bisection(mesh, comm.size)
+        head = (mesh.cell_type, mesh.name)
+        comm.bcast(head, root=root)
+        for r in [*(q for q in range(comm.size) if q != root), root]:
+            part = Part.of_cells(mesh, np.flatnonzero(owner == r), family)
+            piece = (part.mesh.points, part.mesh.cells, part.global_dofs,
+                     None if values is None else values[part.global_dofs])
+            if r != root:
+                comm.send(piece, dest=r, tag=3)
+    else:
+        head = comm.bcast(None, root=root)
+        piece = comm.recv(source=root, tag=3)
+    points, cells, dofs, local = piece
+    return Part(Mesh.trusted(points, cells, *head), family, dofs), local
+
+
 def gather(part: Part, values, comm, root: int = 0):
     """The whole field (global dof order) on `root` from every rank's values at its local
     dofs (a dof on several ranks takes one of their equal values); None elsewhere."""

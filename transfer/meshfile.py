@@ -227,9 +227,13 @@ class MeshFile:
     blocks: list[int]
     ignored: dict[str, int] = field(default_factory=dict)  # lower-dimensional cell type -> count
 
+    #: files this process has read (``mpirun varcouple transfer`` says that only rank 0 read)
+    reads = 0
+
     @classmethod
     def read(cls, path) -> "MeshFile":
         name = str(path)
+        MeshFile.reads += 1
         p = Path(path)
         if not p.exists():
             raise MeshFileError(f"{name}: file not found")

@@ -107,6 +107,23 @@ def _pvtu(layout: tuple, pieces: list[str]) -> str:
             f"{sources}  </PUnstructuredGrid>\n</VTKFile>\n")
 
 
+def write_pieces(mesh: meshio.Mesh, path: Path, owner: np.ndarray) -> None:
+    """`mesh` (one cell block) as the .pvtu `path` of one .vtu piece per value of `owner`
+    (the piece of every cell), each piece with its cells' points and their point data, as a
+    coupler on ranks writes a step; for files given to ``varcouple transfer`` in pieces."""
+    path = Path(path)
+    block, names = mesh.cells[0], []
+    for i in range(int(owner.max()) + 1):
+        cells = block.data[owner == i]
+        used, local = np.unique(cells, return_inverse=True)
+        piece = meshio.Mesh(mesh.points[used], [(block.type, local.reshape(cells.shape))],
+                            point_data={k: np.asarray(v)[used] for k, v in mesh.point_data.items()},
+                            cell_data={k: [np.asarray(v[0])[owner == i]] for k, v in mesh.cell_data.items()})
+        names.append(f"{path.stem}_p{i}.vtu")
+        meshio.write(path.parent / names[-1], piece)
+    path.write_text(_pvtu(_layout(piece), names))
+
+
 def reduce_figures(figures: dict, how: dict[str, str], comm=None) -> dict:
     """The figures of this rank's part combined over the ranks (collective; the same on every rank).
 

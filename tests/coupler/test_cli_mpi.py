@@ -1,6 +1,6 @@
-"""``mpirun -n 2 varcouple transfer``: the meshes read and partitioned on every rank, the
-operator assembled and applied on both, and rank 0 writes the file the serial run writes
-(fields equal to 1e-12, the same uncovered dofs); an input error is said once."""
+"""``mpirun -n 2 varcouple transfer``: rank 0 reads the two files, once, and sends the other
+rank its parts; the operator is assembled and applied on both, and rank 0 writes the file the
+serial run writes (fields equal to 1e-12, the same uncovered dofs); an input error is said once."""
 
 from __future__ import annotations
 
@@ -52,6 +52,8 @@ def test_two_ranks_write_the_serial_file(files, name, kind, method):
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert proc.stdout.count("wrote ") == 1  # rank 0 alone reports and writes
         assert ("x 2 MPI ranks" in proc.stdout) == (ranks == 2)
+        if ranks == 2:  # the files are opened by rank 0 alone, each once
+            assert "read    files opened per rank [2, 0]" in proc.stdout
         outputs[ranks] = meshio.read(out)
     serial, mpi = outputs[1], outputs[2]
     np.testing.assert_array_equal(serial.points, mpi.points)
@@ -69,3 +71,87 @@ def test_an_input_error_is_said_once(files):
     assert proc.returncode == 2
     assert proc.stderr.count("varcouple: error:") == 1
     assert "src.vtu: no field 'nope'" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def by_coordinates(m: meshio.Mesh, name: str, kind: str) -> np.ndarray:
+    """The point (cell) field `name` of `m` in the lexicographic order of the points (cell centres)."""
+    if kind == "point":
+        return m.point_data[name][np.lexsort(m.points.T[::-1])]
+    return m.cell_data[name][0][np.lexsort(m.points[m.cells[0].data].mean(axis=1).T[::-1])]
+
+
+@pytest.mark.parametrize("name, kind, method", [("u", "point", "l2"), ("k", "cell", "pseudo_l2")])
+def test_pieces_are_read_by_their_ranks(files, tmp_path, name, kind, method):
+    """SRC and DST as .pvtu of 3 pieces each: rank 0 opens pieces 0 and 1 of each, rank 1 piece 2;
+    the output is the same on 1 and 2 ranks and is the whole-file run's, point by point (cell by cell)."""
+    from coupler.output.results import write_pieces
+    from transfer import Mesh
+    from transfer.partition import slabs
+
+    for file in ("src", "dst"):
+        mesh = meshio.read(files / f"{file}.vtu")
+        write_pieces(mesh, tmp_path / f"{file}.pvtu", slabs(Mesh.from_meshio(mesh), 3, axis=0))
+    outputs = {}
+    for ranks in (1, 2):
+        out = tmp_path / f"out_{ranks}.vtu"
+        proc = varcouple(tmp_path / "src.pvtu", tmp_path / "dst.pvtu", "--field", name, "-o", out,
+                         "--method", method, ranks=ranks)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert f"read    files opened per rank {[6] if ranks == 1 else [4, 2]}" in proc.stdout
+        outputs[ranks] = meshio.read(out)
+    whole = tmp_path / "whole.vtu"
+    proc = varcouple(files / "src.vtu", files / "dst.vtu", "--field", name, "-o", whole, "--method", method)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    serial, mpi, whole = outputs[1], outputs[2], meshio.read(whole)
+    assert len(serial.points) == len(whole.points) and len(serial.cells[0].data) == len(whole.cells[0].data)
+    np.testing.assert_array_equal(serial.points, mpi.points)
+    np.testing.assert_array_equal(serial.cells[0].data, mpi.cells[0].data)
+    for a, b in ((serial, mpi), (serial, whole)):
+        np.testing.assert_array_equal(*(m.points[np.lexsort(m.points.T[::-1])] for m in (a, b)))
+        np.testing.assert_array_equal(by_coordinates(a, "covered", kind), by_coordinates(b, "covered", kind))
+        u, v = by_coordinates(a, name, kind), by_coordinates(b, name, kind)
+        assert 0 < np.isnan(u).reshape(len(u), -1).any(axis=1).sum() < len(u)  # the target sticks out: NaN there
+        np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
+        assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
+
+
+def test_a_bad_piece_on_rank_1_is_said_once_by_rank_0(files, tmp_path):
+    """The third piece (rank 1's) is missing: every rank stops with exit 2, rank 0 says which."""
+    from coupler.output.results import write_pieces
+    from transfer import Mesh
+    from transfer.partition import slabs
+
+    mesh = meshio.read(files / "src.vtu")
+    write_pieces(mesh, tmp_path / "src.pvtu", slabs(Mesh.from_meshio(mesh), 3, axis=0))
+    (tmp_path / "src_p2.vtu").unlink()
+    proc = varcouple(tmp_path / "src.pvtu", files / "dst.vtu", "--field", "u", "-o", tmp_path / "x.vtu", ranks=2)
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert proc.stderr.count("varcouple: error:") == 1
+    assert "src_p2.vtu: file not found" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "x.vtu").exists()
+
+
+def test_an_xdmf_target_is_read_by_rows(files, tmp_path):
+    """DST converted to XDMF + HDF5 by ``mpirun -n 2 python -m solid_fenicsx.convert``: each rank
+    reads its own topology rows and the points they use (rank 0 also opens SRC: [2, 1]); the
+    output is the same on 1 and 2 ranks and is the .vtu run's, point by point."""
+    pytest.importorskip("dolfinx")
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    subprocess.run(["mpirun", "-n", "2", "--oversubscribe", sys.executable, "-m", "solid_fenicsx.convert",
+                    str(files / "dst.vtu"), str(tmp_path / "dst.xdmf")], check=True, env=env, cwd=ROOT,
+                   capture_output=True, timeout=180)
+    outputs = {}
+    for ranks, opened in ((1, [2]), (2, [2, 1]), (0, None)):
+        out = tmp_path / f"out_{ranks}.vtu"
+        target = files / "dst.vtu" if ranks == 0 else tmp_path / "dst.xdmf"  # 0: the .vtu, serially
+        proc = varcouple(files / "src.vtu", target, "--field", "u", "-o", out, ranks=max(ranks, 1))
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert opened is None or f"read    files opened per rank {opened}" in proc.stdout
+        outputs[ranks] = meshio.read(out)
+    np.testing.assert_array_equal(outputs[1].points, outputs[2].points)
+    np.testing.assert_array_equal(outputs[1].cells[0].data, outputs[2].cells[0].data)
+    for a, b in ((outputs[1], outputs[2]), (outputs[1], outputs[0])):
+        np.testing.assert_array_equal(*(m.points[np.lexsort(m.points.T[::-1])] for m in (a, b)))
+        u, v = by_coordinates(a, "u", "point"), by_coordinates(b, "u", "point")
+        np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
+        assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
