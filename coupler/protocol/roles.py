@@ -68,12 +68,29 @@ class FieldContract:
 
 
 @dataclass(frozen=True)
+class GeometryArray:
+    """An array of a role's ``geometry`` reply: ``width`` columns (0: one id per row), given
+    ``when`` "always", on "ranks" (each part of a participant on several ranks: its ids,
+    docs/protocol.md "Parts") or when it "may"."""
+
+    name: str
+    width: int
+    when: str
+
+    @property
+    def kind(self) -> str:
+        return "ids (n,)" if self.width == 0 else f"(n, {self.width})"
+
+
+@dataclass(frozen=True)
 class Role:
-    """A role's contract: its geometry (``grid`` or ``mesh``), the locations its fields may live
-    at (the geometry header's ``location``; the first one the default) and its fields."""
+    """A role's contract: its geometry (``grid`` or ``mesh``) and the arrays of its reply, the
+    locations its fields may live at (the geometry header's ``location``; the first one the
+    default) and its fields."""
 
     name: str
     geometry: str
+    arrays: tuple[GeometryArray, ...]
     locations: tuple[str, ...]
     outputs: tuple[FieldContract, ...]
     inputs: tuple[FieldContract, ...]
@@ -83,11 +100,13 @@ class Role:
 
 
 ROLES: dict[str, Role] = {r.name: r for r in (
-    Role("fluid", "grid", ("cells", "points"),
+    Role("fluid", "grid", (GeometryArray(CELL_IDS, 0, "ranks"), GeometryArray(INPUT_IDS, 0, "may")), ("cells", "points"),
          outputs=(FieldContract(PRESSURE, 1, required=True), FieldContract(VELOCITY, 3, required=True)),
          inputs=(FieldContract(SOLID_FRACTION, 1), FieldContract(SOLID_VELOCITY, 3),
                  FieldContract(INLET_PRESSURE, 1, SINGLE))),
-    Role("solid", "mesh", ("points",),
+    Role("solid", "mesh", (GeometryArray(POINTS, 3, "always"), GeometryArray(CELLS, 4, "always"),
+                           GeometryArray(POINT_IDS, 0, "ranks"), GeometryArray(CELL_IDS, 0, "ranks"),
+                           GeometryArray(INTERFACE_TRIANGLES, 3, "may")), ("points",),
          outputs=(FieldContract(DISPLACEMENT, 3, required=True), FieldContract(VELOCITY, 3, required=True),
                   FieldContract(VON_MISES, 1), FieldContract(IN_CONTACT, 1), FieldContract(CONTACT_PRESSURE, 1),
                   FieldContract(GAP, 1), FieldContract(SLAVE, 1), FieldContract(MORTAR_WEIGHT, 1)),
@@ -126,23 +145,21 @@ def check_geometry(name: str, header: Mapping, fields: Mapping) -> int | None:
     location = header.get("location", role.locations[0])
     if location not in role.locations:
         raise ContractError(name, role.name, f"geometry 'location' {location!r} is not one of {list(role.locations)}")
-    if role.geometry == "grid":
-        if "grid" not in header:
-            raise ContractError(name, role.name, "geometry: missing 'grid' (a structured grid: origin, spacing, shape)")
-        return _grid_rows(name, role.name, header["grid"], location)
-    arrays = {k: np.asarray(getattr(f, "data", f)) for k, f in (fields or {}).items()}
-    for key, width in ((POINTS, 3), (CELLS, 4)):
-        if key not in arrays:
-            raise ContractError(name, role.name, f"geometry: missing {key!r}")
-        if arrays[key].ndim != 2 or arrays[key].shape[1] != width:
-            raise ContractError(name, role.name, f"geometry {key!r}: wrong shape {arrays[key].shape}, expected "
-                                                 f"(n, {width})")
-    if header.get("cell_type") != "tetra":
+    if role.geometry == "grid" and "grid" not in header:
+        raise ContractError(name, role.name, "geometry: missing 'grid' (a structured grid: origin, spacing, shape)")
+    if role.geometry == "mesh" and header.get("cell_type") != "tetra":
         raise ContractError(name, role.name, f"geometry: cell_type {header.get('cell_type')!r}, expected 'tetra'")
-    if INTERFACE_TRIANGLES in arrays and (arrays[INTERFACE_TRIANGLES].ndim != 2
-                                          or arrays[INTERFACE_TRIANGLES].shape[1] != 3):
-        raise ContractError(name, role.name, f"geometry {INTERFACE_TRIANGLES!r}: wrong shape "
-                                             f"{arrays[INTERFACE_TRIANGLES].shape}, expected (k, 3)")
+    arrays = {k: np.asarray(getattr(f, "data", f)) for k, f in (fields or {}).items()}
+    for a in role.arrays:
+        if a.name not in arrays:
+            if a.when == "always":
+                raise ContractError(name, role.name, f"geometry: missing {a.name!r}")
+            continue
+        shape = arrays[a.name].shape
+        if shape[1:] != ((a.width,) if a.width else ()) or len(shape) != (2 if a.width else 1):
+            raise ContractError(name, role.name, f"geometry {a.name!r}: wrong shape {shape}, expected {a.kind}")
+    if role.geometry == "grid":
+        return _grid_rows(name, role.name, header["grid"], location)
     return len(arrays[POINTS])
 
 
@@ -211,6 +228,9 @@ def table() -> str:
     """The roles as the Markdown table of docs/protocol.md ("Roles"; a test keeps them equal)."""
     lines = ["| role | geometry | direction | field | kind | at | required |", "| --- | --- | --- | --- | --- | --- | --- |"]
     for role in ROLES.values():
+        for a in role.arrays:
+            lines.append(f"| {role.name} | {role.geometry} | geometry | `{a.name}` | {a.kind} | - | "
+                         f"{ {'always': 'yes', 'ranks': 'on several ranks', 'may': 'no'}[a.when]} |")
         at = {ROWS: " or ".join(role.locations) if role.geometry == "grid" else "vertices", SINGLE: "one value"}
         for direction, fields in (("output", role.outputs), ("input", role.inputs)):
             for f in fields:

@@ -160,7 +160,11 @@ def test_a_participant_that_breaks_its_contract_is_refused_naming_the_field(cls,
 
 def test_a_solid_of_wrong_cells_and_a_fluid_of_unknown_location_are_refused():
     with pytest.raises(ContractError, match=r"geometry 'cells': wrong shape \(5, 1\), expected \(n, 4\)"):
-        roles.check_geometry("solid", {"cell_type": "vertex"}, {"points": np.zeros((5, 3)), "cells": np.zeros((5, 1))})
+        roles.check_geometry("solid", {"cell_type": "tetra"}, {"points": np.zeros((5, 3)), "cells": np.zeros((5, 1))})
+    with pytest.raises(ContractError, match=r"geometry: cell_type 'vertex', expected 'tetra'"):
+        roles.check_geometry("solid", {"cell_type": "vertex"}, {"points": np.zeros((5, 3)), "cells": np.zeros((5, 4))})
+    with pytest.raises(ContractError, match=r"geometry 'cell_ids': wrong shape \(12, 1\), expected ids \(n,\)"):
+        roles.check_geometry("fluid", {"grid": GRID}, {"cell_ids": np.zeros((12, 1))})
     with pytest.raises(ContractError, match=r"geometry 'location' 'faces' is not one of \['cells', 'points'\]"):
         roles.check_geometry("fluid", {"grid": GRID, "location": "faces"}, {})
     with pytest.raises(ContractError, match=r"3 positive cell counts"):
