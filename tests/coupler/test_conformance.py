@@ -6,6 +6,7 @@ documentation's table is the module's."""
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 
@@ -173,14 +174,13 @@ def test_a_solid_of_wrong_cells_and_a_fluid_of_unknown_location_are_refused():
     assert roles.check_geometry("mesh", {}, {}) is None  # no role (a mesh file): no contract
 
 
-def test_the_runner_refuses_a_reply_that_breaks_the_contract(tmp_path, monkeypatch):
+def test_the_runner_refuses_a_reply_that_breaks_the_contract(tmp_path, monkeypatch, capsys):
     """A one-way flow scene (a fixed solid served in process, the Chorin fluid): a solid whose
-    displacement has the wrong shape stops the run with the contract's line."""
-    from coupler.run.runner import run
+    displacement has the wrong shape stops the run, exit 4 (failed), with the contract's line."""
+    from coupler.cli import main
 
     case = copy_case(CASES / "parallel_plates", tmp_path, {'participant = "openfoam"': 'participant = "chorin"',
                                                            "max_iterations = 5000\n": ""})
-
     original = RigidSolid.advance
 
     def flat(self, *args):
@@ -188,9 +188,12 @@ def test_the_runner_refuses_a_reply_that_breaks_the_contract(tmp_path, monkeypat
         return {**out, DISPLACEMENT: Field(DISPLACEMENT, out[DISPLACEMENT].data[:, :2])}
 
     monkeypatch.setattr(RigidSolid, "advance", flat)
-    with pytest.raises(ContractError, match=r"participant 'solid' \(role solid\): advance output 'displacement': "
-                                            r"wrong shape \(\d+, 2\), expected \(\d+, 3\)"):
-        run(load(case), log=lambda *a: None, progress=False)
+    assert main(["run", str(case), "-o", str(tmp_path / "out")]) == 4
+    line = re.compile(r"participant 'solid' \(role solid\): advance output 'displacement': wrong shape \(\d+, 2\), "
+                      r"expected \(\d+, 3\)")
+    assert line.search(capsys.readouterr().err)
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == "failed" and line.search(summary["error"])
 
 
 def test_the_documented_roles_are_the_module_s():
