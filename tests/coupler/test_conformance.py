@@ -200,3 +200,15 @@ def test_the_documented_roles_are_the_module_s():
     doc = (ROOT / "docs" / "protocol.md").read_text()
     rows = re.search(r"\| role \| geometry \|.*?\n\n", doc, re.S)
     assert rows is not None and rows.group(0).rstrip("\n") + "\n" == roles.table()
+
+
+def test_every_registered_participant_declares_a_role_with_a_contract_and_inputs_of_it():
+    from coupler.scene.participants import registered
+
+    specs = registered()
+    assert {"openfoam", "chorin", "reynolds", "solid_fenicsx", "spring_solid", "replay_fluid"} <= set(specs)
+    for kind, spec in specs.items():
+        if spec.role is None:  # a test participant (echo)
+            continue
+        assert spec.role in roles.ROLES, kind
+        assert set(spec.accepts) <= {f.name for f in roles.ROLES[spec.role].inputs}, kind

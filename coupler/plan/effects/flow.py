@@ -95,7 +95,7 @@ def _check_slabs(scene) -> None:
 def _check_rate_control(scene) -> None:
     """A flow rate needs a fluid whose inlet pressure the coupler may set in every iteration."""
     solver = scene.solvers["fluid"]
-    if "flow_rate" in scene.effect_settings[NAME]["inlet"] and "inlet_pressure" not in solver.spec.accepts:
+    if "flow_rate" in scene.effect_settings[NAME]["inlet"] and INLET_PRESSURE not in solver.spec.accepts:
         raise SceneError(f"{scene.path}: [flow] flow_rate: the {solver.kind} fluid does not take a new inlet pressure "
                          f"in every coupling iteration (a participant that accepts 'inlet_pressure': "
                          f"{', '.join(k for k, p in for_role('fluid').items() if 'inlet_pressure' in p.accepts)}); give "
