@@ -3,7 +3,6 @@
 solver: the coupler reads it to validate scenes (entry point ``varcouple.participants``)."""
 
 from coupler.protocol.penalization import PENALIZATION
-from coupler.protocol.roles import INLET_PRESSURE
 from coupler.protocol.settings import ParticipantSpec, Setting, Settings
 from coupler.protocol.slabs import MIN_CELLS, SLAB_AXES
 
@@ -13,7 +12,7 @@ POISSON_METHODS = ("auto", "direct", "gamg")
 SOLID_VELOCITIES = ("cells", "bodies", "none")
 
 PARTICIPANT = ParticipantSpec(
-    kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",), accepts=(INLET_PRESSURE,),
+    kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",), accepts=("inlet_pressure",),
     memory=(120 * 2**20, 2000),
     description="incompressible flow on the structured grid by Chorin's projection on a staggered grid, in memory, "
                 "the solid immersed by volume penalization towards its velocity cell by cell",

@@ -3,7 +3,6 @@
 cannot run (:func:`refuses`). Imports no solver: the coupler reads it to validate scenes
 (entry point ``varcouple.participants``)."""
 
-from coupler.protocol.roles import INLET_PRESSURE
 from coupler.protocol.settings import ParticipantSpec, Setting, Settings
 
 
@@ -27,7 +26,7 @@ def refuses(scene) -> str | None:
 
 
 PARTICIPANT = ParticipantSpec(
-    kind="reynolds", module="fluid_reynolds", role="fluid", needs=("flow",), accepts=(INLET_PRESSURE,),
+    kind="reynolds", module="fluid_reynolds", role="fluid", needs=("flow",), accepts=("inlet_pressure",),
     memory=(60 * 2**20, 300), refuses=refuses,
     description="steady flow in the fracture's mean plane by the Reynolds equation (the local cubic law) on the "
                 "local aperture of the fluid grid's columns, one sparse direct solve; the pressure given to "
