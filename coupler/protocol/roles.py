@@ -90,8 +90,8 @@ class Role:
 
     name: str
     geometry: str
-    arrays: tuple[GeometryArray, ...]
     locations: tuple[str, ...]
+    arrays: tuple[GeometryArray, ...]
     outputs: tuple[FieldContract, ...]
     inputs: tuple[FieldContract, ...]
 
@@ -100,13 +100,15 @@ class Role:
 
 
 ROLES: dict[str, Role] = {r.name: r for r in (
-    Role("fluid", "grid", (GeometryArray(CELL_IDS, 0, "ranks"), GeometryArray(INPUT_IDS, 0, "may")), ("cells", "points"),
+    Role("fluid", geometry="grid", locations=("cells", "points"),
+         arrays=(GeometryArray(CELL_IDS, 0, "ranks"), GeometryArray(INPUT_IDS, 0, "may")),
          outputs=(FieldContract(PRESSURE, 1, required=True), FieldContract(VELOCITY, 3, required=True)),
          inputs=(FieldContract(SOLID_FRACTION, 1), FieldContract(SOLID_VELOCITY, 3),
                  FieldContract(INLET_PRESSURE, 1, SINGLE))),
-    Role("solid", "mesh", (GeometryArray(POINTS, 3, "always"), GeometryArray(CELLS, 4, "always"),
-                           GeometryArray(POINT_IDS, 0, "ranks"), GeometryArray(CELL_IDS, 0, "ranks"),
-                           GeometryArray(INTERFACE_TRIANGLES, 3, "may")), ("points",),
+    Role("solid", geometry="mesh", locations=("points",),
+         arrays=(GeometryArray(POINTS, 3, "always"), GeometryArray(CELLS, 4, "always"),
+                 GeometryArray(POINT_IDS, 0, "ranks"), GeometryArray(CELL_IDS, 0, "ranks"),
+                 GeometryArray(INTERFACE_TRIANGLES, 3, "may")),
          outputs=(FieldContract(DISPLACEMENT, 3, required=True), FieldContract(VELOCITY, 3, required=True),
                   FieldContract(VON_MISES, 1), FieldContract(IN_CONTACT, 1), FieldContract(CONTACT_PRESSURE, 1),
                   FieldContract(GAP, 1), FieldContract(SLAVE, 1), FieldContract(MORTAR_WEIGHT, 1)),
@@ -226,7 +228,7 @@ def conformance(name: str, participant, config: Mapping, inputs=None) -> dict:
 
 def table() -> str:
     """The roles as the Markdown table of docs/protocol.md ("Roles"; a test keeps them equal)."""
-    lines = ["| role | geometry | direction | field | kind | at | required |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    lines = ["| role | geometry | direction | field | kind | at | required |", "|" + " --- |" * 7]
     for role in ROLES.values():
         for a in role.arrays:
             lines.append(f"| {role.name} | {role.geometry} | geometry | `{a.name}` | {a.kind} | - | "

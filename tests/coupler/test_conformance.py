@@ -145,7 +145,8 @@ class FlatDisplacement(SpringSolid):
     (ShortPressure, {"grid": GRID}, "participant 'fluid' (role fluid): advance output 'pressure': wrong shape (35,), "
                                     "expected (36,) (scalar per row of 36)"),
     (Gridless, {"grid": GRID}, "participant 'fluid' (role fluid): geometry: missing 'grid'"),
-    (ExtraOutput, {"grid": GRID}, "participant 'fluid' (role fluid): advance output 'vorticity': not a field of its role"),
+    (ExtraOutput, {"grid": GRID},
+     "participant 'fluid' (role fluid): advance output 'vorticity': not a field of its role"),
     (Unannounced, {"grid": GRID}, "participant 'fluid' (role fluid): announce 'provides': missing velocity"),
     (FlatDisplacement, {"box": BOX, "stiffness": 1e6},
      "participant 'solid' (role solid): advance output 'displacement': wrong shape (36,), expected (12, 3)"),
