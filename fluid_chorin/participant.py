@@ -31,6 +31,7 @@ import time
 import numpy as np
 
 from coupler.protocol.participant import Participant
+from coupler.protocol.roles import INLET_PRESSURE, PRESSURE, SOLID_FRACTION, SOLID_VELOCITY, VELOCITY
 from coupler.protocol.wire import Field
 
 from .solver import ChorinSolver, Run, State
@@ -38,7 +39,7 @@ from .spec import ChorinSpec
 
 log = logging.getLogger("varcouple.fluid_chorin")
 #: the inputs of ``advance`` and their shapes (None: one row per input cell of the rank)
-INPUT_SHAPES = {"solid_fraction": (None,), "solid_velocity": (None, 3), "inlet_pressure": (1,)}
+INPUT_SHAPES = {SOLID_FRACTION: (None,), SOLID_VELOCITY: (None, 3), INLET_PRESSURE: (1,)}
 
 
 class ChorinParticipant(Participant):
@@ -49,8 +50,8 @@ class ChorinParticipant(Participant):
         self.saved: dict[int, State] = {}
 
     def announce(self) -> dict:
-        return {"kind": self.kind, "provides": ["pressure", "velocity"],
-                "accepts": ["solid_fraction", "solid_velocity", "inlet_pressure"], "location": "cells"}
+        return {"kind": self.kind, "provides": [PRESSURE, VELOCITY],
+                "accepts": [SOLID_FRACTION, SOLID_VELOCITY, INLET_PRESSURE], "location": "cells"}
 
     def configure(self, config: dict) -> None:
         spec = ChorinSpec.from_config(config)
@@ -78,11 +79,11 @@ class ChorinParticipant(Participant):
         if problem:
             raise ValueError(problem)
         arrays = {name: np.asarray(inputs[name].data, dtype=float) for name in INPUT_SHAPES if name in inputs}
-        if "inlet_pressure" in arrays:
-            solver.set_inlet_pressure(float(arrays.pop("inlet_pressure")[0]))
+        if INLET_PRESSURE in arrays:
+            solver.set_inlet_pressure(float(arrays.pop(INLET_PRESSURE)[0]))
         if arrays:
-            fraction = arrays.get("solid_fraction", solver.solid_fraction)
-            solver.set_solid(fraction, arrays.get("solid_velocity"))
+            fraction = arrays.get(SOLID_FRACTION, solver.solid_fraction)
+            solver.set_solid(fraction, arrays.get(SOLID_VELOCITY))
         t0 = time.perf_counter()
         run = solver.transient(t, dt) if solver.spec.transient else solver.steady()
         log.info("window %d iteration %d: %s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
@@ -90,7 +91,7 @@ class ChorinParticipant(Participant):
                  time.perf_counter() - t0)
         self.report(run)
         pressure, velocity = solver.part_fields()
-        return {"pressure": Field("pressure", pressure, "Pa"), "velocity": Field("velocity", velocity, "m/s")}
+        return {PRESSURE: Field(PRESSURE, pressure, "Pa"), VELOCITY: Field(VELOCITY, velocity, "m/s")}
 
     def input_problem(self, inputs) -> str | None:
         """An input whose shape is not one row per input cell of this rank (:data:`INPUT_SHAPES`)

@@ -68,6 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from coupler.protocol.participant import Participant, on_root, scratch_dir
+from coupler.protocol.roles import PRESSURE, SOLID_FRACTION, SOLID_VELOCITY, VELOCITY
 from coupler.protocol.wire import Field
 
 from .case import CaseSpec
@@ -89,8 +90,8 @@ class FluidParticipant(Participant):
         atexit.register(self._cleanup)  # SIGTERM, SIGINT and a lost coupler end through SystemExit
 
     def announce(self) -> dict:
-        return {"kind": self.kind, "provides": ["pressure", "velocity"],
-                "accepts": ["solid_fraction", "solid_velocity"], "location": "cells"}
+        return {"kind": self.kind, "provides": [PRESSURE, VELOCITY],
+                "accepts": [SOLID_FRACTION, SOLID_VELOCITY], "location": "cells"}
 
     def configure(self, config: dict) -> None:
         spec = on_root(self.comm, self._spec, config)
@@ -134,11 +135,11 @@ class FluidParticipant(Participant):
         if self.solver is None:
             return "advance before configure"
         n = len(self.solver.input_ids)
-        if "solid_velocity" in inputs and self.solver.bodies_refused:
+        if SOLID_VELOCITY in inputs and self.solver.bodies_refused:
             return f"input 'solid_velocity': {self.solver.bodies_refused}"
         for name, f in inputs.items():
-            want = (n,) if name == "solid_fraction" else (n, 3)
-            if name in ("solid_fraction", "solid_velocity") and f.data.shape != want:
+            want = (n,) if name == SOLID_FRACTION else (n, 3)
+            if name in (SOLID_FRACTION, SOLID_VELOCITY) and f.data.shape != want:
                 mine = "" if self.size == 1 else (f" (rank {self.rank}'s input_ids: " + (
                     "the whole grid)" if self.solver.whole_inputs else
                     f"processor{self.rank}'s cells and those their drag and bodies read)"))
@@ -151,9 +152,9 @@ class FluidParticipant(Participant):
         problem = self.input_problem(inputs)
         if problem:
             raise ValueError(problem)
-        if "solid_fraction" in inputs:
-            self.fraction = np.array(inputs["solid_fraction"].data, dtype=np.float64)
-        velocity = inputs["solid_velocity"].data if "solid_velocity" in inputs else None
+        if SOLID_FRACTION in inputs:
+            self.fraction = np.array(inputs[SOLID_FRACTION].data, dtype=np.float64)
+        velocity = inputs[SOLID_VELOCITY].data if SOLID_VELOCITY in inputs else None
         if velocity is not None and self.spec.solid_velocity == "none" and not self._warned_velocity \
                 and np.any(velocity != 0):
             log.warning("fluid_openfoam: solid_velocity is not applied (solid_velocity 'none': the solid is "
@@ -163,8 +164,8 @@ class FluidParticipant(Participant):
         self.solver.prune(set(self.saved.values()))
         log.info("window %d iteration %d: %s", window, iteration, self.solver.last_run)
         self.report_solve(**self.solver.report())
-        return {"pressure": Field("pressure", p * self.spec.rho, "Pa"),
-                "velocity": Field("velocity", U, "m/s")}
+        return {PRESSURE: Field(PRESSURE, p * self.spec.rho, "Pa"),
+                VELOCITY: Field(VELOCITY, U, "m/s")}
 
     def save_state(self, window):
         if self.solver is None:

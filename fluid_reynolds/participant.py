@@ -21,6 +21,7 @@ import time
 import numpy as np
 
 from coupler.protocol.participant import Participant
+from coupler.protocol.roles import INLET_PRESSURE, PRESSURE, SOLID_FRACTION, VELOCITY
 from coupler.protocol.wire import Field
 
 from .reynolds import ReynoldsFlow, solve
@@ -40,8 +41,8 @@ class ReynoldsParticipant(Participant):
         self.saved: dict[int, dict] = {}
 
     def announce(self) -> dict:
-        return {"kind": self.kind, "provides": ["pressure", "velocity"],
-                "accepts": ["solid_fraction", "inlet_pressure"], "location": "cells"}
+        return {"kind": self.kind, "provides": [PRESSURE, VELOCITY],
+                "accepts": [SOLID_FRACTION, INLET_PRESSURE], "location": "cells"}
 
     def configure(self, config: dict) -> None:
         self.spec = spec = ReynoldsSpec.from_config(config)
@@ -62,15 +63,15 @@ class ReynoldsParticipant(Participant):
         if self.spec is None:
             raise RuntimeError("advance before configure")
         spec, n = self.spec, self.spec.columns.grid.num_cells
-        for name, shape in (("solid_fraction", (n,)), ("inlet_pressure", (1,))):
+        for name, shape in ((SOLID_FRACTION, (n,)), (INLET_PRESSURE, (1,))):
             if name in inputs:
                 data = np.asarray(inputs[name].data, dtype=float)
                 if data.shape != shape or not np.all(np.isfinite(data)):
                     raise ValueError(f"input {name!r}: expected {shape} finite values, got shape {data.shape}")
-        if "solid_fraction" in inputs:
-            self.state["fraction"] = np.array(inputs["solid_fraction"].data, dtype=float)
-        if "inlet_pressure" in inputs:
-            self.state["pressures"]["xmin"] = float(np.asarray(inputs["inlet_pressure"].data)[0])
+        if SOLID_FRACTION in inputs:
+            self.state["fraction"] = np.array(inputs[SOLID_FRACTION].data, dtype=float)
+        if INLET_PRESSURE in inputs:
+            self.state["pressures"]["xmin"] = float(np.asarray(inputs[INLET_PRESSURE].data)[0])
         t0 = time.perf_counter()
         flow = self.solve()
         log.info("window %d iteration %d: Reynolds flow rate %.6g m^3/s, %d of %d plane cells solved, residual "
@@ -82,8 +83,8 @@ class ReynoldsParticipant(Participant):
         self.report_solve("Reynolds (SuperLU)", flow.residual <= TOLERANCE, 1, flow.residual, TOLERANCE,
                           f"{int(flow.solved.sum())} of {flow.solved.size} plane cells open and connected")
         columns = spec.columns
-        return {"pressure": Field("pressure", columns.spread(flow.pressure), "Pa"),
-                "velocity": Field("velocity", columns.velocity(flow.flux_x, flow.flux_y, self.state["fraction"]),
+        return {PRESSURE: Field(PRESSURE, columns.spread(flow.pressure), "Pa"),
+                VELOCITY: Field(VELOCITY, columns.velocity(flow.flux_x, flow.flux_y, self.state["fraction"]),
                                   "m/s")}
 
     def solve(self) -> ReynoldsFlow:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from coupler.coupling.row_sums import RowSums
+from coupler.protocol.roles import GAP, IN_CONTACT, MORTAR_WEIGHT, PRESSURE, SLAVE, VELOCITY
 
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
 from .flow_rate import percolates, section_flow_rates
@@ -56,13 +57,13 @@ class FractureFigures:
         ``weights``, the grid cells' solid ``fraction`` and fluid ``velocity`` (at ``block``), the
         interface vertices' open area ``wet`` and fluid ``pressure``."""
         solid, fluid = outputs["solid"], outputs["fluid"]
-        slave = solid["slave"] > 0.5
+        slave = solid[SLAVE] > 0.5
         on_grid = self.fs.update(outputs)
         interface = on_grid.interface
-        return {"gap": solid["gap"][slave], "in_contact": solid["in_contact"][slave] > 0.5,
-                "weights": solid["mortar_weight"][slave], "fraction": on_grid.fraction, "velocity": fluid["velocity"],
+        return {"gap": solid[GAP][slave], "in_contact": solid[IN_CONTACT][slave] > 0.5,
+                "weights": solid[MORTAR_WEIGHT][slave], "fraction": on_grid.fraction, "velocity": fluid[VELOCITY],
                 "wet": interface.weights * open_share(interface, self.points, solid),  # the open area per vertex
-                "pressure": interface.from_fluid(fluid["pressure"])}
+                "pressure": interface.from_fluid(fluid[PRESSURE])}
 
     @property
     def pressure_drop(self) -> float:

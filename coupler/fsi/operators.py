@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from coupler.protocol.roles import PRESSURE, SOLID_FRACTION, SOLID_VELOCITY, VELOCITY
+
 from .context import OperatorContext, fluid_solid
 from . import open_gap
 from .projection import Projection
@@ -36,7 +38,7 @@ class PressureTrace:
         self.size, self.weights = interface.size, self.fs.on_grid.reference_weights
 
     def evaluate(self, outputs) -> np.ndarray:
-        return self.fs.on_grid.interface.from_fluid(outputs["fluid"]["pressure"])
+        return self.fs.on_grid.interface.from_fluid(outputs["fluid"][PRESSURE])
 
     def deliver(self, x) -> np.ndarray:
         return self.fs.on_grid.interface.to_solid_vertices(x)
@@ -94,8 +96,8 @@ class ViscousTraction:
 
     def fields(self, outputs) -> tuple:
         """(the fluid's cell pressure, its cell velocity, the solid's velocity at the interface vertices)."""
-        wall = outputs["solid"]["velocity"][self.fs.on_grid.interface.vertices]
-        return outputs["fluid"]["pressure"], outputs["fluid"]["velocity"], wall
+        wall = outputs["solid"][VELOCITY][self.fs.on_grid.interface.vertices]
+        return outputs["fluid"][PRESSURE], outputs["fluid"][VELOCITY], wall
 
     def deliver(self, x) -> np.ndarray:
         return self.fs.on_grid.interface.to_solid_vertices(np.asarray(x).reshape(-1, 3))
@@ -140,7 +142,7 @@ class SolidVelocity:
         self.fs = fluid_solid(ctx)
 
     def evaluate(self, outputs) -> np.ndarray:
-        return self.fs.update(outputs).to_fluid.apply(outputs["solid"]["velocity"], fill=0.0)
+        return self.fs.update(outputs).to_fluid.apply(outputs["solid"][VELOCITY], fill=0.0)
 
     def deliver(self, value) -> np.ndarray:
         return value
@@ -149,7 +151,7 @@ class SolidVelocity:
 #: operator name (as plans write it) -> class, built as ``cls(context, exchange)``
 OPERATORS = {"pressure_trace": PressureTrace, "open_pressure_trace": OpenPressureTrace,
              "viscous_traction": ViscousTraction,
-             "solid_fraction": SolidFraction, "solid_velocity": SolidVelocity,
+             SOLID_FRACTION: SolidFraction, SOLID_VELOCITY: SolidVelocity,
              "flow_rate_control": lambda ctx, exchange: ctx.shared("flow_rate_control", FlowRateControl),
              "l2": lambda ctx, exchange: Projection(ctx, exchange, "l2"),
              "pseudo_l2": lambda ctx, exchange: Projection(ctx, exchange, "pseudo_l2")}

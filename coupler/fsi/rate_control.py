@@ -24,6 +24,7 @@ import numpy as np
 
 from coupler.coupling.row_sums import RowSums
 from coupler.errors import CouplerError
+from coupler.protocol.roles import VELOCITY
 
 from .flow_rate import percolates, section_flow_rates
 from .context import OperatorContext, fluid_solid
@@ -65,7 +66,7 @@ class FlowRateControl:
 
     def local(self, outputs) -> tuple[np.ndarray, np.ndarray]:
         """The fluid velocity and the solid fraction of the deformed solid at the cells of ``block``."""
-        return outputs["fluid"]["velocity"], self.fs.update(outputs).fraction
+        return outputs["fluid"][VELOCITY], self.fs.update(outputs).fraction
 
     def inlet(self, pressure: float):
         """The input ``inlet_pressure`` of the fluid: one value."""

@@ -46,6 +46,7 @@ from coupler.output.report import PAGE
 from coupler.output.results import SUMMARY, Series, write_summary
 from coupler.plan.plan import Plan, make_plan
 from coupler.protocol.errors import ParticipantInputError
+from coupler.protocol.roles import check_geometry, check_outputs
 from coupler.protocol.transport import new_run_id
 from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession
@@ -241,6 +242,7 @@ class Run:
         self.out, self.phases, self.summary, self.log, self.run_id = out, phases, summary, log, run_id
         self.clients: dict = {}
         self.outputs: dict[str, dict] = {}  # latest outputs per participant
+        self.rows: dict[str, int | None] = {}  # rows of each participant's fields (its role's contract)
         self.inputs: dict[str, dict] = {}  # latest inputs per participant
         self.figures: dict[str, dict] = {}
         self.allow = {p.name: p.allow_unconverged for p in plan.participants}
@@ -267,6 +269,7 @@ class Run:
             announced[p.name] = client.announce()
             self.phases.remote(f"{p.name} setup", client, "configure", p.config)
             header, fields = self.phases.remote(f"{p.name} setup", client, "geometry")
+            self.rows[p.name] = check_geometry(p.name, header, fields or {})
             meshes[p.name] = _mesh_of(p.name, header, fields)
             geometry[p.name] = _as_arrays(fields or {})
             self.log(f"{p.name}: {announced[p.name].get('kind')} on {meshes[p.name].num_cells} cells")
@@ -295,6 +298,7 @@ class Run:
         fields = {k: Field(k, v, units) for k, (v, units) in inputs.items()}
         self.outputs[name] = _as_arrays(self.phases.remote(name, client, "advance", window.index, iteration,
                                                            window.t_start, window.dt, fields))
+        check_outputs(name, self.outputs[name], self.rows[name])
         self._record(name, iteration, inputs)
 
     def _record(self, name: str, iteration: int, inputs: dict) -> None:

@@ -22,6 +22,8 @@ binary mask the exact fractions replace).
 import math
 
 from coupler.errors import SceneError
+from coupler.protocol.roles import (DISPLACEMENT, IN_CONTACT, INLET_PRESSURE, PRESSURE, SOLID_FRACTION, SOLID_VELOCITY,
+                                     TRACTION, VELOCITY)
 from coupler.protocol.slabs import slab_bounds
 from coupler.scene.participants import for_role
 from coupler.scene.tables import Table
@@ -93,7 +95,7 @@ def _check_slabs(scene) -> None:
 def _check_rate_control(scene) -> None:
     """A flow rate needs a fluid whose inlet pressure the coupler may set in every iteration."""
     solver = scene.solvers["fluid"]
-    if "flow_rate" in scene.effect_settings[NAME]["inlet"] and "inlet_pressure" not in solver.spec.accepts:
+    if "flow_rate" in scene.effect_settings[NAME]["inlet"] and INLET_PRESSURE not in solver.spec.accepts:
         raise SceneError(f"{scene.path}: [flow] flow_rate: the {solver.kind} fluid does not take a new inlet pressure "
                          f"in every coupling iteration (a participant that accepts 'inlet_pressure': "
                          f"{', '.join(k for k, p in for_role('fluid').items() if 'inlet_pressure' in p.accepts)}); give "
@@ -188,7 +190,7 @@ def plan(scene, plan) -> None:
     rate = (scene.effect_settings.get(NAME) or {}).get("inlet", {}).get("flow_rate")
     if rate is not None:
         plan.exchanges.append(Exchange(
-            ["fluid.velocity", "solid.displacement"], "fluid.inlet_pressure", "flow_rate_control", "before 1",
+            [f"fluid.{VELOCITY}", f"solid.{DISPLACEMENT}"], f"fluid.{INLET_PRESSURE}", "flow_rate_control", "before 1",
             accelerated=True, description=f"the pressure difference dp that passes [flow] flow_rate = {rate:g} m^3/s: "
                                           f"an unknown of the fixed point, H(dp) = dp Q_target / Q (Stokes: Q linear "
                                           f"in dp); converged when also |Q / Q_target - 1| <= tolerance "
@@ -197,12 +199,12 @@ def plan(scene, plan) -> None:
     deformed = ("the fixed solid" if not elastic else "the deformed solid" if c["deformation"] else
                 "the undeformed solid ([coupling] deformation = false)")
     sampled = "exact volume fractions" if fraction == "exact" else "1 where the cell centre is in the solid"
-    plan.exchanges.append(Exchange(["solid.displacement"], "fluid.solid_fraction", "solid_fraction", "before 1",
+    plan.exchanges.append(Exchange([f"solid.{DISPLACEMENT}"], f"fluid.{SOLID_FRACTION}", SOLID_FRACTION, "before 1",
                                    description=f"P0 indicator of {deformed} -> Q0, {sampled}",
                                    options={"fraction": fraction}))
     if dynamic:
-        plan.exchanges.append(Exchange(["solid.displacement", "solid.velocity"], "fluid.solid_velocity",
-                                       "solid_velocity", "6",
+        plan.exchanges.append(Exchange([f"solid.{DISPLACEMENT}", f"solid.{VELOCITY}"], f"fluid.{SOLID_VELOCITY}",
+                                       SOLID_VELOCITY, "6",
                                        description=f"P1 (solid mesh) -> Q0 (fluid cells) of {deformed}, pseudo_l2"))
     quasi = ""
     s = solver.settings
@@ -258,18 +260,18 @@ def _loading(scene, plan) -> None:
     interface = c["interface"] if isinstance(c["interface"], str) else ", ".join(c["interface"])
     if c["traction"] == "full":
         plan.exchanges.append(Exchange(
-            ["fluid.pressure", "fluid.velocity", "solid.velocity"], "solid.traction", "viscous_traction", "2-3",
+            [f"fluid.{PRESSURE}", f"fluid.{VELOCITY}", f"solid.{VELOCITY}"], f"solid.{TRACTION}", "viscous_traction", "2-3",
             accelerated=True, description=f"(-p I + tau) n on the wetted boundary '{interface}': the Q0 pressure "
                                           f"traced half a cell into the fluid, the wall shear from three velocity "
                                           f"samples (coupler/fsi/viscous.py)"))
     elif "contact" in scene.effects:
         plan.exchanges.append(Exchange(
-            ["fluid.pressure", "solid.in_contact"], "solid.pressure", "open_pressure_trace", "2-3", accelerated=True,
+            [f"fluid.{PRESSURE}", f"solid.{IN_CONTACT}"], f"solid.{PRESSURE}", "open_pressure_trace", "2-3", accelerated=True,
             description=f"Q0 (grid) -> P1 on the contact faces '{interface}' moved half a fluid cell into the gap, "
                         f"pseudo_l2 trace, times the open share of each vertex: zero at slave nodes in contact, "
                         f"on the master face one minus the L2 projection of the slave's contact indicator"))
     else:
         plan.exchanges.append(Exchange(
-            ["fluid.pressure"], "solid.pressure", "pressure_trace", "2-3", accelerated=True,
+            [f"fluid.{PRESSURE}"], f"solid.{PRESSURE}", "pressure_trace", "2-3", accelerated=True,
             description=f"Q0 (grid) -> P1 on the wetted boundary '{interface}' moved half a fluid cell into the "
                         f"fluid, pseudo_l2 trace (solids without boundary triangles: onto all solid vertices)"))
