@@ -195,7 +195,7 @@ def test_added_mass_cases_with_chorin_per_cell_differ_by_the_model(tmp_path, cas
 
 
 @pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="OpenFOAM (simpleFoam) not installed")
-def test_quick_benchmark_runs_both_fluids_side_by_side(tmp_path, capsys):
+def test_quick_benchmark_runs_the_three_fluids_side_by_side(tmp_path, capsys):
     bench = load_bench("fluids")
     out = tmp_path / "fluids.json"
     bench.main(["--quick", "-o", str(out)])
@@ -203,7 +203,7 @@ def test_quick_benchmark_runs_both_fluids_side_by_side(tmp_path, capsys):
     assert "goal small_fracture_speedup" in printed and ("PASS" in printed or "MISS" in printed)
     data = json.loads(out.read_text())
     runs = data["coupled"]["small_fracture"]["runs"]
-    assert set(runs) == {"openfoam", "chorin"} and all(r["status"] == "completed" for r in runs.values())
+    assert set(runs) == {"openfoam", "chorin", "reynolds"} and all(r["status"] == "completed" for r in runs.values())
     for r in runs.values():
         assert r["fluid_seconds"] > 0 and 0 < r["fluid_share"] < 1 and r["seconds_per_coupling_iteration"] > 0
     diff = data["coupled"]["small_fracture"]["chorin_against_openfoam"]
