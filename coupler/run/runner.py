@@ -36,7 +36,7 @@ import numpy as np
 from coupler import checks
 from coupler.coupling.acceleration import make_accelerator
 from coupler.coupling.loop import run_coupled
-from coupler.errors import CouplerError, SceneError, run_status
+from coupler.errors import CouplerError, RunFailed, SceneError, one_line, run_status
 from coupler.fsi.monitors import MONITORS
 from coupler.fsi.operators import OPERATORS, OperatorContext
 from coupler.output.plots import residual_plot
@@ -134,21 +134,49 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     if root:
         write_summary(out, summary)
     start = time.perf_counter()
+    failure = None
     try:
         with scene_input(scene), run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
             result = run_class(scene, plan, session, launcher, out, phases, summary, log, run_id,
                                **({"comm": comm} if comm is not None else {})).execute(progress)
         summary.update(result, status="completed")
     except BaseException as exc:
-        summary["status"] = run_status(exc)
-        summary["error"] = f"{type(exc).__name__}: {exc}"
-        raise
-    finally:
-        summary["wall_seconds"] = time.perf_counter() - start
-        if root:
-            write_summary(out, summary)
-            publish(out, summary, scene.output["pictures"], log)
+        failure = exc
+        _record_failure(summary, exc)
+    summary["wall_seconds"] = time.perf_counter() - start
+    if root:
+        failure = _write_end(out, summary, scene.output["pictures"], log, failure)
+    if failure is not None:
+        raise failure
     return summary
+
+
+def _record_failure(summary: dict, exc: BaseException) -> None:
+    summary["status"] = run_status(exc)
+    summary["error"] = f"{type(exc).__name__}: {exc}"
+
+
+def _write_end(out: Path, summary: dict, pictures: bool, log, failure: BaseException | None):
+    """Write the run's final summary and its report; the exception the run ends with. An output
+    that cannot be written (a full disk, a directory made read-only) fails a run that had
+    completed; it never hides the error a run already failed with, but is added to it as a note,
+    as is a summary.json that could not be updated."""
+    try:
+        write_summary(out, summary)
+        publish(out, summary, pictures, log)
+        return failure
+    except OSError as exc:
+        lost = exc
+    if failure is None:  # it had completed: the file it could not write is its failure
+        failure = RunFailed(one_line(lost))
+        _record_failure(summary, failure)
+    elif Path(lost.filename or "").name != SUMMARY:
+        failure.add_note(f"also {one_line(lost)}")
+    try:  # the status it ended with, if the directory takes it now
+        write_summary(out, summary)
+    except OSError as exc:
+        failure.add_note(f"{out / SUMMARY} not updated ({exc.strerror or exc}): it does not say how the run ended")
+    return failure
 
 
 def rehearse(scene, plan: Plan, log=print) -> dict:
