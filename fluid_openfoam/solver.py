@@ -159,7 +159,7 @@ class OpenFOAMSolver:
                 raise
         dt = time.perf_counter() - t0
         if rc != 0:
-            raise OpenFOAMError(f"{app} failed in {self.case}: {describe_exit(rc, oom_before)} (log {logf}):\n"
+            raise OpenFOAMError(f"{app} failed in {self.case}: {describe_exit(rc, oom_before, pid=proc.pid)} (log {logf}):\n"
                                 f"{_tail(logf)}")
         return dt
 

@@ -102,7 +102,7 @@ class Process:
 
     def how(self) -> str:
         """How it ended (:func:`coupler.exits.describe_exit`); call once it has."""
-        return describe_exit(self.popen.poll(), self.oom_before, "the launcher" if self.killed else None)
+        return describe_exit(self.popen.poll(), self.oom_before, "the launcher" if self.killed else None, self.pid)
 
     def describe_exit(self, lines: int = 15) -> str:
         if self.popen.poll() is None:
