@@ -389,6 +389,8 @@ class Run:
         self.summary["steps"].append(record)
         self.summary.update(self.context.summary())
         write_summary(self.out, self.summary, comm=self.comm)
+        for name, report in inner.accepted:
+            self.log(f"warning: time step {window.index}: participant {name!r}: {report.describe()}")
         if not inner.converged:
             raise inner.error(window.index)
 

@@ -66,8 +66,12 @@ def test_allow_unconverged_accepts_it_on_purpose_and_says_so(tmp_path, capsys):
     case = copy_case(CASE, tmp_path, {"feedback = 3.0e4": "feedback = 3.0e4\nunconverged = [1]\n"
                                                           "allow_unconverged = true"})
     out = tmp_path / "out"
-    code, err = run(capsys, case, out)
+    code = main(["run", str(case), "--output", str(out)])
+    said, err = capsys.readouterr()
     assert code == 0, err
+    assert [line for line in said.splitlines() if "accepted" in line] == [
+        "warning: time step 1: participant 'fluid': replay did not converge: residual 0.01 > 1e-06 after 10 "
+        "iterations (told to (config 'unconverged')); accepted (allow_unconverged)"]
     s = summary(out)
     assert s["status"] == "completed" and len(s["steps"]) == 4
     assert s["steps"][1]["converged"] and s["steps"][1]["accepted_unconverged"] == ["fluid: replay"]
