@@ -60,10 +60,20 @@ class ParticipantDied(ParticipantFailure):
         super().__init__(name, f"participant {name!r} died: {reason}")
 
 
+class ParticipantStopped(ParticipantFailure):
+    """The participant's process is there but stopped (SIGSTOP, SIGTSTP): it answers nothing."""
+
+    def __init__(self, name: str, reason: str):
+        self.reason = reason
+        super().__init__(name, f"participant {name!r} is stopped: {reason}")
+
+
 class ParticipantTimeout(ParticipantFailure):
-    """The participant is alive but did not answer ``verb`` within ``seconds``."""
+    """The participant is alive but did not answer ``verb`` within ``seconds`` (the scene's
+    ``[messaging] timeout``)."""
 
     def __init__(self, name: str, verb: str, seconds: float):
         self.verb = verb
         self.seconds = seconds
-        super().__init__(name, f"participant {name!r} did not answer {verb!r} within {seconds:g} s")
+        super().__init__(name, f"participant {name!r} did not answer {verb!r} within {seconds:g} s "
+                               f"([messaging] timeout = {seconds:g}: raise it for longer solves)")

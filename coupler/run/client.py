@@ -18,8 +18,8 @@ from typing import Callable, Iterable, Mapping
 
 import zenoh
 
-from coupler.protocol.errors import (ParticipantDied, ParticipantError, ParticipantInputError, ParticipantTimeout,
-                                     ProtocolError)
+from coupler.protocol.errors import (ParticipantDied, ParticipantError, ParticipantFailure, ParticipantInputError,
+                                     ParticipantStopped, ParticipantTimeout, ProtocolError)
 from coupler.protocol.parts import Layout, Part
 from coupler.protocol.transport import (COUPLER, DEFAULT_TIMEOUT, SHM_THRESHOLD, VERBS, alive_key, callback,
                                         check_name, is_shm, key, new_run_id, open_listening_session,
@@ -47,20 +47,30 @@ class ParticipantClient:
     :class:`ParticipantDied` at once (within ``poll`` seconds). ``process_check``:
     optional callable returning ``None`` while the participant's process runs and a
     reason (exit code, last log lines) once it has exited; it makes the messages
-    precise and catches a process that dies before it ever comes alive.
+    precise and catches a process that dies before it ever comes alive. ``process_stopped``:
+    optional callable returning why the participant's process is stopped (SIGSTOP: it answers
+    nothing and its token goes), else ``None``: such a participant is reported as stopped, not
+    died. ``waiting``: where a call that has waited ``note_every`` seconds says so, naming the
+    participant, the request and the timeout, and again every ``note_every`` seconds (default:
+    the log).
 
     Statistics of the calls are kept in :attr:`stats` (seconds, bytes each way, and the
     participant's own compute time reported in replies as ``elapsed``).
     """
 
     def __init__(self, session: zenoh.Session, run_id: str, name: str, timeout: float = DEFAULT_TIMEOUT,
-                 *, process_check: Callable[[], str | None] | None = None, poll: float = 0.05,
+                 *, process_check: Callable[[], str | None] | None = None,
+                 process_stopped: Callable[[], str | None] | None = None,
+                 waiting: Callable[[str], None] | None = None, note_every: float = 10.0, poll: float = 0.05,
                  shared_memory: bool = True):
         self.session = session
         self.run_id = check_name("run id", run_id)
         self.name = check_name("participant name", name)
         self.timeout = timeout
         self.process_check = process_check
+        self.process_stopped = process_stopped
+        self.waiting = waiting or log.info
+        self.note_every = note_every
         self.poll = poll
         self.finished = False
         self.shared_memory = shared_memory
@@ -107,6 +117,20 @@ class ParticipantClient:
         if sample.kind != zenoh.SampleKind.PUT and not self.finished:
             log.warning("participant %s: liveliness token of rank %d lost", self.name, rank)
 
+    def _gone(self, reason: str) -> ParticipantFailure:
+        """The error for a participant that stopped answering for `reason`: stopped when its
+        process is (SIGSTOP), else died."""
+        stopped = self.process_stopped() if self.process_stopped else None
+        return ParticipantStopped(self.name, stopped) if stopped else ParticipantDied(self.name, reason)
+
+    def _note_wait(self, verb: str, header: Mapping | None, waited: float, timeout: float) -> None:
+        """Say that `verb` has waited `waited` seconds for an answer (and why, when the process is stopped)."""
+        where = ", ".join(f"{k} {header[k]}" for k in ("window", "iteration") if header and k in header)
+        stopped = self.process_stopped() if self.process_stopped else None
+        self.waiting(f"waiting for participant {self.name!r}: no answer to {verb!r}" + (f" ({where})" if where else "")
+                     + f" for {waited:.0f} s" + (f"; it is stopped: {stopped}" if stopped else "")
+                     + f" (the wait ends at {timeout:g} s: [messaging] timeout)")
+
     @property
     def alive(self) -> bool:
         """The participant's liveliness token is present."""
@@ -141,7 +165,7 @@ class ParticipantClient:
         while not self._alive:
             reason = self._death_reason()
             if reason:
-                raise ParticipantDied(self.name, reason)
+                raise self._gone(reason)
             left = deadline - time.monotonic()
             if left <= 0:
                 raise ParticipantTimeout(self.name, "start", timeout)
@@ -172,7 +196,7 @@ class ParticipantClient:
         if not self._alive:
             reason = self._death_reason()
             if reason:
-                raise ParticipantDied(self.name, reason)
+                raise self._gone(reason)
             self.wait_alive(timeout)
         ranks = [r for r in range(len(parts)) if self.mine is None or r in self.mine]
         self._wait_ranks([r for r in ranks if r], timeout)
@@ -185,20 +209,25 @@ class ParticipantClient:
         if 0 in ranks:  # rank 0's request last: it broadcasts the verb to the others
             calls[0] = self._query(key(self.run_id, self.name, verb), payloads[0], timeout)
         calls = dict(sorted(calls.items()))
-        deadline = time.monotonic() + timeout
+        start = time.monotonic()
+        deadline, note = start + timeout, start + self.note_every
         try:
             while pending := [c for c in calls.values() if not c.done.is_set()]:  # one look at each
                 if pending[0].done.wait(self.poll):
                     continue
                 for r, c in calls.items():  # a rank that died first is named (mpirun then ends the others)
                     if r and ((c.done.is_set() and not c.replies) or r in self._ranks_lost):
-                        raise ParticipantDied(self.name, self._rank_gone(r, c.key))
+                        raise self._gone(self._rank_gone(r, c.key))
                 if not self._alive:
-                    raise ParticipantDied(self.name, self._death_reason() or f"lost while answering {verb!r}")
+                    raise self._gone(self._death_reason() or f"lost while answering {verb!r}")
                 if self.process_check and (reason := self.process_check()):
                     raise ParticipantDied(self.name, reason)
-                if time.monotonic() > deadline:
+                now = time.monotonic()
+                if now > deadline:
                     raise ParticipantTimeout(self.name, verb, timeout)
+                if now > note:
+                    self._note_wait(verb, header, now - start, timeout)
+                    note += self.note_every
         except BaseException:
             for c in calls.values():
                 c.cancel.cancel()
@@ -222,7 +251,7 @@ class ParticipantClient:
         while missing := [r for r in ranks if r not in self._ranks_alive]:
             lost = [r for r in missing if r in self._ranks_lost]
             if lost:
-                raise ParticipantDied(self.name, self._rank_gone(lost[0], part_key(self.run_id, self.name, "*", lost[0])))
+                raise self._gone(self._rank_gone(lost[0], part_key(self.run_id, self.name, "*", lost[0])))
             if time.monotonic() > deadline:
                 raise ParticipantTimeout(self.name, f"start of rank {missing[0]}", timeout)
             time.sleep(0.01)
@@ -249,7 +278,7 @@ class ParticipantClient:
         where = f"rank {rank} ({call.key})"
         if not call.replies:
             if rank:
-                raise ParticipantDied(self.name, self._rank_gone(rank, call.key))
+                raise self._gone(self._rank_gone(rank, call.key))
             # zenoh ends a query without reply when the participant's session goes away;
             # its liveliness token follows within milliseconds.
             end = time.monotonic() + 2.0
@@ -257,7 +286,7 @@ class ParticipantClient:
                 time.sleep(0.01)
             reason = self._death_reason()
             if reason or not self._alive:
-                raise ParticipantDied(self.name, reason or f"no reply to {verb!r}")
+                raise self._gone(reason or f"no reply to {verb!r}")
             raise ProtocolError(f"participant {self.name!r} gave no reply to {verb!r} (no queryable)")
         if len(call.replies) > 1:
             raise ProtocolError(f"{len(call.replies)} processes answered {verb!r} as participant {self.name!r}, "

@@ -25,6 +25,7 @@ every step, so a failed run keeps what it did), ``residuals.png`` for implicit p
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 from contextlib import ExitStack, contextmanager
@@ -136,7 +137,8 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     start = time.perf_counter()
     failure = None
     try:
-        with scene_input(scene), run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
+        with scene_input(scene), logging_to(out / "logs" / ("coupler.log" if root else f"coupler.{comm.rank}.log")), \
+                run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
             result = run_class(scene, plan, session, launcher, out, phases, summary, log, run_id,
                                **({"comm": comm} if comm is not None else {})).execute(progress)
         summary.update(result, status="completed")
@@ -149,6 +151,34 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     if failure is not None:
         raise failure
     return summary
+
+
+class _LogFile(logging.FileHandler):
+    """A log file that a full disk or a read-only directory silences instead of printing a
+    traceback per record on the screen (the run's own error says what happened)."""
+
+    def handleError(self, record):
+        pass
+
+
+@contextmanager
+def logging_to(path: Path):
+    """The coupler's own log records (loggers ``varcouple.*``: a participant's liveliness token
+    lost, processes started and stopped, calls that wait) go to `path` for the run, not to the
+    screen, where the run's one error line says what ended it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    logger, handler = logging.getLogger("varcouple"), _LogFile(path, delay=True)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    before = logger.level, logger.propagate
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        handler.close()
+        logger.level, logger.propagate = before
 
 
 def _record_failure(summary: dict, exc: BaseException) -> None:
@@ -237,6 +267,14 @@ def processes(scene, plan: Plan, run_id: str, logs):
         yield session, stack.enter_context(Launcher(run_id, logs, session.endpoints))
 
 
+def watched(launcher: Launcher, name: str, log) -> dict:
+    """How the client of participant `name` watches its process (exited, stopped) and where it
+    says that a call waits long (`log`): keyword arguments of
+    :class:`~coupler.run.client.ParticipantClient`."""
+    return {"process_check": lambda: launcher.check(name), "process_stopped": lambda: launcher.stopped(name),
+            "waiting": log}
+
+
 def served_in_process(p, run_id: str, comm=None):
     """The participant object of the in-process participant `p` (a stand-in of
     :mod:`coupler.standins`), bound to the run (and to this rank of the coupler's ranks `comm`:
@@ -286,8 +324,7 @@ class Run:
                 self.log(f"serving {p.name}: {p.kind} in this process")
                 continue
             self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=p.arguments)
-            self.clients[p.name] = self.session.client(
-                p.name, timeout=timeout, process_check=lambda name=p.name: self.launcher.check(name))
+            self.clients[p.name] = self.session.client(p.name, timeout=timeout, **watched(self.launcher, p.name, self.log))
             self.log(f"started {p.name}: {p.kind} ({p.ranks} rank{'s' * (p.ranks > 1)}), log in "
                      f"{self.launcher.log_dir / p.name}.log")
         meshes, geometry, announced = {}, {}, {}

@@ -265,3 +265,21 @@ def test_a_capped_simplefoam_is_not_reported_as_converged(tmp_path, capsys):
     report = s["steps"][0]["solves"]["fluid"][0]
     assert report["solver"] == "simpleFoam" and not report["converged"] and report["residual"] > 1e-7
     assert s["steps"][0]["solves"]["solid"][0]["converged"]  # the solid's Krylov solve is reported too
+
+
+def test_a_stopped_participant_is_named_as_stopped_in_one_line(tmp_path):
+    """SIGSTOP of the solid: the run ends with exit 4 and one line saying the solid is stopped (it
+    said 'died'); the coupler's own notes (liveliness tokens lost) go to logs/coupler.log, not
+    after the error line."""
+    case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
+    out = tmp_path / "out"
+    proc = _start_run(case, out, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    pid = _wait_for_steps(out)["participants_announced"]["solid"]["pid"]
+    os.kill(pid, signal.SIGSTOP)
+    err = _finish(proc, timeout=120)  # the run's end kills the stopped solid
+    assert proc.returncode == EXIT_CODES["failed"], err
+    lines = [line for line in err.splitlines() if not line.startswith("case [")]  # the progress bar
+    assert lines == [f"varcouple: error: participant 'solid' is stopped: process {pid} is stopped (state T: "
+                     f"SIGSTOP or SIGTSTP); kill -CONT {pid} resumes it"], err
+    assert summary(out)["status"] == "failed"
+    assert "participant solid: liveliness token lost" in (out / "logs" / "coupler.log").read_text()
