@@ -25,6 +25,11 @@ class ParticipantFailure(CouplerError):
         self.name = name
         super().__init__(message)
 
+    def at(self, where: str) -> "ParticipantFailure":
+        """This error, its message prefixed by where in the run it happened (a time step)."""
+        self.args = (f"{where}: {self.args[0]}",)
+        return self
+
 
 class ParticipantError(ParticipantFailure):
     """The participant answered with an error (its handler raised): ``message`` is its text."""

@@ -46,7 +46,7 @@ from coupler.output.publish import publish
 from coupler.output.report import PAGE
 from coupler.output.results import SUMMARY, Series, write_summary
 from coupler.plan.plan import Plan, make_plan
-from coupler.protocol.errors import ParticipantInputError
+from coupler.protocol.errors import ParticipantFailure, ParticipantInputError
 from coupler.protocol.roles import check_geometry, check_outputs
 from coupler.protocol.transport import new_run_id
 from coupler.protocol.wire import Field
@@ -183,7 +183,7 @@ def logging_to(path: Path):
 
 def _record_failure(summary: dict, exc: BaseException) -> None:
     summary["status"] = run_status(exc)
-    summary["error"] = f"{type(exc).__name__}: {exc}"
+    summary["error"] = "; ".join([f"{type(exc).__name__}: {exc}", *getattr(exc, "__notes__", ())])
 
 
 def _write_end(out: Path, summary: dict, pictures: bool, log, failure: BaseException | None):
@@ -382,14 +382,20 @@ class Run:
         self.context.window = window
         try:
             for p in self.plan.participants:
-                inputs = {}
+                inputs, sources = {}, []
                 for e, op in zip(self.plan.exchanges, self.operators):
                     if e.target_participant != p.name:
                         continue
                     value = given[id(e)] if e.accelerated else self.phases.timed("transfer", op.evaluate,
                                                                                  self.outputs)
                     inputs[e.target_field] = (self.phases.timed("transfer", op.deliver, value), op.units)
-                self._advance(p.name, window, iteration, inputs)
+                    sources.append(op)
+                try:
+                    self._advance(p.name, window, iteration, inputs)
+                except ParticipantFailure as exc:  # when and on what it failed: the step, and inputs set by a key
+                    for note in (op.blame() for op in sources if hasattr(op, "blame")):
+                        exc.add_note(note)
+                    raise exc.at(f"{window}, coupling iteration {iteration}")
             H = [self.phases.timed("transfer", op.evaluate, self.outputs) for _, op in self._accelerated()]
         except CouplerError as exc:
             if type(exc) is not CouplerError:  # a participant's failure names itself
