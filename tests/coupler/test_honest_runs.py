@@ -195,13 +195,15 @@ def test_an_unwritable_output_is_one_line_before_anything_runs(capsys):
     ({"E = 1.0e9": "E = inf"}, ["[materials.solid] E", "finite"]),
     ({"nu = 0.25": "nu = nan"}, ["[materials.solid] nu", "finite"]),
     ({"upper = [1.0, 1.0, 1.0]": "upper = [1.0, inf, 1.0]"}, ["[geometry.fluid] upper", "finite numbers"]),
+    ({"upper = [1.0, 1.0, 1.0]": "upper = [1e300, 1e300, 1e300]"},
+     ["[geometry.fluid] upper", "1e+300 overflows double precision", "give the geometry in other units"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nmode = \"client\""},
      ["[messaging] connect", "client mode needs the zenoh router"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nconnect = [\"foo:bar\"]"},
      ["[messaging] connect", "'foo:bar' is not a zenoh endpoint"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nconnect = [\"tcp/127.0.0.1:99999\"]"},
      ["[messaging] connect", "port in 1..65535"]),
-], ids=["dt_inf", "E_inf", "nu_nan", "grid_inf", "client_without_router", "malformed_endpoint", "bad_port"])
+], ids=["dt_inf", "E_inf", "nu_nan", "grid_inf", "grid_1e300", "client_without_router", "malformed_endpoint", "bad_port"])
 def test_scene_numbers_and_endpoints_are_checked_where_read(tmp_path, capsys, replace, words):
     case = copy_case(CASE, tmp_path, replace)
     code, err = run(capsys, case, tmp_path / "out")
