@@ -74,11 +74,12 @@ class ParticipantStopped(ParticipantFailure):
 
 
 class ParticipantTimeout(ParticipantFailure):
-    """The participant is alive but did not answer ``verb`` within ``seconds`` (the scene's
-    ``[messaging] timeout``)."""
+    """The participant is alive but did not answer ``verb``, nor report progress on it, within
+    ``seconds`` (the scene's ``[messaging] timeout``); ``progressed``: it had reported some before."""
 
-    def __init__(self, name: str, verb: str, seconds: float):
+    def __init__(self, name: str, verb: str, seconds: float, progressed: bool = False):
         self.verb = verb
         self.seconds = seconds
-        super().__init__(name, f"participant {name!r} did not answer {verb!r} within {seconds:g} s "
-                               f"([messaging] timeout = {seconds:g}: raise it for longer solves)")
+        silent = f"and reported no progress on it for {seconds:g} s" if progressed else f"within {seconds:g} s"
+        super().__init__(name, f"participant {name!r} did not answer {verb!r} {silent} ([messaging] timeout = "
+                               f"{seconds:g}: raise it for longer solves)")

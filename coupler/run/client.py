@@ -6,11 +6,14 @@
 * :class:`ParticipantClient` calls one participant's verbs with a timeout per call and
   tracks its liveliness: a query to a participant that dies is answered by
   :class:`~coupler.protocol.errors.ParticipantDied` within a fraction of a second, not
-  after the timeout.
+  after the timeout. The timeout follows the work: it counts from the participant's latest
+  progress message of the call (docs/protocol.md, "Progress"), so a slow solver that reports
+  progress is never cut off and a silent one is.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -23,7 +26,7 @@ from coupler.protocol.errors import (ParticipantDied, ParticipantError, Particip
 from coupler.protocol.parts import Layout, Part
 from coupler.protocol.transport import (COUPLER, DEFAULT_TIMEOUT, SHM_THRESHOLD, VERBS, alive_key, callback,
                                         check_name, is_shm, key, new_run_id, open_listening_session,
-                                        open_session, part_key, payload_bytes, warm_up_shm, zbytes)
+                                        open_session, part_key, payload_bytes, progress_key, warm_up_shm, zbytes)
 from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite, check_reply, decode, encode
 
 log = logging.getLogger("varcouple.client")
@@ -41,7 +44,8 @@ class _Call:
 class ParticipantClient:
     """The coupler's handle on one participant: its verbs as methods.
 
-    Every call is a zenoh query with a timeout (``timeout`` per call, else the client's).
+    Every call is a zenoh query with a timeout (``timeout`` per call, else the client's), counted
+    from the call's start or the participant's latest progress message for it, whichever is later.
     Liveliness is tracked by a subscriber on the participant's token: :attr:`alive`.
     A call to a participant that is dead, or dies while the call waits, raises
     :class:`ParticipantDied` at once (within ``poll`` seconds). ``process_check``:
@@ -89,6 +93,8 @@ class ParticipantClient:
         self.mine: list[int] | None = None
         self._ranks_alive: set[int] = set()
         self._ranks_lost: set[int] = set()
+        self._heard: tuple[float, dict] | None = None  # (when, what) of its latest progress message
+        self._progress_sub = session.declare_subscriber(progress_key(run_id, name), callback(self._on_progress))
         self._sub = session.liveliness().declare_subscriber(
             alive_key(run_id, name), callback(self._on_liveliness), history=True)
         self._rank_sub = session.liveliness().declare_subscriber(
@@ -105,6 +111,23 @@ class ParticipantClient:
                 self._lost_at = time.monotonic()
         if sample.kind != zenoh.SampleKind.PUT and not self.finished:
             log.warning("participant %s: liveliness token lost", self.name)
+
+    def _on_progress(self, sample):
+        try:
+            self._heard = (time.monotonic(), json.loads(payload_bytes(sample.payload)))
+        except ValueError:
+            log.warning("participant %s: malformed progress message ignored", self.name)
+
+    def _progress_of(self, verb: str, header: Mapping | None, since: float) -> tuple[float, str] | None:
+        """(when, message) of the participant's latest progress on this call (`verb` with `header`'s
+        window and iteration, heard after `since`), or None."""
+        heard = self._heard
+        if heard is None or heard[0] < since:
+            return None
+        when, what = heard
+        same = what.get("verb") == verb and all(what.get(k) == header[k] for k in ("window", "iteration")
+                                                if header and k in header)
+        return (when, str(what.get("message", ""))) if same else None
 
     def _on_rank_liveliness(self, sample):
         rank = int(str(sample.key_expr).rsplit("/", 1)[-1])
@@ -123,13 +146,20 @@ class ParticipantClient:
         stopped = self.process_stopped() if self.process_stopped else None
         return ParticipantStopped(self.name, stopped) if stopped else ParticipantDied(self.name, reason)
 
-    def _note_wait(self, verb: str, header: Mapping | None, waited: float, timeout: float) -> None:
-        """Say that `verb` has waited `waited` seconds for an answer (and why, when the process is stopped)."""
+    def _note_wait(self, verb: str, header: Mapping | None, waited: float, timeout: float,
+                   progress: tuple[float, str] | None) -> None:
+        """Say that `verb` has waited `waited` seconds for an answer, with the participant's latest
+        `progress` (when, message) on it, or why it is silent when its process is stopped."""
         where = ", ".join(f"{k} {header[k]}" for k in ("window", "iteration") if header and k in header)
         stopped = self.process_stopped() if self.process_stopped else None
+        if progress is not None:
+            said = (f"; working, {time.monotonic() - progress[0]:.0f} s ago: {progress[1]} (the wait ends "
+                    f"{timeout:g} s after its last progress: [messaging] timeout)")
+        else:
+            said = (f"; it is stopped: {stopped}" if stopped else "; no progress reported") + \
+                f" (the wait ends at {timeout:g} s without progress: [messaging] timeout)"
         self.waiting(f"waiting for participant {self.name!r}: no answer to {verb!r}" + (f" ({where})" if where else "")
-                     + f" for {waited:.0f} s" + (f"; it is stopped: {stopped}" if stopped else "")
-                     + f" (the wait ends at {timeout:g} s: [messaging] timeout)")
+                     + f" for {waited:.0f} s" + said)
 
     @property
     def alive(self) -> bool:
@@ -210,7 +240,7 @@ class ParticipantClient:
             calls[0] = self._query(key(self.run_id, self.name, verb), payloads[0], timeout)
         calls = dict(sorted(calls.items()))
         start = time.monotonic()
-        deadline, note = start + timeout, start + self.note_every
+        note = start + self.note_every
         try:
             while pending := [c for c in calls.values() if not c.done.is_set()]:  # one look at each
                 if pending[0].done.wait(self.poll):
@@ -222,11 +252,11 @@ class ParticipantClient:
                     raise self._gone(self._death_reason() or f"lost while answering {verb!r}")
                 if self.process_check and (reason := self.process_check()):
                     raise ParticipantDied(self.name, reason)
-                now = time.monotonic()
-                if now > deadline:
-                    raise ParticipantTimeout(self.name, verb, timeout)
+                now, progress = time.monotonic(), self._progress_of(verb, header, start)
+                if now > (progress[0] if progress else start) + timeout:  # silent for `timeout` seconds
+                    raise ParticipantTimeout(self.name, verb, timeout, progress is not None)
                 if now > note:
-                    self._note_wait(verb, header, now - start, timeout)
+                    self._note_wait(verb, header, now - start, timeout, progress)
                     note += self.note_every
         except BaseException:
             for c in calls.values():
@@ -368,12 +398,12 @@ class ParticipantClient:
             raise
 
     def close(self) -> None:
-        for sub in (self._sub, self._rank_sub):
+        for sub in (self._sub, self._rank_sub, self._progress_sub):
             try:
                 sub.undeclare()
             except Exception:  # noqa: BLE001
                 pass
-        self._sub = self._rank_sub = None
+        self._sub = self._rank_sub = self._progress_sub = None
 
     def __enter__(self):
         return self

@@ -388,8 +388,26 @@ def test_a_call_that_waits_says_so_naming_the_participant_and_the_request(run):
     slow.configure({"delay": 1.8})
     slow.advance(3, 1, 0.0, 1.0, {"x": np.ones(2)})
     assert len(said) >= 2, said
-    assert said[0] == ("waiting for participant 'slow': no answer to 'advance' (window 3, iteration 1) for 1 s "
-                       "(the wait ends at 20 s: [messaging] timeout)")
+    assert said[0] == ("waiting for participant 'slow': no answer to 'advance' (window 3, iteration 1) for 1 s; "
+                       "no progress reported (the wait ends at 20 s without progress: [messaging] timeout)")
+
+
+def test_the_timeout_follows_the_work(run):
+    """A solve three times longer than the timeout that reports progress every 0.2 s is waited for
+    (it was cut off at the timeout); the same solve silent is timed out (test_timeout)."""
+    said = []
+    run.launcher.start("busy", "coupler.standins", extra_args=["--kind", "echo"])
+    busy = run.coupler.client("busy", 1.0, waiting=said.append, note_every=1.0)
+    busy.wait_alive(30.0)
+    busy.configure({"delay": 3.0, "progress": 0.2})
+    t0 = time.monotonic()
+    out = busy.advance(0, 2, 0.0, 1.0, {"x": np.ones(2)})
+    assert time.monotonic() - t0 >= 3.0 and np.array_equal(out["x"].data, np.ones(2))
+    assert len(said) >= 2 and all("(window 0, iteration 2)" in line and "; working, " in line and
+                                  "s slept (the wait ends 1 s after its last progress" in line for line in said), said
+    busy.configure({"delay": 3.0, "progress": 0.0})
+    with pytest.raises(ParticipantTimeout, match=r"did not answer 'advance' within 1 s \(\[messaging\] timeout = 1"):
+        busy.advance(1, 0, 0.0, 1.0, {"x": np.ones(2)})
 
 
 def test_a_stopped_participant_is_reported_as_stopped_not_died(run):
