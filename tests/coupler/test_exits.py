@@ -122,20 +122,43 @@ def test_participant_the_launcher_kills_is_not_blamed_on_memory(tmp_path):
 
 # ------------------------------------------------------------------ OpenFOAM binaries
 
-def test_openfoam_binary_killed_by_sigkill(tmp_path, monkeypatch):
-    """OpenFOAMSolver.run names a SIGKILL and what the kernel says of it, not 'exit code -9'."""
+def fake_blockmesh(tmp_path, monkeypatch, script: str) -> OpenFOAMSolver:
+    """An OpenFOAMSolver on a 2 x 2 x 2 grid case whose ``blockMesh`` is the shell `script`."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     fake = bin_dir / "blockMesh"
-    fake.write_text("#!/bin/sh\nkill -9 $$\n")
+    fake.write_text("#!/bin/sh\n" + script)
     fake.chmod(0o755)
     monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
     (tmp_path / "case").mkdir()
     spec = CaseSpec.from_config({"grid": {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [2, 2, 2]}})
-    solver = OpenFOAMSolver(tmp_path / "case", spec)
+    return OpenFOAMSolver(tmp_path / "case", spec)
+
+
+def test_openfoam_binary_killed_by_sigkill(tmp_path, monkeypatch):
+    """OpenFOAMSolver.run names a SIGKILL and what the kernel says of it, not 'exit code -9'."""
+    solver = fake_blockmesh(tmp_path, monkeypatch, "kill -9 $$\n")
     with pytest.raises(OpenFOAMError) as info:
         solver.run("blockMesh")
     assert RULED_OUT in str(info.value) and "exit code" not in str(info.value)
+
+
+def test_a_running_openfoam_binary_logs_its_progress(tmp_path, monkeypatch, caplog):
+    """While a binary writes its log, its last line is logged every PROGRESS_SECONDS (the fluid
+    participant's progress, which keeps the coupler's [messaging] timeout from cutting a long solve
+    off: docs/protocol.md); a binary whose log stands still is silent."""
+    import logging
+
+    import fluid_openfoam.solver as solver_module
+
+    solver = fake_blockmesh(tmp_path, monkeypatch, 'for i in 1 2 3 4 5 6; do echo "Time = $i"; sleep 0.2; done\n'
+                                                   "sleep 1\n")
+    monkeypatch.setattr(solver_module, "PROGRESS_SECONDS", 0.3)
+    with caplog.at_level(logging.INFO, logger="varcouple.fluid_openfoam"):
+        solver.run("blockMesh")
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("blockMesh running: ")]
+    assert len(lines) >= 2 and all(line.startswith("blockMesh running: Time = ") for line in lines), lines
+    assert len(lines) <= 5  # none in the last second, when the log stood still
 
 
 # ------------------------------------------------------------------ a real out-of-memory kill
