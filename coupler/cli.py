@@ -420,6 +420,11 @@ def error(message: str) -> None:
     print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 
+def _noted(message: str, exc: BaseException) -> str:
+    """`message` and the notes of `exc` (what else went wrong while it ended the run)."""
+    return "; ".join([message, *getattr(exc, "__notes__", ())])
+
+
 def _terminate(signum, frame):
     from coupler.errors import Terminated
 
@@ -460,16 +465,16 @@ def _main(argv: list[str] | None) -> int:
     try:
         return args.func(args)
     except Terminated as exc:
-        error(f"{exc}: participants stopped, the results written so far are kept")
+        error(_noted(f"{exc}: participants stopped, the results written so far are kept", exc))
         return EXIT_CODES["terminated"]
-    except KeyboardInterrupt:
-        error("interrupted: participants stopped, the results written so far are kept")
+    except KeyboardInterrupt as exc:
+        error(_noted("interrupted: participants stopped, the results written so far are kept", exc))
         return EXIT_CODES["interrupted"]
     except NotConverged as exc:
-        error(str(exc))
+        error(one_line(exc))
         return EXIT_CODES["not_converged"]
     except RunFailed as exc:
-        error(str(exc))
+        error(one_line(exc))
         return EXIT_CODES["failed"]
     except (CouplerError, TransferError, OSError) as exc:
         sys.stdout.flush()

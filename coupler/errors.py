@@ -38,10 +38,13 @@ EXIT_CODES = {"completed": 0, "check_failed": 1, "invalid": 2, "not_converged": 
 
 
 def one_line(exc: BaseException) -> str:
-    """An error as one line; an OSError as ``<file>: <reason>``."""
+    """An error as one line; an OSError as ``<file>: <reason>``; its notes (``add_note``: what
+    else went wrong while it ended the run) after it, separated by ``;``."""
     if isinstance(exc, OSError) and exc.strerror:
-        return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
-    return " ".join(str(exc).split()) or type(exc).__name__
+        text = f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    else:
+        text = " ".join(str(exc).split()) or type(exc).__name__
+    return "; ".join([text, *(" ".join(note.split()) for note in getattr(exc, "__notes__", ()))])
 
 
 def run_status(exc: BaseException | None) -> str:

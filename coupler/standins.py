@@ -44,7 +44,8 @@ below. Their settings (``pressure``, ``feedback``, ``unconverged``; ``stiffness`
 ``echo``
     Returns its inputs unchanged (for benchmarks and tests). Config: ``{"reply": "same"}``
     or ``"empty"`` (reply without arrays: one-way timing), ``"delay": s`` (sleep in
-    ``advance``), ``"fail": "message"`` (``advance`` raises it).
+    ``advance``, logging a line every ``"progress": s`` when given: a slow solver that reports
+    progress), ``"fail": "message"`` (``advance`` raises it).
 
 Participants that solve nothing, which the runner serves in its own process
 (:mod:`coupler.run.local`):
@@ -110,6 +111,8 @@ ECHO = ParticipantSpec(
         Setting("reply", "string", "same: the inputs; empty: a reply without arrays (one-way timing)",
                 default="same", choices=("same", "empty")),
         Setting("delay", "number", "sleep in advance", default=0.0, minimum=0.0, unit="s"),
+        Setting("progress", "number", "while it sleeps, log a line every this many seconds (its progress: "
+                "docs/protocol.md); 0: silent", default=0.0, minimum=0.0, unit="s"),
         Setting("fail", "string", "advance raises this message", default=None)))
 
 
@@ -300,8 +303,12 @@ class Echo(Participant):
         return {}, None
 
     def advance(self, window, iteration, t, dt, inputs):
-        if self.config["delay"]:
-            time.sleep(self.config["delay"])
+        end, every = time.monotonic() + self.config["delay"], self.config["progress"]
+        while (left := end - time.monotonic()) > 0:
+            time.sleep(min(left, every) if every else left)
+            if every:
+                log.info("echo: %.1f s of %.1f s slept", self.config["delay"] - max(left - every, 0.0),
+                         self.config["delay"])
         if self.config["fail"]:
             raise RuntimeError(self.config["fail"])
         return {} if self.config["reply"] == "empty" else inputs

@@ -264,7 +264,8 @@ class ChorinSolver:
             residual = max(self.relative([a - b for a, b in zip(new.q, self.state.q)], new.q),
                            self.relative([phi], [new.p], cells=True))
             if not np.isfinite(residual):
-                raise FloatingPointError(f"the pseudo-time stepping diverged at step {it} (dt {dt:.3g} s)")
+                raise FloatingPointError(f"chorin: the steady pseudo-time stepping diverged at its iteration {it} "
+                                         f"(pseudo time step dt {dt:.3g} s): non-finite velocity or pressure")
             self.state = State(new.q, new.p, self.state.t)
             if residual < spec.tolerance:
                 break

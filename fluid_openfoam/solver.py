@@ -60,6 +60,32 @@ OPENFOAM_DIR = "/usr/share/openfoam"
 
 _RESIDUAL = re.compile(r"Solving for (\w+), Initial residual = ([^,]+),")
 
+#: while a binary runs, the last line of its log is logged this often (seconds) when the log grew:
+#: the participant's progress, which keeps the coupler's [messaging] timeout from cutting a long
+#: solve off (docs/protocol.md); a binary whose log stands still is silent
+PROGRESS_SECONDS = 10.0
+
+
+def _wait_logging(proc: subprocess.Popen, logf: Path, app: str) -> int:
+    """``proc.wait()``, logging the last line of its log `logf` every :data:`PROGRESS_SECONDS` in
+    which the log grew."""
+    size = 0
+    while True:
+        try:
+            return proc.wait(PROGRESS_SECONDS)
+        except subprocess.TimeoutExpired:
+            try:
+                with open(logf, "rb") as f:
+                    grown = f.seek(0, 2)
+                    f.seek(max(size, grown - 4096))
+                    lines = f.read().decode("utf-8", "replace").split("\n")
+            except OSError:
+                continue
+            last = next((line.strip() for line in reversed(lines) if line.strip()), "")
+            if grown > size and last:
+                log.info("%s running: %s", app, last)
+            size = grown
+
 
 def final_residual(log_text: str, transient: bool) -> float:
     """The quantity ``residualControl`` compares with the tolerance: the largest initial
@@ -148,7 +174,7 @@ class OpenFOAMSolver:
             proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                     env=env)
             try:
-                rc = proc.wait()
+                rc = _wait_logging(proc, logf, app)
             except BaseException:
                 proc.terminate()
                 try:
@@ -159,7 +185,7 @@ class OpenFOAMSolver:
                 raise
         dt = time.perf_counter() - t0
         if rc != 0:
-            raise OpenFOAMError(f"{app} failed in {self.case}: {describe_exit(rc, oom_before)} (log {logf}):\n"
+            raise OpenFOAMError(f"{app} failed in {self.case}: {describe_exit(rc, oom_before, pid=proc.pid)} (log {logf}):\n"
                                 f"{_tail(logf)}")
         return dt
 

@@ -32,6 +32,7 @@ communicator, so all ranks stop together, and the inner CG + GAMG is distributed
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
@@ -42,6 +43,12 @@ from petsc4py import PETSc
 from .distributed import DistributedQP
 from .petsc import configure_cg_amg, converged_reason, near_nullspace, petsc_matrix, petsc_vector
 from .problem import BoundConstrainedQP, NonsmoothSolveError, Solution
+
+log = logging.getLogger("varcouple.nonsmooth")
+
+#: a long solve logs its progress at least this often (seconds): the line is also the participant's
+#: progress, which keeps the coupler's [messaging] timeout from cutting it off (docs/protocol.md)
+PROGRESS_SECONDS = 10.0
 
 
 def _fixed_system(A: sp.csr_matrix, b: np.ndarray, diag: np.ndarray, active: np.ndarray, value: np.ndarray):
@@ -177,6 +184,7 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
     seen.add(sets)
     history, changes, krylov = [], [], 0
     monotone_from, converged, reason = None, False, ""
+    shown = time.monotonic()
     try:
         for it in range(1, max_iter + 1):
             value = np.where(sets == 1, qp.upper, np.where(sets == -1, qp.lower, bound))
@@ -201,6 +209,10 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
             residual = comm.allreduce(float(np.max(np.abs(x - qp.project(x + lam * dinv)), initial=0.0)), op=MPI.MAX)
             history.append(residual / scale(x))
             tol_abs = tol * scale(x)
+            if comm.rank == 0 and time.monotonic() - shown >= PROGRESS_SECONDS:  # a long solve shows it moves
+                shown = time.monotonic()
+                log.info("active set iteration %d: residual %.3g (tolerance %g), %d Krylov iterations so far", it,
+                         history[-1], tol, krylov)
             if inner < 0:
                 reason = (f"the inner CG + {amg.upper()} reached its {ksp_max_it} iterations at active set "
                           f"iteration {it}")

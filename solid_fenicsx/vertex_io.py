@@ -31,6 +31,8 @@ import dolfinx
 import dolfinx.cpp
 import dolfinx.fem
 
+from transfer.atomic import atomic_path
+
 from .mesh import SolidMesh
 
 
@@ -299,7 +301,8 @@ def write_vtu(path, vio: VertexIO, point_data: dict | None = None, cell_data: di
     for name, value in (cell_data or {}).items():
         cdata[name] = [_gather_cells(vio, value, root) if isinstance(value, dolfinx.fem.Function) else value]
     if vio.comm.rank == root:
-        meshio.write(str(path), meshio.Mesh(pts, [("tetra", tets)], point_data=pdata, cell_data=cdata))
+        with atomic_path(path) as tmp:
+            meshio.write(str(tmp), meshio.Mesh(pts, [("tetra", tets)], point_data=pdata, cell_data=cdata))
 
 
 def _gather_cells(vio: VertexIO, f: dolfinx.fem.Function, root: int):

@@ -13,7 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from .errors import MeshError
-from .mesh import Mesh, lattice_hexahedra
+from .mesh import Mesh, check_coordinates, lattice_hexahedra
 
 
 #: the six faces of an axis-aligned box (a grid, a box mesh), in the order (axis, side)
@@ -48,6 +48,7 @@ class StructuredGrid:
         self.shape = tuple(int(n) for n in np.asarray(shape).reshape(3))
         if not np.all(np.isfinite(self.origin)) or not np.all(np.isfinite(self.spacing)):
             raise MeshError(f"{name}: origin and spacing must be finite")
+        check_coordinates(name, [self.origin, self.origin + self.spacing * np.asarray(self.shape)])
         if np.any(self.spacing <= 0):
             raise MeshError(f"{name}: spacing must be positive, got {self.spacing.tolist()}")
         if min(self.shape) < 1:

@@ -1,7 +1,7 @@
 """Meshes: tetrahedra and hexahedra (volume), triangles and quadrilaterals in 3D (surface).
 
 Vertex order is VTK's (and meshio's) for every cell type. A mesh is validated
-when it is made: finite coordinates, indices in range, no repeated vertex in a
+when it is made: finite coordinates within :data:`COORDINATE_LIMIT`, indices in range, no repeated vertex in a
 cell, no degenerate cell and, for volume cells, no inverted cell. Tolerances
 are relative to each cell's own size, so a mesh in metres and the same mesh in
 millimetres are judged alike.
@@ -66,6 +66,25 @@ def lattice_tetrahedra(shape, start: int = 0, stop: int | None = None) -> np.nda
 
 #: a cell whose measure is below this times (longest edge)^dim is degenerate
 DEGENERATE_RTOL = 1e-13
+
+#: the largest coordinate magnitude a mesh or grid may have: the intersections' volumes and moments
+#: multiply up to six coordinates, which overflow double precision (1.8e308) beyond about 1e51; a
+#: P1 -> Q1 transfer of a linear field is exact at 1e50 and wrong at 1e60 (measured), and a mesh
+#: at 1e300 was reported as not overlapping its partner
+COORDINATE_LIMIT = 1e50
+
+
+def check_coordinates(name: str, points) -> None:
+    """MeshError unless every coordinate of `points` is finite and within :data:`COORDINATE_LIMIT`."""
+    points = np.asarray(points, dtype=np.float64)
+    if not np.all(np.isfinite(points)):
+        bad = int(np.argwhere(~np.isfinite(points.reshape(-1, points.shape[-1])))[0, 0])
+        raise MeshError(f"{name}: point {bad} has a non-finite coordinate")
+    largest = float(np.max(np.abs(points), initial=0.0))
+    if largest > COORDINATE_LIMIT:
+        raise MeshError(f"{name}: coordinates up to {largest:.3g} in magnitude overflow double precision in the "
+                        f"volumes and moments of the transfers (at most {COORDINATE_LIMIT:g}); give the geometry in "
+                        f"other units")
 
 #: vertex order of the mirror image of a volume cell: its orientation reversed (two
 #: vertices of a tetrahedron swapped; the bottom and top quads of a hexahedron swapped)
@@ -250,9 +269,7 @@ class Mesh:
         if self.cells.ndim != 2 or self.cells.shape[1] != nverts:
             raise MeshError(f"{self.name}: {self.cell_type} cells need {nverts} vertices, "
                             f"got cells of shape {self.cells.shape}")
-        if not np.all(np.isfinite(self.points)):
-            bad = int(np.argwhere(~np.isfinite(self.points))[0, 0])
-            raise MeshError(f"{self.name}: point {bad} has a non-finite coordinate")
+        check_coordinates(self.name, self.points)
         if self.num_cells == 0:
             raise MeshError(f"{self.name}: mesh has no cells")
         if self.cells.min() < 0 or self.cells.max() >= self.num_points:

@@ -25,6 +25,7 @@ import numpy as np
 from .mesh import CELL_TYPES, Mesh
 from .spaces import FunctionSpace
 
+from .atomic import atomic_path, write_text
 from .errors import MeshFileError, without_content
 
 #: meshio cell-type prefix -> topological dimension ("tetra10" is a "tetra", ...)
@@ -177,8 +178,8 @@ def write_pvd(path, entries) -> None:
     """A ParaView collection ``.pvd`` listing the files of a time series: `entries` are
     (time, file name relative to the collection) pairs, in order."""
     rows = "\n".join(f'    <DataSet timestep="{t:.12g}" file="{name}"/>' for t, name in entries)
-    Path(path).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
-                          f"{rows}\n  </Collection>\n</VTKFile>\n")
+    write_text(path, '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+                     f"{rows}\n  </Collection>\n</VTKFile>\n")
 
 
 def family(mesh: Mesh, kind: str) -> str:
@@ -375,7 +376,7 @@ class MeshFile:
         out = meshio.Mesh(self.mesh.points, [(self.mesh.cell_type, self.mesh.cells)],
                           point_data=point_data, cell_data=cell_data)
         try:
-            with vtu_zlib_level(VTU_ZLIB_LEVEL):
-                meshio.write(Path(path), out)
+            with vtu_zlib_level(VTU_ZLIB_LEVEL), atomic_path(path) as tmp:
+                meshio.write(tmp, out)
         except Exception as exc:  # meshio raises many exception types (format, I/O)
             raise MeshFileError(f"{path}: cannot write the mesh: {one_line(exc)}") from exc

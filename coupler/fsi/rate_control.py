@@ -135,6 +135,11 @@ class FlowRateControl:
         return (f"the flow rate {self.flow_rate:.6g} m^3/s differs from [flow] flow_rate {self.target:g} by "
                 f"{error:.3g} (relative, tolerance {self.tolerance:g})")
 
+    def blame(self) -> str:
+        """The key behind the inlet pressure delivered, for a fluid that failed on it."""
+        return (f"its inlet pressure comes from {self.where} = {self.target:g} m^3/s: a pressure difference of "
+                f"{self.pressure_drop:.3g} Pa was asked of it; check that flow rate")
+
     def figures(self) -> dict:
         """The dp found and the rate reached (the last iteration's), for the step's record."""
         reached = self.flow_rate if self.flow_rate is not None else float("nan")

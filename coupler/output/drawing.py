@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from transfer.atomic import atomic_path
+
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")  # offscreen, no X server
 
 WINDOW = (1200, 800)
@@ -70,8 +72,11 @@ def save(p, out: Path, name: str, text: str) -> Path:
     """Write `text` on the picture and save it as `name` in `out`."""
     p.add_text(text, position="upper_left", font_size=12, color="black")
     path = out / name
-    p.screenshot(str(path))
-    p.close()
+    try:
+        with atomic_path(path) as tmp:
+            p.screenshot(str(tmp))
+    finally:
+        p.close()
     return path
 
 

@@ -7,6 +7,19 @@ from pathlib import Path
 
 import numpy as np
 
+from transfer.atomic import atomic_path
+
+
+def save_figure(fig, path: Path, dpi: int) -> None:
+    """Save the matplotlib figure `fig` as `path` (atomically: whole or not at all) and close it."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
+
 
 def residual_plot(path: Path, result) -> None:
     import matplotlib
@@ -30,8 +43,7 @@ def residual_plot(path: Path, result) -> None:
     ax.set_title(f"fixed-point residuals ({result.accelerator.get('name', '')})")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def solver_convergence(path: Path, steps: list[dict]) -> bool:
@@ -58,8 +70,7 @@ def solver_convergence(path: Path, steps: list[dict]) -> bool:
     if len(curves) <= 10:
         ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return True
 
 
@@ -94,8 +105,7 @@ def apertures_plot(path: Path, steps: list[dict]) -> bool:
     ax.legend(lines[0][0] + lines[1][0], lines[0][1] + lines[1][1], fontsize=8, loc="lower left")
     ax.set_title("apertures against confining stress")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return True
 
 
@@ -142,6 +152,5 @@ def figures_plot(path: Path, steps: list[dict], overlays: dict | None = None) ->
     for ax in axes.ravel()[len(series):]:
         ax.set_axis_off()
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
     return True

@@ -12,6 +12,8 @@ import html
 import json
 from pathlib import Path
 
+from transfer.atomic import write_text
+
 PAGE = "index.html"
 
 STYLE = """
@@ -162,7 +164,7 @@ def write_page(out: Path, summary: dict, pictures: list) -> Path:
     page = (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{_e(title)}</title>'
             f"<style>{STYLE}</style></head><body>{body}</body></html>\n")
     path = out / PAGE
-    path.write_text(page)
+    write_text(path, page)
     return path
 
 
@@ -181,5 +183,5 @@ def write_study_page(directory: Path, study: dict, plot: str | None = None) -> P
     page = (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>study</title>'
             f"<style>{STYLE}</style></head><body>{body}</body></html>\n")
     path = directory / PAGE
-    path.write_text(page)
+    write_text(path, page)
     return path

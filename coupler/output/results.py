@@ -18,6 +18,7 @@ import numpy as np
 
 from coupler.errors import CouplerError
 from transfer import StructuredGrid
+from transfer.atomic import atomic_path, write_text
 from transfer.meshfile import write_pvd
 
 SUMMARY = "summary.json"
@@ -49,7 +50,8 @@ class Series:
                            cell_data={k: [v] for k, v in (cell_data or {}).items()})
         if self.comm is None:
             file = f"{self.name}_{step:04d}.vtu"
-            meshio.write(self.directory / file, mesh)
+            with atomic_path(self.directory / file) as tmp:
+                meshio.write(tmp, mesh)
         else:
             file = self._write_pieces(step, mesh)
         self.entries.append((t, file))
@@ -63,7 +65,8 @@ class Series:
         piece = f"{self.name}_{step:04d}_p{rank}.vtu"
         held = len(mesh.cells[0].data) > 0
         if held:
-            meshio.write(self.directory / piece, mesh)
+            with atomic_path(self.directory / piece) as tmp:
+                meshio.write(tmp, mesh)
         layouts = self.comm.allgather((held, piece, _layout(mesh)))
         pieces = [(r, p, layout) for r, (h, p, layout) in enumerate(layouts) if h]
         for r, _, layout in pieces[1:]:
@@ -72,8 +75,8 @@ class Series:
                                    f"rank {pieces[0][0]}'s {pieces[0][2]}")
         file = f"{self.name}_{step:04d}.pvtu"
         if rank == 0:
-            (self.directory / file).write_text(_pvtu(pieces[0][2] if pieces else _layout(mesh),
-                                                     [p for _, p, _ in pieces]))
+            write_text(self.directory / file, _pvtu(pieces[0][2] if pieces else _layout(mesh),
+                                                    [p for _, p, _ in pieces]))
         return file
 
 
@@ -180,6 +183,4 @@ def write_summary(out: Path, summary: dict, name: str = SUMMARY, comm=None) -> N
     """`summary` as JSON in ``out/name``, written atomically (by rank 0 of `comm` alone)."""
     if comm is not None and comm.Get_rank() != 0:
         return
-    tmp = out / (name + ".tmp")
-    tmp.write_text(json.dumps(summary, indent=2, default=float))
-    tmp.replace(out / name)
+    write_text(out / name, json.dumps(summary, indent=2, default=float))

@@ -25,6 +25,11 @@ class ParticipantFailure(CouplerError):
         self.name = name
         super().__init__(message)
 
+    def at(self, where: str) -> "ParticipantFailure":
+        """This error, its message prefixed by where in the run it happened (a time step)."""
+        self.args = (f"{where}: {self.args[0]}",)
+        return self
+
 
 class ParticipantError(ParticipantFailure):
     """The participant answered with an error (its handler raised): ``message`` is its text."""
@@ -60,10 +65,21 @@ class ParticipantDied(ParticipantFailure):
         super().__init__(name, f"participant {name!r} died: {reason}")
 
 
-class ParticipantTimeout(ParticipantFailure):
-    """The participant is alive but did not answer ``verb`` within ``seconds``."""
+class ParticipantStopped(ParticipantFailure):
+    """The participant's process is there but stopped (SIGSTOP, SIGTSTP): it answers nothing."""
 
-    def __init__(self, name: str, verb: str, seconds: float):
+    def __init__(self, name: str, reason: str):
+        self.reason = reason
+        super().__init__(name, f"participant {name!r} is stopped: {reason}")
+
+
+class ParticipantTimeout(ParticipantFailure):
+    """The participant is alive but did not answer ``verb``, nor report progress on it, within
+    ``seconds`` (the scene's ``[messaging] timeout``); ``progressed``: it had reported some before."""
+
+    def __init__(self, name: str, verb: str, seconds: float, progressed: bool = False):
         self.verb = verb
         self.seconds = seconds
-        super().__init__(name, f"participant {name!r} did not answer {verb!r} within {seconds:g} s")
+        silent = f"and reported no progress on it for {seconds:g} s" if progressed else f"within {seconds:g} s"
+        super().__init__(name, f"participant {name!r} did not answer {verb!r} {silent} ([messaging] timeout = "
+                               f"{seconds:g}: raise it for longer solves)")

@@ -1,10 +1,11 @@
 """The participant's side of the protocol (docs/protocol.md): :class:`ParticipantServer`
 serves one participant's verbs: one queryable per verb, a liveliness token, and a loop that
 runs the handler's methods in the calling (main) thread and answers each query, errors
-included."""
+included; while a verb runs, its log records are published as progress (:class:`Progress`)."""
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import queue
@@ -15,10 +16,13 @@ import zenoh
 
 from .errors import InputError, ProtocolError
 from .transport import (COUPLER, PART_VERBS, SHM_THRESHOLD, VERBS, alive_key, callback, check_name, is_shm, key,
-                        part_key, payload_bytes, rank_alive_key, warm_up_shm, zbytes)
+                        part_key, payload_bytes, progress_key, rank_alive_key, warm_up_shm, zbytes)
 from .wire import Field, as_fields, decode, encode, json_number
 
 log = logging.getLogger("varcouple.server")
+
+#: at most one progress message per this many seconds (docs/protocol.md, "Progress")
+PROGRESS_EVERY = 0.5
 
 class _Stop:
     def __init__(self, reason: str):
@@ -78,6 +82,32 @@ def send_reply(query, reply_key: str, base: dict, shared_memory: bool, t0: float
               len(payload))
 
 
+class Progress(logging.Handler):
+    """While a verb runs: the participant's log records (level INFO and above, any logger) published
+    on its progress key as ``{"verb", "window", "iteration", "message"}`` (``base``: the reply's
+    run id, participant, verb, window and iteration), at most one per :data:`PROGRESS_EVERY`
+    seconds. A solver that logs while it works is seen working; one that hangs logs nothing."""
+
+    def __init__(self, publisher, base: dict):
+        super().__init__(logging.INFO)
+        self.publisher, self.base = publisher, base
+        self.sent = -PROGRESS_EVERY
+        self._busy = False
+
+    def emit(self, record) -> None:
+        now = time.monotonic()
+        if self._busy or now - self.sent < PROGRESS_EVERY:
+            return
+        self._busy, self.sent = True, now
+        try:
+            self.publisher.put(json.dumps({k: self.base.get(k) for k in ("verb", "window", "iteration")}
+                                          | {"message": record.getMessage()}))
+        except Exception:  # noqa: BLE001 - progress must never fail the verb
+            pass
+        finally:
+            self._busy = False
+
+
 class CouplerGone(ConnectionError):
     """The coupler's liveliness token disappeared: the participant should exit."""
 
@@ -112,6 +142,7 @@ class ParticipantServer:
             session.declare_queryable(key(run_id, name, verb), callback(self._queue.put), complete=True)
             for verb in VERBS
         ]
+        self._progress = session.declare_publisher(progress_key(run_id, name))
         self._coupler_sub = None
         if watch_coupler:
             self._coupler_sub = session.liveliness().declare_subscriber(
@@ -146,8 +177,13 @@ class ParticipantServer:
         """Run the handler for one query and reply (never raises for handler errors)."""
         verb = str(query.key_expr).rsplit("/", 1)[-1]
         base = {"run_id": self.run_id, "participant": self.name, "verb": verb}
-        answer(query, key(self.run_id, self.name, verb), base, self.shared_memory,
-               lambda request, fields: self.dispatch(verb, request, fields))
+        progress, root = Progress(self._progress, base), logging.getLogger()
+        root.addHandler(progress)
+        try:
+            answer(query, key(self.run_id, self.name, verb), base, self.shared_memory,
+                   lambda request, fields: self.dispatch(verb, request, fields))
+        finally:
+            root.removeHandler(progress)
         if verb == "finish":
             self.finished = True
 
@@ -187,7 +223,7 @@ class ParticipantServer:
         if self._closed:
             return
         self._closed = True
-        for entity in [self._token, self._coupler_sub, *self._queryables]:
+        for entity in [self._token, self._coupler_sub, self._progress, *self._queryables]:
             if entity is not None:
                 try:
                     entity.undeclare()

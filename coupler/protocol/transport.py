@@ -100,6 +100,12 @@ def part_key(run_id: str, name: str, verb: str, rank: int) -> str:
     return f"{PREFIX}/{run_id}/{name}/{verb}/{int(rank)}"
 
 
+def progress_key(run_id: str, name: str) -> str:
+    """``varcouple/<run_id>/<participant>/progress``: what the participant is doing while a verb runs
+    (docs/protocol.md, "Progress")."""
+    return f"{PREFIX}/{run_id}/{name}/progress"
+
+
 def rank_alive_key(run_id: str, name: str, rank: int) -> str:
     """``varcouple/<run_id>/<participant>/alive/<rank>``: the liveliness token of rank ``rank``
     (1 and above) of a participant on several MPI ranks."""

@@ -6,11 +6,14 @@
 * :class:`ParticipantClient` calls one participant's verbs with a timeout per call and
   tracks its liveliness: a query to a participant that dies is answered by
   :class:`~coupler.protocol.errors.ParticipantDied` within a fraction of a second, not
-  after the timeout.
+  after the timeout. The timeout follows the work: it counts from the participant's latest
+  progress message of the call (docs/protocol.md, "Progress"), so a slow solver that reports
+  progress is never cut off and a silent one is.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -18,12 +21,12 @@ from typing import Callable, Iterable, Mapping
 
 import zenoh
 
-from coupler.protocol.errors import (ParticipantDied, ParticipantError, ParticipantInputError, ParticipantTimeout,
-                                     ProtocolError)
+from coupler.protocol.errors import (ParticipantDied, ParticipantError, ParticipantFailure, ParticipantInputError,
+                                     ParticipantStopped, ParticipantTimeout, ProtocolError)
 from coupler.protocol.parts import Layout, Part
 from coupler.protocol.transport import (COUPLER, DEFAULT_TIMEOUT, SHM_THRESHOLD, VERBS, alive_key, callback,
                                         check_name, is_shm, key, new_run_id, open_listening_session,
-                                        open_session, part_key, payload_bytes, warm_up_shm, zbytes)
+                                        open_session, part_key, payload_bytes, progress_key, warm_up_shm, zbytes)
 from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite, check_reply, decode, encode
 
 log = logging.getLogger("varcouple.client")
@@ -41,26 +44,37 @@ class _Call:
 class ParticipantClient:
     """The coupler's handle on one participant: its verbs as methods.
 
-    Every call is a zenoh query with a timeout (``timeout`` per call, else the client's).
+    Every call is a zenoh query with a timeout (``timeout`` per call, else the client's), counted
+    from the call's start or the participant's latest progress message for it, whichever is later.
     Liveliness is tracked by a subscriber on the participant's token: :attr:`alive`.
     A call to a participant that is dead, or dies while the call waits, raises
     :class:`ParticipantDied` at once (within ``poll`` seconds). ``process_check``:
     optional callable returning ``None`` while the participant's process runs and a
     reason (exit code, last log lines) once it has exited; it makes the messages
-    precise and catches a process that dies before it ever comes alive.
+    precise and catches a process that dies before it ever comes alive. ``process_stopped``:
+    optional callable returning why the participant's process is stopped (SIGSTOP: it answers
+    nothing and its token goes), else ``None``: such a participant is reported as stopped, not
+    died. ``waiting``: where a call that has waited ``note_every`` seconds says so, naming the
+    participant, the request and the timeout, and again every ``note_every`` seconds (default:
+    the log).
 
     Statistics of the calls are kept in :attr:`stats` (seconds, bytes each way, and the
     participant's own compute time reported in replies as ``elapsed``).
     """
 
     def __init__(self, session: zenoh.Session, run_id: str, name: str, timeout: float = DEFAULT_TIMEOUT,
-                 *, process_check: Callable[[], str | None] | None = None, poll: float = 0.05,
+                 *, process_check: Callable[[], str | None] | None = None,
+                 process_stopped: Callable[[], str | None] | None = None,
+                 waiting: Callable[[str], None] | None = None, note_every: float = 10.0, poll: float = 0.05,
                  shared_memory: bool = True):
         self.session = session
         self.run_id = check_name("run id", run_id)
         self.name = check_name("participant name", name)
         self.timeout = timeout
         self.process_check = process_check
+        self.process_stopped = process_stopped
+        self.waiting = waiting or log.info
+        self.note_every = note_every
         self.poll = poll
         self.finished = False
         self.shared_memory = shared_memory
@@ -79,6 +93,8 @@ class ParticipantClient:
         self.mine: list[int] | None = None
         self._ranks_alive: set[int] = set()
         self._ranks_lost: set[int] = set()
+        self._heard: tuple[float, dict] | None = None  # (when, what) of its latest progress message
+        self._progress_sub = session.declare_subscriber(progress_key(run_id, name), callback(self._on_progress))
         self._sub = session.liveliness().declare_subscriber(
             alive_key(run_id, name), callback(self._on_liveliness), history=True)
         self._rank_sub = session.liveliness().declare_subscriber(
@@ -96,6 +112,23 @@ class ParticipantClient:
         if sample.kind != zenoh.SampleKind.PUT and not self.finished:
             log.warning("participant %s: liveliness token lost", self.name)
 
+    def _on_progress(self, sample):
+        try:
+            self._heard = (time.monotonic(), json.loads(payload_bytes(sample.payload)))
+        except ValueError:
+            log.warning("participant %s: malformed progress message ignored", self.name)
+
+    def _progress_of(self, verb: str, header: Mapping | None, since: float) -> tuple[float, str] | None:
+        """(when, message) of the participant's latest progress on this call (`verb` with `header`'s
+        window and iteration, heard after `since`), or None."""
+        heard = self._heard
+        if heard is None or heard[0] < since:
+            return None
+        when, what = heard
+        same = what.get("verb") == verb and all(what.get(k) == header[k] for k in ("window", "iteration")
+                                                if header and k in header)
+        return (when, str(what.get("message", ""))) if same else None
+
     def _on_rank_liveliness(self, sample):
         rank = int(str(sample.key_expr).rsplit("/", 1)[-1])
         with self._lock:
@@ -106,6 +139,27 @@ class ParticipantClient:
                 self._ranks_lost.add(rank)
         if sample.kind != zenoh.SampleKind.PUT and not self.finished:
             log.warning("participant %s: liveliness token of rank %d lost", self.name, rank)
+
+    def _gone(self, reason: str) -> ParticipantFailure:
+        """The error for a participant that stopped answering for `reason`: stopped when its
+        process is (SIGSTOP), else died."""
+        stopped = self.process_stopped() if self.process_stopped else None
+        return ParticipantStopped(self.name, stopped) if stopped else ParticipantDied(self.name, reason)
+
+    def _note_wait(self, verb: str, header: Mapping | None, waited: float, timeout: float,
+                   progress: tuple[float, str] | None) -> None:
+        """Say that `verb` has waited `waited` seconds for an answer, with the participant's latest
+        `progress` (when, message) on it, or why it is silent when its process is stopped."""
+        where = ", ".join(f"{k} {header[k]}" for k in ("window", "iteration") if header and k in header)
+        stopped = self.process_stopped() if self.process_stopped else None
+        if progress is not None:
+            said = (f"; working, {time.monotonic() - progress[0]:.0f} s ago: {progress[1]} (the wait ends "
+                    f"{timeout:g} s after its last progress: [messaging] timeout)")
+        else:
+            said = (f"; it is stopped: {stopped}" if stopped else "; no progress reported") + \
+                f" (the wait ends at {timeout:g} s without progress: [messaging] timeout)"
+        self.waiting(f"waiting for participant {self.name!r}: no answer to {verb!r}" + (f" ({where})" if where else "")
+                     + f" for {waited:.0f} s" + said)
 
     @property
     def alive(self) -> bool:
@@ -141,7 +195,7 @@ class ParticipantClient:
         while not self._alive:
             reason = self._death_reason()
             if reason:
-                raise ParticipantDied(self.name, reason)
+                raise self._gone(reason)
             left = deadline - time.monotonic()
             if left <= 0:
                 raise ParticipantTimeout(self.name, "start", timeout)
@@ -172,7 +226,7 @@ class ParticipantClient:
         if not self._alive:
             reason = self._death_reason()
             if reason:
-                raise ParticipantDied(self.name, reason)
+                raise self._gone(reason)
             self.wait_alive(timeout)
         ranks = [r for r in range(len(parts)) if self.mine is None or r in self.mine]
         self._wait_ranks([r for r in ranks if r], timeout)
@@ -185,20 +239,25 @@ class ParticipantClient:
         if 0 in ranks:  # rank 0's request last: it broadcasts the verb to the others
             calls[0] = self._query(key(self.run_id, self.name, verb), payloads[0], timeout)
         calls = dict(sorted(calls.items()))
-        deadline = time.monotonic() + timeout
+        start = time.monotonic()
+        note = start + self.note_every
         try:
             while pending := [c for c in calls.values() if not c.done.is_set()]:  # one look at each
                 if pending[0].done.wait(self.poll):
                     continue
                 for r, c in calls.items():  # a rank that died first is named (mpirun then ends the others)
                     if r and ((c.done.is_set() and not c.replies) or r in self._ranks_lost):
-                        raise ParticipantDied(self.name, self._rank_gone(r, c.key))
+                        raise self._gone(self._rank_gone(r, c.key))
                 if not self._alive:
-                    raise ParticipantDied(self.name, self._death_reason() or f"lost while answering {verb!r}")
+                    raise self._gone(self._death_reason() or f"lost while answering {verb!r}")
                 if self.process_check and (reason := self.process_check()):
                     raise ParticipantDied(self.name, reason)
-                if time.monotonic() > deadline:
-                    raise ParticipantTimeout(self.name, verb, timeout)
+                now, progress = time.monotonic(), self._progress_of(verb, header, start)
+                if now > (progress[0] if progress else start) + timeout:  # silent for `timeout` seconds
+                    raise ParticipantTimeout(self.name, verb, timeout, progress is not None)
+                if now > note:
+                    self._note_wait(verb, header, now - start, timeout, progress)
+                    note += self.note_every
         except BaseException:
             for c in calls.values():
                 c.cancel.cancel()
@@ -222,7 +281,7 @@ class ParticipantClient:
         while missing := [r for r in ranks if r not in self._ranks_alive]:
             lost = [r for r in missing if r in self._ranks_lost]
             if lost:
-                raise ParticipantDied(self.name, self._rank_gone(lost[0], part_key(self.run_id, self.name, "*", lost[0])))
+                raise self._gone(self._rank_gone(lost[0], part_key(self.run_id, self.name, "*", lost[0])))
             if time.monotonic() > deadline:
                 raise ParticipantTimeout(self.name, f"start of rank {missing[0]}", timeout)
             time.sleep(0.01)
@@ -249,7 +308,7 @@ class ParticipantClient:
         where = f"rank {rank} ({call.key})"
         if not call.replies:
             if rank:
-                raise ParticipantDied(self.name, self._rank_gone(rank, call.key))
+                raise self._gone(self._rank_gone(rank, call.key))
             # zenoh ends a query without reply when the participant's session goes away;
             # its liveliness token follows within milliseconds.
             end = time.monotonic() + 2.0
@@ -257,7 +316,7 @@ class ParticipantClient:
                 time.sleep(0.01)
             reason = self._death_reason()
             if reason or not self._alive:
-                raise ParticipantDied(self.name, reason or f"no reply to {verb!r}")
+                raise self._gone(reason or f"no reply to {verb!r}")
             raise ProtocolError(f"participant {self.name!r} gave no reply to {verb!r} (no queryable)")
         if len(call.replies) > 1:
             raise ProtocolError(f"{len(call.replies)} processes answered {verb!r} as participant {self.name!r}, "
@@ -339,12 +398,12 @@ class ParticipantClient:
             raise
 
     def close(self) -> None:
-        for sub in (self._sub, self._rank_sub):
+        for sub in (self._sub, self._rank_sub, self._progress_sub):
             try:
                 sub.undeclare()
             except Exception:  # noqa: BLE001
                 pass
-        self._sub = self._rank_sub = None
+        self._sub = self._rank_sub = self._progress_sub = None
 
     def __enter__(self):
         return self

@@ -102,7 +102,7 @@ class Process:
 
     def how(self) -> str:
         """How it ended (:func:`coupler.exits.describe_exit`); call once it has."""
-        return describe_exit(self.popen.poll(), self.oom_before, "the launcher" if self.killed else None)
+        return describe_exit(self.popen.poll(), self.oom_before, "the launcher" if self.killed else None, self.pid)
 
     def describe_exit(self, lines: int = 15) -> str:
         if self.popen.poll() is None:
@@ -199,6 +199,20 @@ class Launcher:
         if proc is None or proc.returncode is None:
             return None
         return proc.describe_exit()
+
+    def stopped(self, name: str) -> str | None:
+        """Why ``name`` answers nothing while it runs: which of its processes (it, its MPI ranks)
+        is stopped (SIGSTOP or SIGTSTP: state T; a debugger: t), or ``None``. Suitable as
+        :class:`~coupler.run.client.ParticipantClient`'s ``process_stopped``."""
+        proc = self.processes.get(name)
+        if proc is None or proc.returncode is not None:
+            return None
+        for pid in [proc.pid, *descendants(proc.pid)]:
+            st = _proc_stat(pid)
+            if st is not None and st[0] in ("T", "t"):
+                how = "SIGSTOP or SIGTSTP" if st[0] == "T" else "traced by a debugger"
+                return f"process {pid} is stopped (state {st[0]}: {how}); kill -CONT {pid} resumes it"
+        return None
 
     def poll(self) -> list[Exited]:
         """The processes that have exited since the last call, with their exit code and

@@ -4,7 +4,8 @@ Two runs writing into one directory would mix their files (the summary of one, t
 steps of the other) without a word. :class:`OutputLock` holds ``.varcouple.lock`` in the
 directory for the length of a run: it names the run id, process, host and start time; a
 second run refuses with that name; a lock whose process is gone (same host) is stale and
-taken over with a note.
+taken over with a note, and the partial files of killed writers (:mod:`transfer.atomic`) are
+removed.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import time
 from pathlib import Path
 
 from coupler.errors import CouplerError
+from transfer.atomic import PARTIAL
 
 LOCK = ".varcouple.lock"
 
@@ -49,6 +51,15 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
+
+
+def _remove_partials(directory: Path) -> None:
+    """Remove the temporary files of :mod:`transfer.atomic` left by processes that are gone
+    (a run killed while writing): the directory holds whole files only."""
+    for file in directory.glob(f".*{PARTIAL}*"):
+        pid = file.stem.rpartition(PARTIAL)[2]
+        if pid.isdigit() and not _alive(int(pid)):
+            file.unlink(missing_ok=True)
 
 
 class OutputLock:
@@ -93,17 +104,24 @@ class OutputLock:
             with os.fdopen(fd, "w") as f:
                 json.dump(me, f)
             self._held = True
+            _remove_partials(self.path.parent)
             return
         raise OutputBusy(f"{self.path}: could not take the output directory's lock")
 
     def release(self) -> None:
+        """Remove the lock. A directory that no longer lets it be removed (made read-only
+        during the run) keeps it: the run's own error says what happened, and the next run
+        takes the stale lock over."""
         if self._held:
-            holder = self._holder()
-            if holder is None or holder.get("run_id") == self.run_id:
-                self.path.unlink(missing_ok=True)
             self._held = False
-            if self._new and not any(self.path.parent.iterdir()):  # a run that wrote nothing leaves nothing
-                self.path.parent.rmdir()
+            try:
+                holder = self._holder()
+                if holder is None or holder.get("run_id") == self.run_id:
+                    self.path.unlink(missing_ok=True)
+                if self._new and not any(self.path.parent.iterdir()):  # a run that wrote nothing leaves nothing
+                    self.path.parent.rmdir()
+            except OSError:
+                pass
 
     def __enter__(self):
         self.acquire()

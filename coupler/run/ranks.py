@@ -51,7 +51,7 @@ from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession, step_reports
 from coupler.run.launch import Launcher
 from coupler.run.local import LocalClient
-from coupler.run.runner import Run, served_in_process, write_series
+from coupler.run.runner import Run, served_in_process, watched, write_series
 from transfer import StructuredGrid
 
 
@@ -183,17 +183,17 @@ class RanksRun(Run):
     def start(self) -> None:
         comm, timeout = self.comm, self.scene.messaging["timeout"]
         for p in self.plan.participants:
-            check = None
+            watch = {}
             if p.in_process:
                 self.clients[p.name] = LocalClient(p.name, served_in_process(p, self.run_id, comm))
                 self.log(f"serving {p.name}: {p.kind} in this process, part r of it on coupler rank r")
                 continue
             if self.root:
                 self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=p.arguments)
-                check = (lambda name=p.name: self.launcher.check(name))
+                watch = watched(self.launcher, p.name, self.log)
                 self.log(f"started {p.name}: {p.kind} ({p.ranks} rank{'s' * (p.ranks > 1)}), log in "
                          f"{self.launcher.log_dir / p.name}.log")
-            self.clients[p.name] = self.session.client(p.name, timeout=timeout, process_check=check)
+            self.clients[p.name] = self.session.client(p.name, timeout=timeout, **watch)
         announced, parts, meshes = {}, {}, {}
         for p in self.plan.participants:
             client = self.clients[p.name]

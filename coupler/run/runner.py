@@ -25,6 +25,7 @@ every step, so a failed run keeps what it did), ``residuals.png`` for implicit p
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 from contextlib import ExitStack, contextmanager
@@ -36,7 +37,7 @@ import numpy as np
 from coupler import checks
 from coupler.coupling.acceleration import make_accelerator
 from coupler.coupling.loop import run_coupled
-from coupler.errors import CouplerError, SceneError, run_status
+from coupler.errors import CouplerError, RunFailed, SceneError, one_line, run_status
 from coupler.fsi.monitors import MONITORS
 from coupler.fsi.operators import OPERATORS, OperatorContext
 from coupler.output.plots import residual_plot
@@ -45,7 +46,7 @@ from coupler.output.publish import publish
 from coupler.output.report import PAGE
 from coupler.output.results import SUMMARY, Series, write_summary
 from coupler.plan.plan import Plan, make_plan
-from coupler.protocol.errors import ParticipantInputError
+from coupler.protocol.errors import ParticipantFailure, ParticipantInputError
 from coupler.protocol.roles import check_geometry, check_outputs
 from coupler.protocol.transport import new_run_id
 from coupler.protocol.wire import Field
@@ -134,21 +135,78 @@ def run(scene, log=print, progress: bool | None = True, run_id: str | None = Non
     if root:
         write_summary(out, summary)
     start = time.perf_counter()
+    failure = None
     try:
-        with scene_input(scene), run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
+        with scene_input(scene), logging_to(out / "logs" / ("coupler.log" if root else f"coupler.{comm.rank}.log")), \
+                run_class.processes(scene, plan, run_id, out, comm) as (session, launcher):
             result = run_class(scene, plan, session, launcher, out, phases, summary, log, run_id,
                                **({"comm": comm} if comm is not None else {})).execute(progress)
         summary.update(result, status="completed")
     except BaseException as exc:
-        summary["status"] = run_status(exc)
-        summary["error"] = f"{type(exc).__name__}: {exc}"
-        raise
-    finally:
-        summary["wall_seconds"] = time.perf_counter() - start
-        if root:
-            write_summary(out, summary)
-            publish(out, summary, scene.output["pictures"], log)
+        failure = exc
+        _record_failure(summary, exc)
+    summary["wall_seconds"] = time.perf_counter() - start
+    if root:
+        failure = _write_end(out, summary, scene.output["pictures"], log, failure)
+    if failure is not None:
+        raise failure
     return summary
+
+
+class _LogFile(logging.FileHandler):
+    """A log file that a full disk or a read-only directory silences instead of printing a
+    traceback per record on the screen (the run's own error says what happened)."""
+
+    def handleError(self, record):
+        pass
+
+
+@contextmanager
+def logging_to(path: Path):
+    """The coupler's own log records (loggers ``varcouple.*``: a participant's liveliness token
+    lost, processes started and stopped, calls that wait) go to `path` for the run, not to the
+    screen, where the run's one error line says what ended it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    logger, handler = logging.getLogger("varcouple"), _LogFile(path, delay=True)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    before = logger.level, logger.propagate
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        handler.close()
+        logger.level, logger.propagate = before
+
+
+def _record_failure(summary: dict, exc: BaseException) -> None:
+    summary["status"] = run_status(exc)
+    summary["error"] = "; ".join([f"{type(exc).__name__}: {exc}", *getattr(exc, "__notes__", ())])
+
+
+def _write_end(out: Path, summary: dict, pictures: bool, log, failure: BaseException | None):
+    """Write the run's final summary and its report; the exception the run ends with. An output
+    that cannot be written (a full disk, a directory made read-only) fails a run that had
+    completed; it never hides the error a run already failed with, but is added to it as a note,
+    as is a summary.json that could not be updated."""
+    try:
+        write_summary(out, summary)
+        publish(out, summary, pictures, log)
+        return failure
+    except OSError as exc:
+        lost = exc
+    if failure is None:  # it had completed: the file it could not write is its failure
+        failure = RunFailed(one_line(lost))
+        _record_failure(summary, failure)
+    elif Path(lost.filename or "").name != SUMMARY:
+        failure.add_note(f"also {one_line(lost)}")
+    try:  # the status it ended with, if the directory takes it now
+        write_summary(out, summary)
+    except OSError as exc:
+        failure.add_note(f"{out / SUMMARY} not updated ({exc.strerror or exc}): it does not say how the run ended")
+    return failure
 
 
 def rehearse(scene, plan: Plan, log=print) -> dict:
@@ -209,6 +267,14 @@ def processes(scene, plan: Plan, run_id: str, logs):
         yield session, stack.enter_context(Launcher(run_id, logs, session.endpoints))
 
 
+def watched(launcher: Launcher, name: str, log) -> dict:
+    """How the client of participant `name` watches its process (exited, stopped) and where it
+    says that a call waits long (`log`): keyword arguments of
+    :class:`~coupler.run.client.ParticipantClient`."""
+    return {"process_check": lambda: launcher.check(name), "process_stopped": lambda: launcher.stopped(name),
+            "waiting": log}
+
+
 def served_in_process(p, run_id: str, comm=None):
     """The participant object of the in-process participant `p` (a stand-in of
     :mod:`coupler.standins`), bound to the run (and to this rank of the coupler's ranks `comm`:
@@ -258,8 +324,7 @@ class Run:
                 self.log(f"serving {p.name}: {p.kind} in this process")
                 continue
             self.launcher.start(p.name, p.module, ranks=p.ranks, extra_args=p.arguments)
-            self.clients[p.name] = self.session.client(
-                p.name, timeout=timeout, process_check=lambda name=p.name: self.launcher.check(name))
+            self.clients[p.name] = self.session.client(p.name, timeout=timeout, **watched(self.launcher, p.name, self.log))
             self.log(f"started {p.name}: {p.kind} ({p.ranks} rank{'s' * (p.ranks > 1)}), log in "
                      f"{self.launcher.log_dir / p.name}.log")
         meshes, geometry, announced = {}, {}, {}
@@ -317,14 +382,20 @@ class Run:
         self.context.window = window
         try:
             for p in self.plan.participants:
-                inputs = {}
+                inputs, sources = {}, []
                 for e, op in zip(self.plan.exchanges, self.operators):
                     if e.target_participant != p.name:
                         continue
                     value = given[id(e)] if e.accelerated else self.phases.timed("transfer", op.evaluate,
                                                                                  self.outputs)
                     inputs[e.target_field] = (self.phases.timed("transfer", op.deliver, value), op.units)
-                self._advance(p.name, window, iteration, inputs)
+                    sources.append(op)
+                try:
+                    self._advance(p.name, window, iteration, inputs)
+                except ParticipantFailure as exc:  # when and on what it failed: the step, and inputs set by a key
+                    for note in (op.blame() for op in sources if hasattr(op, "blame")):
+                        exc.add_note(note)
+                    raise exc.at(f"{window}, coupling iteration {iteration}")
             H = [self.phases.timed("transfer", op.evaluate, self.outputs) for _, op in self._accelerated()]
         except CouplerError as exc:
             if type(exc) is not CouplerError:  # a participant's failure names itself
@@ -361,6 +432,8 @@ class Run:
         self.summary["steps"].append(record)
         self.summary.update(self.context.summary())
         write_summary(self.out, self.summary, comm=self.comm)
+        for name, report in inner.accepted:
+            self.log(f"warning: time step {window.index}: participant {name!r}: {report.describe()}")
         if not inner.converged:
             raise inner.error(window.index)
 

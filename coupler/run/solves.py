@@ -47,6 +47,11 @@ class StepSolves:
         return [(name, r) for name, reports in self.final.items() for r in reports if not r.ok]
 
     @property
+    def accepted(self) -> list[tuple[str, SolveReport]]:
+        """(participant, report) of the accepted iteration's solves accepted unconverged on purpose."""
+        return [(name, r) for name, reports in self.final.items() for r in reports if r.accepted and not r.converged]
+
+    @property
     def converged(self) -> bool:
         return not self.failures
 
@@ -55,8 +60,7 @@ class StepSolves:
         return {"inner_converged": self.converged,
                 "solves": {name: [r.as_dict() for r in reports] for name, reports in self.final.items()},
                 "unconverged_in_earlier_iterations": dict(self.unconverged_before),
-                "accepted_unconverged": [f"{name}: {r.solver}" for name, reports in self.final.items()
-                                         for r in reports if r.accepted and not r.converged]}
+                "accepted_unconverged": [f"{name}: {r.solver}" for name, r in self.accepted]}
 
     def error(self, step: int) -> InnerSolveNotConverged:
         """The error naming the participant, solver, step, iteration and residual of each failure,

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from coupler import scene as scenes
 from coupler.errors import CouplerError, SceneError, one_line, run_status
+from coupler.output.plots import save_figure
 from coupler.output.report import write_study_page
 from coupler.output.results import write_summary
 from coupler.plan.plan import make_plan
@@ -153,8 +154,7 @@ def study_plot(path: Path, study: dict) -> None:
                        f"error ([check] {study['check']})" if study["check"] else "error")
     fig.suptitle(f"{study['case']}: error against {against['against']}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def run_study(case, varies: list[str], output=None, field: str | None = None, figure: str | None = None,

@@ -318,7 +318,7 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
     else:
         if "lower" not in t.data and "upper" not in t.data:
             raise t.error("mesh", "missing: give a mesh file, or a box with lower, upper and shape")
-        lower, upper = t.vector("lower"), t.vector("upper")
+        lower, upper = t.point("lower"), t.point("upper")
         if any(u <= lo for lo, u in zip(lower, upper)):
             raise t.error("upper", f"must exceed lower in every coordinate, got {lower} .. {upper}")
         shape = t.shape("shape")
@@ -385,14 +385,14 @@ def _fluid_geometry(path, data, solid: SolidGeometry | None) -> FluidGeometry:
         return FluidGeometry(g["origin"], g["spacing"], g["shape"])
     shape = t.shape("shape")
     if "lower" in t.data or "upper" in t.data:
-        lower, upper = t.vector("lower"), t.vector("upper")
+        lower, upper = t.point("lower"), t.point("upper")
         if any(u <= lo for lo, u in zip(lower, upper)):
             raise t.error("upper", f"must exceed lower in every coordinate, got {lower} .. {upper}")
         return FluidGeometry(lower, [(u - lo) / n for lo, u, n in zip(lower, upper, shape)], shape)
-    spacing = t.vector("spacing")
+    spacing = t.point("spacing")
     if any(h <= 0 for h in spacing):
         raise t.error("spacing", f"must be positive, got {spacing}")
-    return FluidGeometry(t.vector("origin"), spacing, shape)
+    return FluidGeometry(t.point("origin"), spacing, shape)
 
 
 def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:

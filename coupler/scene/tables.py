@@ -11,6 +11,7 @@ from pathlib import Path
 from coupler.errors import SceneError
 from coupler.protocol.settings import (REQUIRED, Invalid, check_boolean, check_integer, check_number, check_numbers,
                                        check_shape, check_string, check_strings, check_vector)
+from transfer.mesh import COORDINATE_LIMIT
 
 SCENE_FILE = "scene.toml"
 
@@ -74,6 +75,15 @@ class Table:
 
     def vector(self, key, default=REQUIRED, length=3):
         return self._checked(key, default, check_vector, length, optional=True)
+
+    def point(self, key):
+        """A point or length of the geometry: 3 finite numbers within :data:`transfer.mesh.COORDINATE_LIMIT`."""
+        value = self.vector(key)
+        largest = max(abs(v) for v in value)
+        if largest > COORDINATE_LIMIT:
+            raise self.error(key, f"{largest:g} overflows double precision in the volumes and moments of the "
+                                  f"transfers (at most {COORDINATE_LIMIT:g}); give the geometry in other units")
+        return value
 
     def shape(self, key, default=REQUIRED):
         """Cells per axis: a list of 3 positive integers."""

@@ -150,3 +150,15 @@ def test_check_states_the_rate_control(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "fluid.velocity, solid.displacement -> fluid.inlet_pressure: flow_rate_control [step before 1, accelerated]" in out
     assert "flow rate 3e-09 m^3/s, the pressure difference an unknown of the fixed point" in out
+
+
+def test_an_absurd_flow_rate_names_the_step_the_solver_and_the_key(tmp_path, capsys):
+    """flow_rate = 1e10 m^3/s between the plates: the cubic law's first pressure difference (about
+    2e18 Pa) blows the Chorin fluid up; the line named neither the step nor the key."""
+    case = copy_case(CASES / "parallel_plates", tmp_path, {**PLATES, "inlet_pressure = 1.0e-2 ": "flow_rate = 1e10 #"})
+    summary = run(case, tmp_path / "out", code=4)
+    line = one_error_line(capsys)
+    assert line.startswith("varcouple: error: time step 0 (t = 0 .. 1), coupling iteration 0: participant 'fluid' "
+                           "failed: FloatingPointError: chorin: the steady pseudo-time stepping diverged"), line
+    assert f"its inlet pressure comes from {case / 'scene.toml'}: [flow] flow_rate = 1e+10 m^3/s" in line
+    assert summary["status"] == "failed" and "[flow] flow_rate = 1e+10" in summary["error"]

@@ -1,6 +1,8 @@
-"""A child killed by SIGKILL that we did not kill is reported as (probably) out of memory, and
-certainly so when the kernel counted an out-of-memory kill while it ran (coupler/exits.py), for
-participants (coupler/launch.py) and OpenFOAM binaries (fluid_openfoam/solver.py)."""
+"""A child killed by SIGKILL that we did not kill is blamed on the kernel's out-of-memory killer
+only when the kernel says so: its out-of-memory count rose while the child ran, or (without a
+count) its log names the child; a count that did not rise rules it out, and without either the
+message says that it is not known (coupler/protocol/exits.py), for participants
+(coupler/run/launch.py) and OpenFOAM binaries (fluid_openfoam/solver.py)."""
 
 from __future__ import annotations
 
@@ -20,16 +22,42 @@ from fluid_openfoam.case import CaseSpec
 from fluid_openfoam.solver import OpenFOAMError, OpenFOAMSolver
 from vc_helpers import ROOT
 
-PROBABLY = "killed by SIGKILL (signal 9): probably the kernel's out-of-memory killer"
+from coupler.protocol import exits
+
+RULED_OUT = "killed by SIGKILL (signal 9): not the kernel's out-of-memory killer ("
+UNKNOWN = "which is not known"
 
 
 def self_killing_child() -> int:
     return subprocess.run(["sh", "-c", "kill -9 $$"]).returncode
 
 
-def test_sigkill_is_probably_out_of_memory():
+def test_a_sigkill_the_kernel_did_not_count_is_not_blamed_on_memory():
+    before = oom_kills()
     assert self_killing_child() == -signal.SIGKILL
-    assert describe_exit(-signal.SIGKILL, oom_kills()) == PROBABLY
+    text = describe_exit(-signal.SIGKILL, before)
+    assert text.startswith(RULED_OUT) and "another process sent it" in text and "probably" not in text, text
+
+
+@pytest.mark.parametrize("log_line, words", [
+    ("[ 12.3] Out of memory: Killed process 4242 (python3) total-vm:1048576kB", "the kernel's out-of-memory killer "
+                                                                               "(kernel log: [ 12.3] Out of memory"),
+    (None, UNKNOWN)], ids=["kernel_log", "nothing_readable"])
+def test_without_a_count_only_the_kernel_log_blames_memory(monkeypatch, log_line, words):
+    monkeypatch.setattr(exits, "oom_kills", lambda: None)
+    monkeypatch.setattr(exits, "kernel_log_kill", lambda pid: log_line if pid == 4242 else None)
+    text = describe_exit(-signal.SIGKILL, None, pid=4242)
+    assert text.startswith("killed by SIGKILL (signal 9): ") and words in text and "probably" not in text, text
+
+
+def test_the_kernel_log_names_the_pid_it_killed(monkeypatch):
+    log = ("[ 5.1] oom-kill:constraint=CONSTRAINT_MEMCG,task=python3,pid=777,uid=0\n"
+           "[ 5.2] Memory cgroup out of memory: Killed process 777 (python3)\n")
+    monkeypatch.setattr(exits.subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 0, log, ""))
+    assert exits.kernel_log_kill(777) == "[ 5.2] Memory cgroup out of memory: Killed process 777 (python3)"
+    assert exits.kernel_log_kill(77) is None
+    monkeypatch.setattr(exits.subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 1, "", "denied"))
+    assert exits.kernel_log_kill(777) is None  # an unreadable log says nothing
 
 
 def test_exit_code_137_names_sigkill_of_a_process_under_it():
@@ -37,7 +65,7 @@ def test_exit_code_137_names_sigkill_of_a_process_under_it():
     rc = subprocess.run(["sh", "-c", "sh -c 'kill -9 $$'"]).returncode
     assert rc == 137
     text = describe_exit(rc)
-    assert text.startswith("exited with code 137") and "SIGKILL" in text and "out-of-memory" in text
+    assert text.startswith("exited with code 137") and "SIGKILL" in text and UNKNOWN in text
 
 
 @pytest.mark.parametrize("code, words", [(0, "exited with code 0"), (1, "exited with code 1"),
@@ -66,13 +94,13 @@ def module_env(directory: Path, name: str, body: str) -> dict:
     return dict(os.environ, PYTHONPATH=f"{directory}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
 
 
-def test_participant_killed_by_sigkill_is_reported_as_probably_out_of_memory(tmp_path):
+def test_participant_killed_by_sigkill_is_not_blamed_on_memory_the_kernel_did_not_count(tmp_path):
     env = module_env(tmp_path, "vc_selfkill", "import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n")
     with Launcher(f"t-{uuid.uuid4().hex[:8]}", tmp_path, env=env) as launcher:
         launcher.start("solid", "vc_selfkill")
         assert launcher.wait("solid", 30) == -signal.SIGKILL
-        assert PROBABLY in launcher.check("solid")
-        assert PROBABLY in str(launcher.poll()[0])
+        assert RULED_OUT in launcher.check("solid")
+        assert RULED_OUT in str(launcher.poll()[0])
 
 
 def test_participant_the_launcher_kills_is_not_blamed_on_memory(tmp_path):
@@ -89,25 +117,48 @@ def test_participant_the_launcher_kills_is_not_blamed_on_memory(tmp_path):
     launcher.stop_all(timeout=0.5)
     assert proc.returncode == -signal.SIGKILL
     text = launcher.check("fluid")
-    assert "killed by SIGKILL (signal 9), stopped by the launcher" in text and PROBABLY not in text
+    assert "killed by SIGKILL (signal 9), stopped by the launcher" in text and "memory" not in text
 
 
 # ------------------------------------------------------------------ OpenFOAM binaries
 
-def test_openfoam_binary_killed_by_sigkill(tmp_path, monkeypatch):
-    """OpenFOAMSolver.run names a SIGKILL as probably out of memory, not 'exit code -9'."""
+def fake_blockmesh(tmp_path, monkeypatch, script: str) -> OpenFOAMSolver:
+    """An OpenFOAMSolver on a 2 x 2 x 2 grid case whose ``blockMesh`` is the shell `script`."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     fake = bin_dir / "blockMesh"
-    fake.write_text("#!/bin/sh\nkill -9 $$\n")
+    fake.write_text("#!/bin/sh\n" + script)
     fake.chmod(0o755)
     monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
     (tmp_path / "case").mkdir()
     spec = CaseSpec.from_config({"grid": {"origin": [0, 0, 0], "spacing": [1, 1, 1], "shape": [2, 2, 2]}})
-    solver = OpenFOAMSolver(tmp_path / "case", spec)
+    return OpenFOAMSolver(tmp_path / "case", spec)
+
+
+def test_openfoam_binary_killed_by_sigkill(tmp_path, monkeypatch):
+    """OpenFOAMSolver.run names a SIGKILL and what the kernel says of it, not 'exit code -9'."""
+    solver = fake_blockmesh(tmp_path, monkeypatch, "kill -9 $$\n")
     with pytest.raises(OpenFOAMError) as info:
         solver.run("blockMesh")
-    assert PROBABLY in str(info.value) and "exit code" not in str(info.value)
+    assert RULED_OUT in str(info.value) and "exit code" not in str(info.value)
+
+
+def test_a_running_openfoam_binary_logs_its_progress(tmp_path, monkeypatch, caplog):
+    """While a binary writes its log, its last line is logged every PROGRESS_SECONDS (the fluid
+    participant's progress, which keeps the coupler's [messaging] timeout from cutting a long solve
+    off: docs/protocol.md); a binary whose log stands still is silent."""
+    import logging
+
+    import fluid_openfoam.solver as solver_module
+
+    solver = fake_blockmesh(tmp_path, monkeypatch, 'for i in 1 2 3 4 5 6; do echo "Time = $i"; sleep 0.2; done\n'
+                                                   "sleep 1\n")
+    monkeypatch.setattr(solver_module, "PROGRESS_SECONDS", 0.3)
+    with caplog.at_level(logging.INFO, logger="varcouple.fluid_openfoam"):
+        solver.run("blockMesh")
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("blockMesh running: ")]
+    assert len(lines) >= 2 and all(line.startswith("blockMesh running: Time = ") for line in lines), lines
+    assert len(lines) <= 5  # none in the last second, when the log stood still
 
 
 # ------------------------------------------------------------------ a real out-of-memory kill

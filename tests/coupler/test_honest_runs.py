@@ -66,8 +66,12 @@ def test_allow_unconverged_accepts_it_on_purpose_and_says_so(tmp_path, capsys):
     case = copy_case(CASE, tmp_path, {"feedback = 3.0e4": "feedback = 3.0e4\nunconverged = [1]\n"
                                                           "allow_unconverged = true"})
     out = tmp_path / "out"
-    code, err = run(capsys, case, out)
+    code = main(["run", str(case), "--output", str(out)])
+    said, err = capsys.readouterr()
     assert code == 0, err
+    assert [line for line in said.splitlines() if "accepted" in line] == [
+        "warning: time step 1: participant 'fluid': replay did not converge: residual 0.01 > 1e-06 after 10 "
+        "iterations (told to (config 'unconverged')); accepted (allow_unconverged)"]
     s = summary(out)
     assert s["status"] == "completed" and len(s["steps"]) == 4
     assert s["steps"][1]["converged"] and s["steps"][1]["accepted_unconverged"] == ["fluid: replay"]
@@ -191,13 +195,15 @@ def test_an_unwritable_output_is_one_line_before_anything_runs(capsys):
     ({"E = 1.0e9": "E = inf"}, ["[materials.solid] E", "finite"]),
     ({"nu = 0.25": "nu = nan"}, ["[materials.solid] nu", "finite"]),
     ({"upper = [1.0, 1.0, 1.0]": "upper = [1.0, inf, 1.0]"}, ["[geometry.fluid] upper", "finite numbers"]),
+    ({"upper = [1.0, 1.0, 1.0]": "upper = [1e300, 1e300, 1e300]"},
+     ["[geometry.fluid] upper", "1e+300 overflows double precision", "give the geometry in other units"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nmode = \"client\""},
      ["[messaging] connect", "client mode needs the zenoh router"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nconnect = [\"foo:bar\"]"},
      ["[messaging] connect", "'foo:bar' is not a zenoh endpoint"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nconnect = [\"tcp/127.0.0.1:99999\"]"},
      ["[messaging] connect", "port in 1..65535"]),
-], ids=["dt_inf", "E_inf", "nu_nan", "grid_inf", "client_without_router", "malformed_endpoint", "bad_port"])
+], ids=["dt_inf", "E_inf", "nu_nan", "grid_inf", "grid_1e300", "client_without_router", "malformed_endpoint", "bad_port"])
 def test_scene_numbers_and_endpoints_are_checked_where_read(tmp_path, capsys, replace, words):
     case = copy_case(CASE, tmp_path, replace)
     code, err = run(capsys, case, tmp_path / "out")
@@ -261,3 +267,22 @@ def test_a_capped_simplefoam_is_not_reported_as_converged(tmp_path, capsys):
     report = s["steps"][0]["solves"]["fluid"][0]
     assert report["solver"] == "simpleFoam" and not report["converged"] and report["residual"] > 1e-7
     assert s["steps"][0]["solves"]["solid"][0]["converged"]  # the solid's Krylov solve is reported too
+
+
+def test_a_stopped_participant_is_named_as_stopped_in_one_line(tmp_path):
+    """SIGSTOP of the solid: the run ends with exit 4 and one line saying the solid is stopped (it
+    said 'died'); the coupler's own notes (liveliness tokens lost) go to logs/coupler.log, not
+    after the error line."""
+    case = copy_case(CASE, tmp_path, {"steps = 4": "steps = 100000"})
+    out = tmp_path / "out"
+    proc = _start_run(case, out, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    pid = _wait_for_steps(out)["participants_announced"]["solid"]["pid"]
+    os.kill(pid, signal.SIGSTOP)
+    err = _finish(proc, timeout=120)  # the run's end kills the stopped solid
+    assert proc.returncode == EXIT_CODES["failed"], err
+    lines = [line for line in err.splitlines() if not line.startswith("case [")]  # the progress bar
+    assert len(lines) == 1 and lines[0].startswith("varcouple: error: "), err
+    assert lines[0].endswith(f"participant 'solid' is stopped: process {pid} is stopped (state T: SIGSTOP or "
+                             f"SIGTSTP); kill -CONT {pid} resumes it"), err
+    assert summary(out)["status"] == "failed"
+    assert "participant solid: liveliness token lost" in (out / "logs" / "coupler.log").read_text()

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coupler.protocol.errors import ParticipantDied, ParticipantError, ParticipantTimeout
+from coupler.protocol.errors import ParticipantDied, ParticipantError, ParticipantStopped, ParticipantTimeout
 from transfer import FieldError
 from coupler.run.launch import Launcher, descendants
 from coupler.run.client import CouplerSession, ParticipantClient
@@ -288,7 +288,7 @@ def test_timeout(run):
         slow.advance(0, 0, 0.0, 1.0, {"x": np.ones(2)}, timeout=0.5)
     assert 0.5 <= time.monotonic() - t0 < 3
     assert (info.value.name, info.value.verb, info.value.seconds) == ("slow", "advance", 0.5)
-    assert "did not answer 'advance' within 0.5 s" in str(info.value)
+    assert "did not answer 'advance' within 0.5 s ([messaging] timeout = 0.5: raise it" in str(info.value)
 
 
 def test_process_that_cannot_start_is_reported(run):
@@ -378,3 +378,55 @@ def test_nan_in_a_participant_output_is_an_error_naming_the_field(run, tmp_path)
     assert np.all(fluid.advance(0, 0, 0.0, 1.0, {})["pressure"].data == 0)
     with pytest.raises(ParticipantError, match="FieldError: field 'pressure': 1 non-finite"):
         fluid.advance(1, 0, 1.0, 1.0, {})
+
+
+def test_a_call_that_waits_says_so_naming_the_participant_and_the_request(run):
+    said = []
+    run.launcher.start("slow", "coupler.standins", extra_args=["--kind", "echo"])
+    slow = run.coupler.client("slow", 20.0, waiting=said.append, note_every=0.5)
+    slow.wait_alive(30.0)
+    slow.configure({"delay": 1.8})
+    slow.advance(3, 1, 0.0, 1.0, {"x": np.ones(2)})
+    assert len(said) >= 2, said
+    assert said[0] == ("waiting for participant 'slow': no answer to 'advance' (window 3, iteration 1) for 1 s; "
+                       "no progress reported (the wait ends at 20 s without progress: [messaging] timeout)")
+
+
+def test_the_timeout_follows_the_work(run):
+    """A solve three times longer than the timeout that reports progress every 0.2 s is waited for
+    (it was cut off at the timeout); the same solve silent is timed out (test_timeout)."""
+    said = []
+    run.launcher.start("busy", "coupler.standins", extra_args=["--kind", "echo"])
+    busy = run.coupler.client("busy", 1.0, waiting=said.append, note_every=1.0)
+    busy.wait_alive(30.0)
+    busy.configure({"delay": 3.0, "progress": 0.2})
+    t0 = time.monotonic()
+    out = busy.advance(0, 2, 0.0, 1.0, {"x": np.ones(2)})
+    assert time.monotonic() - t0 >= 3.0 and np.array_equal(out["x"].data, np.ones(2))
+    assert len(said) >= 2 and all("(window 0, iteration 2)" in line and "; working, " in line and
+                                  "s slept (the wait ends 1 s after its last progress" in line for line in said), said
+    busy.configure({"delay": 3.0, "progress": 0.0})
+    with pytest.raises(ParticipantTimeout, match=r"did not answer 'advance' within 1 s \(\[messaging\] timeout = 1"):
+        busy.advance(1, 0, 0.0, 1.0, {"x": np.ones(2)})
+
+
+def test_a_stopped_participant_is_reported_as_stopped_not_died(run):
+    run.launcher.start("paused", "coupler.standins", extra_args=["--kind", "echo"])
+    said = []
+    paused = run.coupler.client("paused", 120.0, process_check=lambda: run.launcher.check("paused"),
+                                process_stopped=lambda: run.launcher.stopped("paused"), waiting=said.append,
+                                note_every=5.0)
+    paused.wait_alive(30.0)
+    paused.configure({"delay": 1.0})
+    pid = run.launcher.processes["paused"].pid
+    threading.Timer(0.3, os.kill, (pid, signal.SIGSTOP)).start()
+    t0 = time.monotonic()
+    try:
+        with pytest.raises(ParticipantStopped) as info:
+            paused.advance(0, 0, 0.0, 1.0, {"x": np.ones(2)})
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    print(time.monotonic() - t0, said)
+    assert str(info.value) == (f"participant 'paused' is stopped: process {pid} is stopped (state T: SIGSTOP or "
+                               f"SIGTSTP); kill -CONT {pid} resumes it")
+    assert said and f"it is stopped: process {pid} is stopped" in said[0]

@@ -229,3 +229,20 @@ def test_cycling_is_detected_and_the_safeguard_converges():
     assert sol.converged and sol.info["monotone_from"] is not None
     assert np.max(np.abs(sol.x - enumerate_kkt(CYCLING_A, CYCLING_B, CYCLING_U))) < 1e-10
     assert np.max(np.abs(solve(qp, "snes_vi").x - sol.x)) < 1e-10  # with its backtracking line search
+
+
+def test_a_long_active_set_solve_logs_its_progress(monkeypatch, caplog):
+    """Every PROGRESS_SECONDS (here 0: every iteration) a line names the iteration and residual: a
+    long solid solve is seen working (the coupler's timeout counts from such lines) instead of
+    silent for 17 minutes."""
+    import logging
+
+    from nonsmooth import active_set
+
+    monkeypatch.setattr(active_set, "PROGRESS_SECONDS", 0.0)
+    qp, _ = obstacle_2d()
+    with caplog.at_level(logging.INFO, logger="varcouple.nonsmooth"):
+        sol = active_set.solve_active_set(qp)
+    lines = [r.getMessage() for r in caplog.records if r.name == "varcouple.nonsmooth"]
+    assert sol.converged and len(lines) == sol.iterations >= 2, lines
+    assert lines[0].startswith("active set iteration 1: residual ") and "Krylov iterations so far" in lines[0]

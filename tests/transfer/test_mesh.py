@@ -1,5 +1,7 @@
 """Mesh validation, meshio conversion, function spaces on meshes."""
 
+import re
+
 import meshio
 import numpy as np
 import pytest
@@ -76,6 +78,25 @@ def test_non_finite_coordinates_are_rejected(value):
     points[3, 1] = value
     with pytest.raises(MeshError, match=r"point 3 has a non-finite coordinate"):
         Mesh(points, cells, "tetra")
+
+
+def test_coordinates_that_overflow_the_transfers_are_rejected_as_such():
+    """A mesh at 1e300 was reported as 'do not overlap' its partner, one at 1e60-1e100 transferred a
+    linear field with errors of order one and no word; within the limit the transfer stays exact."""
+    src, dst = box_tetrahedra((3, 3, 3), jitter=0.2, seed=4), box_hexahedra((4, 4, 4))
+    for scale in (1e60, 1e300):
+        with pytest.raises(MeshError, match=re.escape(f"big: coordinates up to {scale:.3g} in magnitude overflow "
+                                                      f"double precision") + r".* \(at most 1e\+50\); give the "
+                                                                              r"geometry in other units"):
+            Mesh(src.points * scale, src.cells, "tetra", name="big")
+        with pytest.raises(MeshError, match="grid: coordinates up to .* overflow double precision"):
+            StructuredGrid([0, 0, 0], [scale, scale, scale], [2, 2, 2])
+    scale = transfer.mesh.COORDINATE_LIMIT / 2
+    a = Mesh(src.points * scale, src.cells, "tetra")
+    b = Mesh(dst.points * scale, dst.cells, "hexahedron")
+    u = 1 + src.points @ [1.0, -2.0, 3.0]
+    v = transfer.Transfer.assemble(FunctionSpace(a, "P1"), FunctionSpace(b, "Q1"), "l2")(u)
+    assert np.max(np.abs(v - (1 + dst.points @ [1.0, -2.0, 3.0]))) < 1e-12
 
 
 def test_mesh_error_names_the_mesh():
