@@ -67,6 +67,7 @@ def assert_ended_failed(proc, out, tree, shared, words: str):
     lines = [line for line in err.splitlines() if line.startswith("varcouple: error:")]
     assert proc.returncode == 4, err
     assert len(lines) == 1 and words in lines[0], err
+    assert err.strip().splitlines()[-1] == lines[0], err  # nothing after it: no mpirun banner, no token lost
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed" and words in summary["error"] and len(summary["steps"]) >= 1
     left = {pid: Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ")[:200] for pid in tree if alive(pid)}
