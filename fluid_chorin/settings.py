@@ -25,8 +25,9 @@ PARTICIPANT = ParticipantSpec(
                 "dynamics: in one outer iteration) that ends the solve", default=1e-7, positive=True),
         Setting("steady", "string", "without dynamics, how the steady flow is solved: march (pseudo-time steps to the "
                 "steady state, up to max_iterations), newton (Newton on the steady velocity-pressure system of the "
-                "grid, GMRES preconditioned by a sparse LU; one rank only; the same steady state, slower than the "
-                "march on the shipped fracture grids: bench/hm.py)", default="march", choices=STEADY_METHODS),
+                "grid, GMRES preconditioned by a sparse LU; one rank only; the same steady state; its time grows less "
+                "with the cells across a fracture than the march's, about equal to it at 10 across: bench/hm.py "
+                "--steady)", default="march", choices=STEADY_METHODS),
         Setting("newton_iterations", "integer", "without dynamics and steady = newton: Newton steps per coupling "
                 "iteration at most", default=30, minimum=1),
         Setting("substeps", "integer", "with dynamics: at least this many time steps per coupling step (more when "

@@ -35,7 +35,8 @@ make pseudo-time steps until the relative change of velocity and pressure in one
 below the tolerance; there the open face's ``u^n`` is relaxed towards the inner face's at the
 rate :meth:`ChorinSolver.open_rate` (at the viscous pseudo-time step, the inner face's), so the
 steady state does not depend on the pseudo-time step: it is the solution of the steady
-equations that :mod:`fluid_chorin.steady` solves by Newton's method (``steady = "newton"``). A transient coupling step (:meth:`ChorinSolver.transient`) is cut into
+equations that :mod:`fluid_chorin.steady` solves by Newton's method (``steady = "newton"``).
+A transient coupling step (:meth:`ChorinSolver.transient`) is cut into
 time steps within the explicit stability bound, each iterated on ``(u^k, p^k)`` (outer
 iterations, as PIMPLE) until the change is below the tolerance: implicit Euler in time, as
 the OpenFOAM fluid's pimpleFoam.
@@ -112,6 +113,7 @@ class ChorinSolver:
         self._poisson: PressurePoisson | None = None
         self._poisson_dt = None
         self.warned_faces: set[str] = set()
+        self._newton: SteadyNewton | None = None
         self.set_solid(np.zeros(int(np.prod(self.slabs.input_shape))), None)
 
     def set_inlet_pressure(self, pressure: float) -> None:
@@ -264,7 +266,9 @@ class ChorinSolver:
         equations (:mod:`fluid_chorin.steady`, one rank) or the pseudo-time march."""
         if self.spec.steady == "march":
             return self.march()
-        report, q, p = SteadyNewton(self).solve(self.spec.tolerance, self.spec.newton_iterations)
+        if self._newton is None:
+            self._newton = SteadyNewton(self)
+        report, q, p = self._newton.solve(self.spec.tolerance, self.spec.newton_iterations)
         self.state = State(q, p, self.state.t)
         return Run(report)
 

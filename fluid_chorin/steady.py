@@ -1,6 +1,6 @@
 """The steady penalized Navier-Stokes equations of the MAC grid solved as steady (paper eq. 12
-without the time derivative): Newton's method on the coupled velocity-pressure system, each
-linear system by a sparse LU factorization, instead of marching pseudo-time to the steady state
+without the time derivative): Newton's method on the coupled velocity-pressure system,
+instead of marching pseudo-time to the steady state
 (:meth:`fluid_chorin.solver.ChorinSolver.steady`, whose fixed point this is):
 
     nu lap u - div(u u) - grad p - D (u - u_s) = 0    on the interior faces,
@@ -17,11 +17,13 @@ and the result keeps the start's mean, as the march does.
 The Jacobian of the momentum terms is probed: central differences, exact for the quadratic
 convection, with the unknowns coloured by their index modulo 3 in each direction (every term
 reads its neighbours at most one index away), 27 colours per component; the pressure
-gradient, the divergence, the drag and the open faces' rows are assembled directly. Newton
-keeps the factorization while it contracts (a chord step), warm-started from the current
-state; at creeping flow the first factorization solves the problem in two or three steps. The
-factorization of the whole saddle-point system costs more than the march on the fracture grids
-(bench/hm.py): the march stays the default.
+gradient, the divergence, the drag and the open faces' rows are assembled directly. Each
+Newton step solves its linear system by GMRES preconditioned with a sparse LU of the
+(regularized) Jacobian (:class:`Saddle`): a fresh Jacobian when the last step contracted by
+less than :data:`CONTRACTION`, the factorization kept over steps and over solves (the next
+coupling iteration's solid is close to this one's) while GMRES converges in :data:`KRYLOV`
+iterations, warm-started from the current state. At creeping flow a solve takes two or three
+steps; the factorization is its cost (bench/hm.py --steady).
 """
 
 from __future__ import annotations
@@ -41,6 +43,10 @@ from .staggered import AXIS, along
 CONTRACTION = 0.2
 #: GMRES's relative residual per Newton step at most
 LINEAR_TOLERANCE = 1e-8
+#: GMRES iterations per Newton step at most (beyond, the Jacobian is factorized afresh)
+KRYLOV = 40
+#: a linear residual below this fraction of the solve's first one is rounding error
+ROUNDING = 1e-13
 #: the pressure diagonal of the preconditioner's factorization, relative to the Schur complement's
 REGULARIZATION = 1e-8
 
@@ -76,6 +82,8 @@ class SteadyNewton:
             self.number.append(n)
         self.cell_number = self.nq + np.arange(self.ncell).reshape(g.cells)
         self.singular = not g.pressure_faces
+        #: the preconditioner, kept over solves while it makes GMRES converge
+        self.linear: Saddle | None = None
 
     # ------------------------------------------------------------------ the equations
     def unpack(self, x: np.ndarray, base: list) -> tuple[list, np.ndarray]:
@@ -100,7 +108,8 @@ class SteadyNewton:
             rows.append(r)
         for (d, side), value in s.pressure_values.items():
             A = AXIS[d]
-            last, inner = along(A, slice(-1, None) if side else slice(0, 1)), along(A, slice(-2, -1) if side else slice(1, 2))
+            last = along(A, slice(-1, None) if side else slice(0, 1))
+            inner = along(A, slice(-2, -1) if side else slice(1, 2))
             t = terms[d][along(A, slice(-1, None) if side else slice(0, 1))]
             rows[d][last] = (t - g.boundary_gradient(d, side, p, value)
                              - s.drag[d][last] * (q[d][last] - s.target[d][last])
@@ -199,14 +208,24 @@ class SteadyNewton:
         self.g.set_normal(base)
         pin, mean = float(s.state.p.flat[0]), float(s.state.p.mean())
         x = self.pack(base, s.state.p)
-        linear, setups, krylov, residual, last = None, 0, 0, math.inf, math.inf
-        it = 0
+        jacobians, factorizations, krylov, residual, last = 0, 0, 0, math.inf, math.inf
+        rtol, fresh, it = min(LINEAR_TOLERANCE, 0.1 * tolerance), True, 0
         for it in range(1, max_iterations + 1):
-            if linear is None:
-                linear = Saddle(self.jacobian(x, base), self.nq, min(LINEAR_TOLERANCE, 0.1 * tolerance))
-                setups += 1
-            dx, iterations = linear.solve(-self.residual(x, base, pin))
+            if fresh:
+                J = self.jacobian(x, base)
+                jacobians += 1
+                if self.linear is None:
+                    self.linear, factorizations = Saddle(J, self.nq), factorizations + 1
+                self.linear.J = J.tocsr()  # an earlier factorization preconditions while GMRES converges
+            F = -self.residual(x, base, pin)
+            floor = ROUNDING * float(np.linalg.norm(F)) if it == 1 else floor  # near it, a step is rounding
+            dx, iterations, solved = self.linear.solve(F, rtol, floor)
             krylov += iterations
+            if not solved:  # factorize the current Jacobian
+                self.linear.destroy()
+                self.linear, factorizations = Saddle(J, self.nq), factorizations + 1
+                dx, iterations, solved = self.linear.solve(F, rtol, floor)
+                krylov += iterations
             x = x + dx
             q, p = self.unpack(x, base)
             step, _ = self.unpack(dx, [np.zeros_like(a) for a in base])
@@ -215,18 +234,15 @@ class SteadyNewton:
                 raise FloatingPointError(f"the steady Newton solve diverged at step {it}")
             if residual < tolerance:
                 break
-            if residual > CONTRACTION * last:
-                linear.destroy()
-                linear = None  # a fresh Jacobian at the new state
+            fresh = residual > CONTRACTION * last  # a fresh Jacobian at the new state
             last = residual
-        if linear is not None:
-            linear.destroy()
         q, p = self.unpack(x, base)
         if self.singular:
             p = p + (mean - p.mean())
         converged = residual < tolerance
         report = SolveReport("chorin steady Newton", converged, it, residual, tolerance,
-                             f"{setups} Jacobians, {krylov} GMRES iterations on {self.nq + self.ncell} unknowns"
+                             f"{jacobians} Jacobians, {factorizations} LU factorizations, {krylov} GMRES iterations "
+                             f"on {self.nq + self.ncell} unknowns"
                              + ("" if converged else f"; limit of {max_iterations} Newton steps reached"))
         return report, q, p
 
@@ -238,9 +254,9 @@ class Saddle:
     complement's diagonal ``C diag(A)^-1 B``) on the pressure diagonal, so the factorization
     needs no pivoting and keeps the fill of a symmetric ordering."""
 
-    def __init__(self, J: sp.spmatrix, nq: int, rtol: float):
+    def __init__(self, J: sp.spmatrix, nq: int):
         J = J.tocsr()
-        self.J, self.nq, self.rtol = J, nq, rtol
+        self.J, self.nq = J, nq
         A, B, C = J[:nq, :nq], J[:nq, nq:], J[nq:, :nq]
         schur = (abs(C) @ sp.diags(1.0 / np.abs(A.diagonal())) @ abs(B)).diagonal()
         n = J.shape[0]
@@ -273,12 +289,14 @@ class Saddle:
         for obj in (self.ksp, self.K, self.x, self.b):
             obj.destroy()
 
-    def solve(self, b: np.ndarray) -> tuple[np.ndarray, int]:
+    def solve(self, b: np.ndarray, rtol: float, atol: float) -> tuple[np.ndarray, int, bool]:
+        """``J x = b`` to the residual ``max(rtol |b|, atol)`` in at most :data:`KRYLOV` iterations:
+        the solution, the iterations and whether it got there."""
         count = [0]
 
         def counted(_):
             count[0] += 1
 
-        x, info = spla.gmres(self.J, b, M=self.M, tol=self.rtol, atol=0.0, restart=200, maxiter=5,
+        x, info = spla.gmres(self.J, b, M=self.M, tol=rtol, atol=atol, restart=KRYLOV, maxiter=1,
                              callback=counted, callback_type="pr_norm")
-        return x, count[0]
+        return x, count[0], info == 0
