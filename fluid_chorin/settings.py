@@ -26,8 +26,8 @@ PARTICIPANT = ParticipantSpec(
         Setting("steady", "string", "without dynamics, how the steady flow is solved: march (pseudo-time steps to the "
                 "steady state, up to max_iterations), newton (Newton on the steady velocity-pressure system of the "
                 "grid, GMRES preconditioned by a sparse LU; one rank only; the same steady state; its time grows less "
-                "with the cells across a fracture than the march's, about equal to it at 10 across: bench/hm.py "
-                "--steady)", default="march", choices=STEADY_METHODS),
+                "with the cells across a fracture than the march's, but its factorization makes it slower than the "
+                "march on the shipped hm_fracture grid: bench/hm.py --steady)", default="march", choices=STEADY_METHODS),
         Setting("newton_iterations", "integer", "without dynamics and steady = newton: Newton steps per coupling "
                 "iteration at most", default=30, minimum=1),
         Setting("substeps", "integer", "with dynamics: at least this many time steps per coupling step (more when "
