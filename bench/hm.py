@@ -8,11 +8,18 @@ costs and how accurate it is.
   cells across the mean initial aperture (the grid's z spacing = aperture / n; the in-plane
   columns as in the tests, 8 x 8): e_m, e_h, Q and the cells across the mean open aperture per
   stress, the error of e_h (and Q) against the finest grid, the wall and fluid seconds and the
-  cells (error against cost), drawn in ``hm.png``.
+  cells (error against cost), drawn in ``hm.png``;
+* ``steady`` (``--steady``): the Chorin fluid's steady solvers side by side in the same run
+  (``[solvers.fluid] steady``: the pseudo-time march and Newton on the steady equations), the
+  shipped grid and the 8 x 8 columns at each number of cells across: the fluid's seconds, their
+  ratio, the growth per doubling across, and the largest relative difference of e_h between the
+  two (they solve the same steady equations).
 
-Goal (PASS/MISS): at most 8 coupling iterations per stress with IQN-ILS.
+Goals (PASS/MISS): at most 8 coupling iterations per stress with IQN-ILS; with ``--steady``
+(issue 27): Newton's fluid time on the shipped grid at least 5 times below the march's, and its
+growth per doubling across at most 2.5.
 
-    .venv/bin/python bench/hm.py [--quick] [--across 4 8 16] [-o FILE]
+    .venv/bin/python bench/hm.py [--quick] [--steady] [--across 4 8 16] [-o FILE]
 
 ``--quick`` (smoke test): one stress (1 MPa), 8 x 8 columns, 4 and 8 cells across; output
 bench/results/hm_quick.json unless ``-o`` is given. The machine is shared: the load average
@@ -37,6 +44,8 @@ from bench.case_runs import run_edited  # noqa: E402
 
 CASE = ROOT / "cases" / "hm_fracture"
 GOAL_ITERATIONS = 8
+GOAL_SPEEDUP, GOAL_GROWTH = 5.0, 2.5  # issue 27: the steady solve against the march
+STEADY = ("march", "newton")
 APERTURE = 1.0e-4  # the scene's mean initial aperture [m] ([geometry.solid.parameters] aperture)
 Z_LOWER, Z_UPPER = -0.00022, 0.00031  # the scene's grid across the gap [m]
 PHASES = ("fluid", "solid", "geometry update", "transfer", "messaging", "checkpoint", "output")
@@ -72,6 +81,29 @@ def grid(columns: int, across: float) -> dict:
 def stresses(values: list[float]) -> dict:
     return {"stress = [1.0e6, 2.0e6, 4.0e6]": f"stress = [{', '.join(repr(v) for v in values)}]",
             "steps = 3": f"steps = {len(values)}"}
+
+
+def method(name: str) -> dict:
+    """The replacement selecting the Chorin fluid's steady solver ``name``."""
+    return {'participant = "chorin"': f'participant = "chorin"\nsteady = "{name}"'}
+
+
+def steady_solvers(shipped: dict, across: list[int], columns: int, load: dict) -> dict:
+    """Each steady solver on the shipped grid (``shipped``: its replacements) and on `columns`
+    x `columns` columns at each number of cells across: fluid seconds, ratios and growth."""
+    out = {"shipped": {m: run_scene({**shipped, **load, **method(m)}) for m in STEADY}, "refined": []}
+    for n in across:
+        out["refined"].append({"cells_across_initial_aperture": n,
+                               **{m: run_scene({**grid(columns, n), **load, **method(m)}) for m in STEADY}})
+    ship = out["shipped"]
+    out["speedup_shipped"] = ship["march"]["phases_seconds"]["fluid"] / ship["newton"]["phases_seconds"]["fluid"]
+    for m in STEADY:
+        times = [r[m]["phases_seconds"]["fluid"] for r in out["refined"]]
+        out[f"growth_{m}"] = [b / a for a, b in zip(times, times[1:])]
+    out["difference_hydraulic_aperture"] = max(
+        abs(f["hydraulic_aperture"] / g["hydraulic_aperture"] - 1)
+        for r in [ship, *out["refined"]] for f, g in zip(r["newton"]["fracture"], r["march"]["fracture"]))
+    return out
 
 
 def refinement(across: list[int], columns: int, load: dict) -> list[dict]:
@@ -121,6 +153,7 @@ def plot(path: Path, rows: list[dict]) -> None:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="one stress, 8 x 8 columns, 4 and 8 across (smoke test)")
+    ap.add_argument("--steady", action="store_true", help="the Chorin fluid's steady solvers side by side")
     ap.add_argument("--across", nargs="+", type=int, default=[4, 8, 16])
     ap.add_argument("-o", "--output", type=Path, help="JSON output (default bench/results/hm.json)")
     args = ap.parse_args(argv)
@@ -160,6 +193,26 @@ def main(argv=None) -> dict:
                   f"{r['phases_seconds']['fluid']:8.1f} {s / 1e6:10.3g} {1e6 * f['hydraulic_aperture']:8.2f} "
                   f"{r['error_hydraulic_aperture'][k]:8.2%} {r['error_flow_rate'][k]:8.2%} "
                   f"{r['error_mechanical_aperture'][k]:8.2%} {r['iterations'][k]:11d}")
+    if args.steady:
+        shipped_grid = {"shape = [16, 16, 53]": "shape = [8, 8, 53]"} if args.quick else {}
+        st = result["steady"] = steady_solvers(shipped_grid, args.across, 8, load)
+        print("\nsteady solvers side by side (fluid seconds; [solvers.fluid] steady):")
+        print(f"  {'grid':>16s} {'march s':>8s} {'newton s':>8s} {'ratio':>6s} {'status':>10s}")
+        lines = [("shipped", st["shipped"])] + [(f"{r['cells_across_initial_aperture']} across", r)
+                                                for r in st["refined"]]
+        for label, r in lines:
+            march, newton = r["march"]["phases_seconds"]["fluid"], r["newton"]["phases_seconds"]["fluid"]
+            print(f"  {label:>16s} {march:8.2f} {newton:8.2f} {march / newton:6.2f} "
+                  f"{r['march']['status']}/{r['newton']['status']}")
+        print("  growth per doubling across: " + ", ".join(
+            f"{m} {' '.join(f'{g:.2f}' for g in st[f'growth_{m}'])}" for m in STEADY))
+        print(f"  largest relative difference of e_h between the two: {st['difference_hydraulic_aperture']:.2e}")
+        growth = max(st["growth_newton"], default=math.nan)
+        result["goals"]["steady_speedup_shipped"] = {
+            "value": st["speedup_shipped"], "goal": f">= {GOAL_SPEEDUP}",
+            "status": "PASS" if st["speedup_shipped"] >= GOAL_SPEEDUP else "MISS"}
+        result["goals"]["steady_growth_per_doubling"] = {
+            "value": growth, "goal": f"<= {GOAL_GROWTH}", "status": "PASS" if growth <= GOAL_GROWTH else "MISS"}
     for name, g in result["goals"].items():
         print(f"goal {name}: {g['value']} ({g['goal']}) {g['status']}")
     result["load_average_after"] = os.getloadavg()

@@ -15,9 +15,9 @@ docs/protocol.md, "Parts"): nothing is gathered. Rigid bodies (``solid_velocity 
 are labelled across the slabs from those inputs (:func:`transfer.bodies.rigid_bodies`: one
 allgather of each slab's face planes and one of its bodies' sums).
 
-Steady (no ``transient``): each ``advance`` makes pseudo-time steps from the current state
-(a warm start) to the tolerance. Transient: from ``t`` over ``dt``. Both report the
-stepping and the pressure Poisson solves (``report_solve``).
+Steady (no ``transient``): each ``advance`` makes pseudo-time steps (or Newton steps,
+``steady = "newton"``) from the current state (a warm start) to the tolerance. Transient: from
+``t`` over ``dt``. Both report the stepping and the pressure Poisson solves (``report_solve``).
 
 State: in memory. ``save_state(w)`` copies the velocity, pressure and time;
 ``restore_state(w)`` goes back to the copy, so a repeated window gives identical outputs.
@@ -58,7 +58,7 @@ class ChorinParticipant(Participant):
         self.solver, self.saved = ChorinSolver(spec, self.comm), {}
         slabs = self.solver.slabs
         log.info("fluid_chorin: grid %s (%d cells), nu %g, drag %g 1/s, %s%s", spec.grid.shape, spec.grid.num_cells,
-                 spec.nu, self.solver.d_max, "transient" if spec.transient else "steady (pseudo-time)",
+                 spec.nu, self.solver.d_max, "transient" if spec.transient else f"steady ({spec.steady})",
                  f"; rank {self.rank} of {self.size}: cells {slabs.lo} to {slabs.hi - 1} along {'xyz'[slabs.d]}, "
                  f"{int(np.prod(slabs.input_shape))} input cells"
                  if self.size > 1 else "")

@@ -10,6 +10,8 @@ from coupler.protocol.slabs import MIN_CELLS, SLAB_AXES
 POISSON_METHODS = ("auto", "direct", "gamg")
 #: how the solid's velocity reaches the fluid (:meth:`fluid_chorin.solver.ChorinSolver.set_solid`)
 SOLID_VELOCITIES = ("cells", "bodies", "none")
+#: how a steady scene's flow is solved (:meth:`fluid_chorin.solver.ChorinSolver.steady`)
+STEADY_METHODS = ("march", "newton")
 
 PARTICIPANT = ParticipantSpec(
     kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",), accepts=("inlet_pressure",),
@@ -21,6 +23,13 @@ PARTICIPANT = ParticipantSpec(
                 minimum=1),
         Setting("tolerance", "number", "the relative change of velocity and pressure in one pseudo-time step (with "
                 "dynamics: in one outer iteration) that ends the solve", default=1e-7, positive=True),
+        Setting("steady", "string", "without dynamics, how the steady flow is solved: march (pseudo-time steps to the "
+                "steady state, up to max_iterations), newton (Newton on the steady velocity-pressure system of the "
+                "grid, GMRES preconditioned by a sparse LU; one rank only; the same steady state; its time grows less "
+                "with the cells across a fracture than the march's, but its factorization makes it slower than the "
+                "march on the shipped hm_fracture grid: bench/hm.py --steady)", default="march", choices=STEADY_METHODS),
+        Setting("newton_iterations", "integer", "without dynamics and steady = newton: Newton steps per coupling "
+                "iteration at most", default=30, minimum=1),
         Setting("substeps", "integer", "with dynamics: at least this many time steps per coupling step (more when "
                 "the explicit stability bound asks)", default=1, minimum=1),
         Setting("outer_correctors", "integer", "with dynamics: predictor-projection outer iterations per time step "

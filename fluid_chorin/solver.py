@@ -26,14 +26,17 @@ One step from ``(u^n, p^n)`` over ``dt`` (incremental pressure correction):
 
 A fixed-pressure face's normal velocity has the predictor of the inner face's explicit terms
 (zero gradient) and its own drag, pressure gradient and, transient, its own ``u^n``: taking
-the inner face's ``u^n`` there (as the steady pseudo-time stepping still does, where only the
-converged state counts; it moves the lubrication case's flow by 0.03 %) shifted the pressure
+the inner face's ``u^n`` there shifted the pressure
 of the whole channel of cases/added_mass_heavy by about 130 Pa per step under a constant
 acceleration (2 to 4 % of its added-mass pressure), against none with the open face's own.
 
-``(u^k, p^k)`` is ``(u^n, p^n)`` for one pass. Steady problems (:meth:`ChorinSolver.steady`)
+``(u^k, p^k)`` is ``(u^n, p^n)`` for one pass. Steady problems (:meth:`ChorinSolver.march`)
 make pseudo-time steps until the relative change of velocity and pressure in one step is
-below the tolerance. A transient coupling step (:meth:`ChorinSolver.transient`) is cut into
+below the tolerance; there the open face's ``u^n`` is relaxed towards the inner face's at the
+rate :meth:`ChorinSolver.open_rate` (at the viscous pseudo-time step, the inner face's), so the
+steady state does not depend on the pseudo-time step: it is the solution of the steady
+equations that :mod:`fluid_chorin.steady` solves by Newton's method (``steady = "newton"``).
+A transient coupling step (:meth:`ChorinSolver.transient`) is cut into
 time steps within the explicit stability bound, each iterated on ``(u^k, p^k)`` (outer
 iterations, as PIMPLE) until the change is below the tolerance: implicit Euler in time, as
 the OpenFOAM fluid's pimpleFoam.
@@ -61,6 +64,7 @@ from transfer.penalization import REACH, drag_fraction
 from .poisson import PoissonReport, PressurePoisson
 from .slabs import Slabs
 from .spec import ChorinSpec
+from .steady import SteadyNewton
 from .staggered import AXIS, Staggered, along, to_faces
 
 log = logging.getLogger("varcouple.fluid_chorin")
@@ -109,6 +113,7 @@ class ChorinSolver:
         self._poisson: PressurePoisson | None = None
         self._poisson_dt = None
         self.warned_faces: set[str] = set()
+        self._newton: SteadyNewton | None = None
         self.set_solid(np.zeros(int(np.prod(self.slabs.input_shape))), None)
 
     def set_inlet_pressure(self, pressure: float) -> None:
@@ -175,6 +180,11 @@ class ChorinSolver:
         g = self.grid
         return self.spec.nu * float(np.sum(2.0 / g.h[np.asarray(g.active)] ** 2))
 
+    def open_rate(self) -> float:
+        """The rate [1/s] at which a steady fixed-pressure face's velocity is pulled towards its
+        inner face's: the inverse of the viscous pseudo-time step (:meth:`stable_dt`)."""
+        return self.viscous_rate() / 0.9
+
     # ------------------------------------------------------------------ one step
     def poisson(self, dt: float) -> PressurePoisson:
         if self._poisson is None or self._poisson_dt != dt:
@@ -207,7 +217,8 @@ class ChorinSolver:
             # then penalized with the open face's own drag and solid velocity; transient, u^n is
             # the open face's own (the inner face's would add the acceleration rho (u_b - u_i) / dt
             # of a velocity gradient along the face's normal: the module doc)
-            own = start.q[d][last] - start.q[d][inner] if self.spec.transient else 0.0
+            # steady, relaxed towards the inner face's at the rate open_rate: a fixed point free of dt
+            own = (start.q[d][last] - start.q[d][inner]) * (1.0 if self.spec.transient else 1.0 - dt * self.open_rate())
             free = (own + (star[d][inner] + beta[d][inner] * g.gradient(d, k.p)[last]) * (1.0 + dt * D[inner])
                     - dt * D[inner] * target[inner])
             star[d][last] = ((free + dt * D[last] * target[last]) / (1.0 + dt * D[last])
@@ -240,7 +251,7 @@ class ChorinSolver:
         speed = self.slabs.max(speed)
         active = np.asarray(g.active)
         inv_h2 = float(np.sum(1.0 / g.h[active] ** 2))
-        bounds = [0.9 / (2.0 * nu * inv_h2)]
+        bounds = [1.0 / self.open_rate()]
         u2 = float(np.sum(speed[active] ** 2))
         if u2 > 0 and explicit:
             bounds.append(0.9 * 2.0 * nu / u2)
@@ -251,6 +262,17 @@ class ChorinSolver:
 
     # ------------------------------------------------------------------ solves
     def steady(self) -> Run:
+        """The steady state from the current one, as ``steady`` says: Newton on the steady
+        equations (:mod:`fluid_chorin.steady`, one rank) or the pseudo-time march."""
+        if self.spec.steady == "march":
+            return self.march()
+        if self._newton is None:
+            self._newton = SteadyNewton(self)
+        report, q, p = self._newton.solve(self.spec.tolerance, self.spec.newton_iterations)
+        self.state = State(q, p, self.state.t)
+        return Run(report)
+
+    def march(self) -> Run:
         """Pseudo-time steps from the current state until the relative change of (u, p) per
         step is below the tolerance (or ``max_iterations``)."""
         spec = self.spec

@@ -44,6 +44,8 @@ class ChorinSpec:
     poisson: str
     solid_velocity: str
     slab_axis: str
+    steady: str
+    newton_iterations: int
 
     @property
     def nu(self) -> float:

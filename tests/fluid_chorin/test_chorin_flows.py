@@ -99,21 +99,22 @@ def test_taylor_green_vortex_decays_at_the_exact_rate_on_32_cubed():
     assert np.abs(solver.state.q[1]).max() < 1e-12  # no flow out of the vortex's plane
 
 
+@pytest.mark.parametrize("steady", ["march", "newton"])
 @pytest.mark.parametrize("n_across,offset,low,high", [(8, 0.3, 0.0, 0.05), (8, 0.0, 0.025, 0.04),
                                                       (4, 0.3, 0.05, 0.065)])
-def test_immersed_plates_follow_the_cubic_law(n_across, offset, low, high):
+def test_immersed_plates_follow_the_cubic_law(n_across, offset, low, high, steady):
     """The geometry of cases/parallel_plates (the plates generator: exact fractions of two
     tetrahedral blocks, grid lines off the walls; w = 1 mm, L = 2 mm, dp = 0.01 Pa, mu = 1e-3 Pa s),
     the 'wall' penalization: 8 cells across within 5 % of Q = w^3 dp / (12 mu L) (measured +1.44 % at
     offset 0.3, +3.13 % = 2 (h/w)^2 with the walls on grid faces, as real walls; 4 across +5.77 %:
-    the OpenFOAM fluid's figures to three digits)."""
+    the OpenFOAM fluid's figures to three digits), by the march and by Newton on the steady equations."""
     w, length, dp, mu = 1e-3, 2e-3, 1e-2, 1e-3
     p = parameters("plates", {"aperture": w, "length": length, "cells_across": n_across, "offset": offset})
     grid = GENERATORS["plates"].grid(p)
     G = StructuredGrid(grid["origin"], grid["spacing"], grid["shape"])
     volumes = Transfer.assemble(FunctionSpace(GENERATORS["plates"].mesh(p).mesh, "P0"), FunctionSpace(G, "Q0"), "l2").D
     config = {"grid": grid, "inlet": {"pressure": dp}, "outlet": {"pressure": 0.0}, "rho": 1000.0, "mu": mu,
-              "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-9}
+              "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-9, "steady": steady}
     solver = ChorinSolver(ChorinSpec.from_config(config))
     solver.set_solid(np.asarray(volumes.diagonal()) / G.cell_measures())
     assert solver.steady().converged

@@ -90,6 +90,9 @@ def _check_slabs(scene) -> None:
             slab_bounds(scene.fluid.shape, solver.ranks, solver.settings["slab_axis"])
         except ValueError as exc:
             raise SceneError(f"{scene.path}: [solvers.fluid] ranks: {exc} ([geometry.fluid] shape)") from None
+    if solver.settings.get("steady") == "newton" and solver.ranks > 1:
+        raise SceneError(f"{scene.path}: [solvers.fluid] steady = 'newton' solves on one rank, got ranks = "
+                         f"{solver.ranks}: use steady = 'march' on several ranks")
 
 
 def _check_rate_control(scene) -> None:
@@ -223,9 +226,11 @@ def plan(scene, plan) -> None:
                               f"decomposition by decomposePar once; one participant process per processor, each "
                               f"writing and reading its own processor's fields, no reconstructPar)")
     if solver.kind == "chorin":
+        how = ("Newton on the steady equations of the grid" if s.get("steady") == "newton"
+               else "Chorin projection in pseudo-time to steady state")
         quasi = (", transient: Chorin projection time steps over each step (implicit Euler) and an elastodynamic "
-                 "solid" if dynamic else ", quasi-static: Chorin projection in pseudo-time to steady state and a "
-                 "static solid per step" if elastic else ", Chorin projection in pseudo-time to steady state")
+                 "solid" if dynamic else f", quasi-static: {how} and a static solid per step" if elastic
+                 else f", {how}")
         if solver.ranks > 1:
             along = "the longest direction" if s["slab_axis"] == "longest" else s["slab_axis"]
             plan.tasks.append(f"fluid: chorin on {solver.ranks} MPI ranks, the grid in slabs along {along} (one per "
