@@ -82,7 +82,7 @@ class Platen:
         return -float(self.elasticity.boundary_force(self.boundary) @ self.normal) / self.area
 
     def load_to(self, target: float, solve: Callable[[], bool], closing: float = 0.0,
-                stale: bool = False) -> PlatenResult:
+                stale: bool = False, monitor: Callable[..., None] | None = None) -> PlatenResult:
         """Move the platen until the mean normal stress is `target`: ``solve()`` solves with
         the platen where it is set and returns whether that solve converged; `closing` (a
         contact's smallest initial gap) is added to the first step from an unloaded state.
@@ -92,11 +92,15 @@ class Platen:
         trials = []
 
         def trial(d):
+            if monitor is not None:
+                monitor(platen_trial=len(trials) + 1, platen_displacement=d, target_stress=target)
             self.set(d)
             ok = solve()
             s = self.stress()
             self.history.append((d, s))
             trials.append((d, s))
+            if monitor is not None:
+                monitor(last_trial_stress=s)
             return ok, s
 
         def result(converged, reason):
