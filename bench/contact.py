@@ -135,6 +135,7 @@ def stress_participant(case: str, parameters: dict, stresses, reuse: bool) -> So
 STRESS_FIGURES = ("seconds", "seconds_assembly", "seconds_amg_setup", "seconds_solves", "seconds_other",
                   "seconds_platen_search", "contact_solves", "step_iterations", "step_krylov_iterations",
                   "closure", "platen_displacement", "area_fraction")
+COUNTS = ("contact_solves", "step_iterations", "step_krylov_iterations")
 
 
 def stress_steps(case, parameters, stresses, reuse) -> dict:
@@ -149,7 +150,7 @@ def stress_steps(case, parameters, stresses, reuse) -> dict:
         reports, figures = p.take_reports()
         steps.append({"stress": stress, "wall_seconds": wall, "converged": all(r.converged for r in reports),
                       "amg_setups": p.static.state.solution.info.get("amg_setups"),
-                      **{k: figures[k] for k in STRESS_FIGURES}})
+                      **{k: int(figures[k]) if k in COUNTS else figures[k] for k in STRESS_FIGURES}})
     return {"dofs": p.contact.num_dofs, "steps": steps,
             **{f"total_{k}": sum(st[k] for st in steps) for k in ("wall_seconds", "contact_solves",
                                                                    "step_iterations", "step_krylov_iterations",
