@@ -22,9 +22,11 @@ active-set iteration ("from scratch", the old behaviour) against once per contac
 (``amg_reuse``), the two in the same run: per stress the wall time (the step's reported
 ``seconds`` and its split: assembly, AMG set-up, solves, other, platen search), contact
 solves, active-set and Krylov iterations; the ratios from scratch / reused, and the largest
-difference of the closures.
+difference of the closures. ``--baseline OLD.json`` (this bench's output for the previous
+commit, measured in the same session) adds the ratios of contact solves and time per stress
+of the reused AMG, old / new (the platen search's share).
 
-    .venv/bin/python bench/contact.py [--quick] [--only stress] [-o OUT.json]
+    .venv/bin/python bench/contact.py [--quick] [--only stress] [--baseline OLD.json] [-o OUT.json]
 
 The machine is shared: the load average before and after is recorded; times are
 indicative. ``--quick``: two tiny levels per problem, two load steps (the smoke test).
@@ -171,6 +173,25 @@ def stress_level(case, parameters, stresses) -> dict:
     return out
 
 
+def against(baseline: dict, levels: list) -> list[dict]:
+    """Per case in both runs: the reused AMG's contact solves per stress and total time, the
+    baseline's and this run's, as ratios old / new."""
+    old = {(lv["case"], json.dumps(lv["parameters"])): lv["reused"] for lv in baseline.get("stress", [])}
+    rows = []
+    for lv in levels:
+        b = old.get((lv["case"], json.dumps(lv["parameters"])))
+        if b is None or [st["stress"] for st in b["steps"]] != [st["stress"] for st in lv["reused"]["steps"]]:
+            continue
+        new = lv["reused"]
+        rows.append({"case": lv["case"], "parameters": lv["parameters"],
+                     "baseline_contact_solves": [st["contact_solves"] for st in b["steps"]],
+                     "contact_solves": [st["contact_solves"] for st in new["steps"]],
+                     "ratio_solves": b["total_contact_solves"] / new["total_contact_solves"],
+                     "ratio_time": b["total_wall_seconds"] / new["total_wall_seconds"],
+                     "ratio_krylov": b["total_step_krylov_iterations"] / new["total_step_krylov_iterations"]})
+    return rows
+
+
 def stress_table(levels) -> list[str]:
     lines = ["The cost of a stress: AMG set up at every active-set iteration (scratch) or once per contact solve "
              "(reused); per stress",
@@ -222,6 +243,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--quick", action="store_true", help="tiny levels (smoke test)")
     ap.add_argument("--only", choices=["solvers", "stress"], default=None,
                     help="only the solver comparison or only the cost of a stress (default both)")
+    ap.add_argument("--baseline", default=None, help="this bench's JSON of the previous commit: ratios against it")
     ap.add_argument("-o", "--output", default=None, help="JSON output (default bench/results/contact.json)")
     a = ap.parse_args(argv)
     stem = "contact" + ("_quick" if a.quick else "") + (f"_{a.only}" if a.only else "")
@@ -250,6 +272,12 @@ def main(argv=None) -> dict:
     if a.only != "solvers":
         result["stress"] = [stress_level(case, parameters, stresses) for case, parameters in stress_cases]
         lines += stress_table(result["stress"]) + [""]
+        if a.baseline:
+            result["against_baseline"] = against(json.loads(Path(a.baseline).read_text()), result["stress"])
+            result["args"]["baseline"] = Path(a.baseline).name
+            lines += [f"against {Path(a.baseline).name}: {r['case']} {r['parameters']}: contact solves per stress "
+                      f"{r['baseline_contact_solves']} -> {r['contact_solves']} (ratio {r['ratio_solves']:.2f}), "
+                      f"time old / new {r['ratio_time']:.2f}" for r in result["against_baseline"]] + [""]
     result["meta"]["load_average_after"] = os.getloadavg()
     for problem, g in result.get("goals", {}).items():
         lines.append(f"{problem}: active-set iterations per step {g['active_set_iterations_do_not_grow']['coarsest_max']}"
