@@ -15,7 +15,18 @@ Goals: active-set iterations per load step that do not grow with refinement
 (finest level's largest count at most the coarsest's + 1); time to solution at least 2x
 below SNES VI at the finest level (both problems).
 
-    .venv/bin/python bench/contact.py [--quick] [-o OUT.json]
+The cost of a stress (issue 30): the solid participant of cases/fracture_closure (the
+cylinder at lattices 8 and 16 per side) and of cases/measured_fracture (coarsen 2 and 1)
+closed by the stress-controlled platen through its steps, the AMG set up at every
+active-set iteration ("from scratch", the old behaviour) against once per contact solve
+(``amg_reuse``), the two in the same run: per stress the wall time (the step's reported
+``seconds`` and its split: assembly, AMG set-up, solves, other, platen search), contact
+solves, active-set and Krylov iterations; the ratios from scratch / reused, and the largest
+difference of the closures. ``--baseline OLD.json`` (this bench's output for the previous
+commit, measured in the same session) adds the ratios of contact solves and time per stress
+of the reused AMG, old / new (the platen search's share).
+
+    .venv/bin/python bench/contact.py [--quick] [--only stress] [--baseline OLD.json] [-o OUT.json]
 
 The machine is shared: the load average before and after is recorded; times are
 indicative. ``--quick``: two tiny levels per problem, two load steps (the smoke test).
@@ -58,7 +69,7 @@ def load_steps(contact, holder, values) -> dict:
         state = contact.solve()
         per_step.append({"iterations": state.solution.iterations,
                          "krylov_iterations": state.solution.krylov_iterations,
-                         "seconds": state.seconds["solve"] + state.seconds["assemble"],
+                         "seconds": state.seconds["total"],
                          "active_nodes": int(state.active.sum())})
     return {"dofs": contact.num_dofs, "steps": per_step, "wall_seconds": time.perf_counter() - start,
             "iterations": [s["iterations"] for s in per_step],
@@ -109,6 +120,98 @@ def compare(level) -> dict:
     return level
 
 
+def stress_participant(case: str, parameters: dict, stresses, reuse: bool) -> SolidParticipant:
+    """The configured solid of `case` with its generator's `parameters` changed, the platen's
+    `stresses` and the AMG reused (or set up at every active-set iteration)."""
+    config = make_plan(load(ROOT / "cases" / case)).participant("solid").config
+    config["generator"]["parameters"].update(parameters)
+    next(ld for ld in config["loads"] if ld["type"] == "platen")["value"] = list(stresses)
+    config["steps"] = len(stresses)
+    p = SolidParticipant()
+    p.comm, p.rank = None, 0
+    p.configure(config)
+    p.contact.options["amg_reuse"] = reuse
+    return p
+
+
+STRESS_FIGURES = ("seconds", "seconds_assembly", "seconds_amg_setup", "seconds_solves", "seconds_other",
+                  "seconds_platen_search", "contact_solves", "step_iterations", "step_krylov_iterations",
+                  "closure", "platen_displacement", "area_fraction")
+COUNTS = ("contact_solves", "step_iterations", "step_krylov_iterations")
+
+
+def stress_steps(case, parameters, stresses, reuse) -> dict:
+    """Each stress of `case` in turn: the step's figures, its measured wall time and whether
+    every inner solve converged."""
+    p = stress_participant(case, parameters, stresses, reuse)
+    steps = []
+    for k, stress in enumerate(stresses):
+        start = time.perf_counter()
+        p.advance(k, 0, float(k), 1.0, {})
+        wall = time.perf_counter() - start
+        reports, figures = p.take_reports()
+        steps.append({"stress": stress, "wall_seconds": wall, "converged": all(r.converged for r in reports),
+                      "amg_setups": p.static.state.solution.info.get("amg_setups"),
+                      **{k: int(figures[k]) if k in COUNTS else figures[k] for k in STRESS_FIGURES}})
+    return {"dofs": p.contact.num_dofs, "steps": steps,
+            **{f"total_{k}": sum(st[k] for st in steps) for k in ("wall_seconds", "contact_solves",
+                                                                   "step_iterations", "step_krylov_iterations",
+                                                                   "seconds_amg_setup")}}
+
+
+def stress_level(case, parameters, stresses) -> dict:
+    out = {"case": case, "parameters": parameters}
+    for name, reuse in (("from_scratch", False), ("reused", True)):
+        out[name] = stress_steps(case, parameters, stresses, reuse)
+    a, b = out["from_scratch"], out["reused"]
+    out["dofs"] = b["dofs"]
+    out["ratio_time_from_scratch_over_reused"] = a["total_wall_seconds"] / b["total_wall_seconds"]
+    out["ratio_krylov_reused_over_from_scratch"] = b["total_step_krylov_iterations"] / a["total_step_krylov_iterations"]
+    out["closure_difference"] = max(abs(x["closure"] - y["closure"]) / abs(x["closure"])
+                                    for x, y in zip(a["steps"], b["steps"]))
+    out["seconds_reported_over_wall"] = min(st["seconds"] / st["wall_seconds"] for st in a["steps"] + b["steps"])
+    return out
+
+
+def against(baseline: dict, levels: list) -> list[dict]:
+    """Per case in both runs: the reused AMG's contact solves per stress and total time, the
+    baseline's and this run's, as ratios old / new."""
+    old = {(lv["case"], json.dumps(lv["parameters"])): lv["reused"] for lv in baseline.get("stress", [])}
+    rows = []
+    for lv in levels:
+        b = old.get((lv["case"], json.dumps(lv["parameters"])))
+        if b is None or [st["stress"] for st in b["steps"]] != [st["stress"] for st in lv["reused"]["steps"]]:
+            continue
+        new = lv["reused"]
+        rows.append({"case": lv["case"], "parameters": lv["parameters"],
+                     "baseline_contact_solves": [st["contact_solves"] for st in b["steps"]],
+                     "contact_solves": [st["contact_solves"] for st in new["steps"]],
+                     "ratio_solves": b["total_contact_solves"] / new["total_contact_solves"],
+                     "ratio_time": b["total_wall_seconds"] / new["total_wall_seconds"],
+                     "ratio_krylov": b["total_step_krylov_iterations"] / new["total_step_krylov_iterations"]})
+    return rows
+
+
+def stress_table(levels) -> list[str]:
+    lines = ["The cost of a stress: AMG set up at every active-set iteration (scratch) or once per contact solve "
+             "(reused); per stress",
+             f"{'case':>18} {'dofs':>7} {'stress MPa':>10} | {'scratch: s':>10} {'solves':>6} {'its':>4} {'krylov':>6} "
+             f"{'amg s':>6} | {'reused: s':>9} {'solves':>6} {'its':>4} {'krylov':>6} {'amg s':>6} | {'time ratio':>10}"]
+    for lv in levels:
+        name = f"{lv['case'].split('_')[0]} {','.join(str(v) for v in lv['parameters'].values())}"
+        for a, b in zip(lv["from_scratch"]["steps"], lv["reused"]["steps"]):
+            lines.append(f"{name:>18} {lv['dofs']:>7} {a['stress'] / 1e6:>10.3g} | {a['seconds']:>10.2f} "
+                         f"{a['contact_solves']:>6} {a['step_iterations']:>4} {a['step_krylov_iterations']:>6} "
+                         f"{a['seconds_amg_setup']:>6.2f} | {b['seconds']:>9.2f} {b['contact_solves']:>6} "
+                         f"{b['step_iterations']:>4} {b['step_krylov_iterations']:>6} {b['seconds_amg_setup']:>6.2f} | "
+                         f"{a['seconds'] / b['seconds']:>10.2f}")
+        lines.append(f"{name:>18} total: time scratch / reused {lv['ratio_time_from_scratch_over_reused']:.2f}, "
+                     f"Krylov reused / scratch {lv['ratio_krylov_reused_over_from_scratch']:.2f}, closures differ by "
+                     f"{lv['closure_difference']:.1e} (relative), reported seconds / wall >= "
+                     f"{lv['seconds_reported_over_wall']:.3f}")
+    return lines
+
+
 def goals(levels) -> dict:
     coarse, fine = levels[0], levels[-1]
     grow = max(fine["active_set"]["iterations"]) <= max(coarse["active_set"]["iterations"]) + 1
@@ -138,9 +241,13 @@ def table(name, levels, key) -> list[str]:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="tiny levels (smoke test)")
+    ap.add_argument("--only", choices=["solvers", "stress"], default=None,
+                    help="only the solver comparison or only the cost of a stress (default both)")
+    ap.add_argument("--baseline", default=None, help="this bench's JSON of the previous commit: ratios against it")
     ap.add_argument("-o", "--output", default=None, help="JSON output (default bench/results/contact.json)")
     a = ap.parse_args(argv)
-    out = Path(a.output) if a.output else ROOT / "bench" / "results" / ("contact_quick.json" if a.quick else "contact.json")
+    stem = "contact" + ("_quick" if a.quick else "") + (f"_{a.only}" if a.only else "")
+    out = Path(a.output) if a.output else ROOT / "bench" / "results" / f"{stem}.json"
     hs, shapes = ((0.12, 0.09), ((6, 6, 2), (8, 8, 3))) if a.quick else ((0.06, 0.04, 0.025), ((8, 8, 3), (16, 16, 5), (24, 24, 6)))
     hertz_steps = 2 if a.quick else 3
     platen = [0.16e-3, 0.32e-3] if a.quick else [0.08e-3, 0.16e-3, 0.24e-3, 0.32e-3]
@@ -149,14 +256,30 @@ def main(argv=None) -> dict:
                        "note": "machine shared with other engineers: times are indicative"},
               "args": {"quick": a.quick, "hertz_h": list(hs), "fracture_shapes": [list(s) for s in shapes],
                        "hertz_load_steps": hertz_steps, "fracture_platen_displacements": platen}}
-    with tempfile.TemporaryDirectory() as tmp:
-        result["hertz"] = [compare(hertz_level(tmp, h, hertz_steps)) for h in hs]
-    result["fracture"] = [compare(fracture_level(s, platen)) for s in shapes]
-    result["goals"] = {"hertz": goals(result["hertz"]), "fracture": goals(result["fracture"])}
+    stress_cases = ([("fracture_closure", {"lattice": [8, 8, 3]}), ("measured_fracture", {"coarsen": 4})] if a.quick
+                    else [("fracture_closure", {"lattice": list(s)}) for s in ((8, 8, 3), (16, 16, 5))]
+                    + [("measured_fracture", {"coarsen": c}) for c in (2, 1)])
+    stresses = [1e6, 5e6] if a.quick else [1e6, 5e6, 20e6]
+    result["args"].update(stress_cases=stress_cases, stresses=stresses, only=a.only)
+    lines = []
+    if a.only != "stress":
+        with tempfile.TemporaryDirectory() as tmp:
+            result["hertz"] = [compare(hertz_level(tmp, h, hertz_steps)) for h in hs]
+        result["fracture"] = [compare(fracture_level(s, platen)) for s in shapes]
+        result["goals"] = {"hertz": goals(result["hertz"]), "fracture": goals(result["fracture"])}
+        lines += table("Hertz (half-sphere on a block)", result["hertz"], "h") + [""]
+        lines += table("Rough fracture closure", result["fracture"], "shape") + [""]
+    if a.only != "solvers":
+        result["stress"] = [stress_level(case, parameters, stresses) for case, parameters in stress_cases]
+        lines += stress_table(result["stress"]) + [""]
+        if a.baseline:
+            result["against_baseline"] = against(json.loads(Path(a.baseline).read_text()), result["stress"])
+            result["args"]["baseline"] = Path(a.baseline).name
+            lines += [f"against {Path(a.baseline).name}: {r['case']} {r['parameters']}: contact solves per stress "
+                      f"{r['baseline_contact_solves']} -> {r['contact_solves']} (ratio {r['ratio_solves']:.2f}), "
+                      f"time old / new {r['ratio_time']:.2f}" for r in result["against_baseline"]] + [""]
     result["meta"]["load_average_after"] = os.getloadavg()
-    lines = table("Hertz (half-sphere on a block)", result["hertz"], "h") + [""]
-    lines += table("Rough fracture closure", result["fracture"], "shape") + [""]
-    for problem, g in result["goals"].items():
+    for problem, g in result.get("goals", {}).items():
         lines.append(f"{problem}: active-set iterations per step {g['active_set_iterations_do_not_grow']['coarsest_max']}"
                      f" -> {g['active_set_iterations_do_not_grow']['finest_max']} "
                      f"{g['active_set_iterations_do_not_grow']['status']}; SNES VI {g['snes_vi_iterations']['coarsest_max']}"

@@ -9,7 +9,9 @@ Each iteration predicts the active sets from ``y = x + lam / diag(A)``::
 and solves the equality-constrained problem ``x_U = upper_U``, ``x_L = lower_L``,
 ``(A x)_I = b_I`` with CG + GAMG (the active rows and columns replaced by their
 diagonal, which keeps the block structure and the near-nullspace usable for
-AMG). It stops when the sets repeat (the exact PDAS criterion: the last solve
+AMG; the AMG is set up once, on the first iteration's system, and preconditions the
+later ones, whose operators differ from it only in the rows and columns whose set
+changed). It stops when the sets repeat (the exact PDAS criterion: the last solve
 then satisfies all KKT conditions up to the Krylov tolerance) or when the
 scaled natural residual ``max |x - P(x + lam / diag(A))|``, relative to
 ``max(|x|, |finite bounds|)``, falls below ``tol``: that relative residual is the
@@ -139,7 +141,7 @@ class _SetHistory:
 
 def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | None = None, *, tol: float = 1e-10,
                      max_iter: int = 100, ksp_rtol: float = 1e-12, ksp_max_it: int = 2000,
-                     amg: str = "gamg") -> Solution:
+                     amg: str = "gamg", amg_reuse: bool = True, monitor=None) -> Solution:
     """Solve the QP by the primal-dual active set method with CG + GAMG inner solves.
 
     qp : serial (scipy) or distributed (:class:`~nonsmooth.distributed.DistributedQP`: ``x0``
@@ -150,9 +152,18 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
         sets are predicted from it (``x0 + lam / diag(A)`` against the bounds): at the
         previous solution with the previous loads they are its active sets, with changed
         loads those sets moved by the change of the multiplier (a warm start of both).
+    amg_reuse : set the AMG up once, on the first iteration's system, and precondition the
+        later ones with it (their operators differ only in the rows and columns of the
+        components whose set changed; the near null space is the same), each CG still to
+        ``ksp_rtol``; False sets it up anew at every iteration
+    monitor : called as ``monitor(**values)`` after every active-set iteration
+        (``active_set_iteration``, ``residual``, ``cg_iterations`` so far) and every CG iteration
+        (``cg_iteration``, ``cg_residual``): a caller's progress lines; without one, a log line
+        every ``PROGRESS_SECONDS`` on rank 0
     ``iterations`` counts active-set iterations (one linear solve each),
     ``history`` the relative scaled natural residual after each, ``info["changes"]``
-    the number of components whose set changed before each solve.
+    the number of components whose set changed before each solve, ``info["amg_setups"]``
+    and ``info["amg_setup_seconds"]`` the AMG set-ups and their time.
     """
     start = time.perf_counter()
     algebra = qp if isinstance(qp, DistributedQP) else _Serial(qp)
@@ -177,6 +188,9 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
     ksp = PETSc.KSP().create(comm)
     configure_cg_amg(ksp, ksp_rtol, max_it=ksp_max_it, amg=amg)
     ksp.setInitialGuessNonzero(True)
+    if monitor is not None:
+        ksp.setMonitor(lambda _, k, rnorm: monitor(cg_iteration=k, cg_residual=float(rnorm)))
+    preconditioner, setups, setup_seconds = None, 0, 0.0
 
     lam = qp.multiplier(x)
     sets = _Sets.predict(qp, x, lam, dinv, tol * scale(x))
@@ -191,7 +205,16 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
             M, bv = algebra.fixed_system(sets != 0, value, diag)
             if nns is not None:
                 M.setNearNullSpace(nns)
-            ksp.setOperators(M)
+            if preconditioner is None or not amg_reuse:  # a new AMG on this system
+                ksp.setOperators(M)
+                t_setup = time.perf_counter()
+                ksp.setUp()
+                setup_seconds += time.perf_counter() - t_setup
+                setups += 1
+                if amg_reuse:
+                    preconditioner = M
+            else:  # this system preconditioned by the first one's AMG, set up once
+                ksp.setOperators(M, preconditioner)
             xv = algebra.vector(np.where(sets != 0, value, x))
             ksp.solve(bv, xv)
             inner = ksp.getConvergedReason()
@@ -200,7 +223,8 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
                 raise NonsmoothSolveError(f"active set iteration {it}: CG + {amg.upper()} failed "
                                           f"({converged_reason(ksp)}) after {ksp.getIterationNumber()} iterations")
             x = xv.getArray().copy()
-            for obj in (M, xv, bv):
+            x[sets != 0] = value[sets != 0]  # exact (a reused AMG couples the active rows to CG's tolerance)
+            for obj in (xv, bv) if M is preconditioner else (M, xv, bv):
                 obj.destroy()
             if not comm.allreduce(bool(np.all(np.isfinite(x))), op=MPI.LAND):
                 raise NonsmoothSolveError(f"active set iteration {it}: the linear solve returned NaN/inf")
@@ -209,7 +233,9 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
             residual = comm.allreduce(float(np.max(np.abs(x - qp.project(x + lam * dinv)), initial=0.0)), op=MPI.MAX)
             history.append(residual / scale(x))
             tol_abs = tol * scale(x)
-            if comm.rank == 0 and time.monotonic() - shown >= PROGRESS_SECONDS:  # a long solve shows it moves
+            if monitor is not None:  # the caller shows the progress (the solid: platen trial, iterations)
+                monitor(active_set_iteration=it, residual=history[-1], cg_iterations=krylov)
+            elif comm.rank == 0 and time.monotonic() - shown >= PROGRESS_SECONDS:  # a long solve shows it moves
                 shown = time.monotonic()
                 log.info("active set iteration %d: residual %.3g (tolerance %g), %d Krylov iterations so far", it,
                          history[-1], tol, krylov)
@@ -235,8 +261,11 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
                       f"{'' if monotone_from is None else f'; cycling detected at iteration {monotone_from}'}")
     finally:
         ksp.destroy()
+        if preconditioner is not None:
+            preconditioner.destroy()
     return Solution(x=x, iterations=len(history), converged=converged, solver="active_set",
                     seconds=time.perf_counter() - start, krylov_iterations=krylov, history=history,
                     active=sets != 0,
-                    info={"changes": changes, "monotone_from": monotone_from, "kkt_residual": qp.kkt_residual(x)},
+                    info={"changes": changes, "monotone_from": monotone_from, "kkt_residual": qp.kkt_residual(x),
+                          "amg_setups": setups, "amg_setup_seconds": setup_seconds},
                     residual=history[-1] if history else float("nan"), tolerance=tol, reason=reason)

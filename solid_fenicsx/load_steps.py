@@ -21,6 +21,8 @@ its face (the whole face's force minus the contact set's p D_kk n_k).
 
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +30,27 @@ import numpy as np
 from .platen import ContactLost
 
 AXES = {"x": 0, "y": 1, "z": 2}
+log = logging.getLogger("varcouple.solid_fenicsx")
+PROGRESS_SECONDS = 5.0  # between progress lines of a long step (a line at least every 10 s)
+
+
+class Progress:
+    """The progress lines of a long load step: the latest values of every level of the
+    step (platen trial, active-set iteration, CG iteration), logged on rank 0 when
+    ``PROGRESS_SECONDS`` have passed since the last line."""
+
+    def __init__(self, rank: int = 0):
+        self.rank, self.values, self.step, self.shown = rank, {}, 0, time.monotonic()
+
+    def start(self, step: int) -> None:
+        self.step, self.values, self.shown = step, {}, time.monotonic()
+
+    def __call__(self, **values) -> None:
+        self.values.update(values)
+        if self.rank == 0 and time.monotonic() - self.shown >= PROGRESS_SECONDS:
+            self.shown = time.monotonic()
+            log.info("load step %d: %s", self.step,
+                     ", ".join(f"{k.replace('_', ' ')} {v:.4g}" for k, v in self.values.items()))
 
 
 @dataclass
@@ -91,12 +114,22 @@ class StaticStep:
 
     ``run(step)`` returns the reports (``(solver, converged, iterations, residual,
     tolerance, detail, history)`` of the step's final inner solves), the figures and, with
-    contact, the slave face's fields (values at the slave nodes)."""
+    contact, the slave face's fields (values at the slave nodes). With contact the figures
+    split the step's time into ``seconds_assembly``, ``seconds_amg_setup`` and
+    ``seconds_solves`` (the rest of the solvers' time); :meth:`timed` adds ``seconds``, the
+    step's wall time, and ``seconds_other`` (stresses, gaps, fields); with the step's ``contact_solves``,
+    ``step_iterations`` and ``step_krylov_iterations`` (all its solves); with a platen
+    ``seconds_platen_search``, the wall time of its search. Progress lines
+    (:class:`Progress`) come at least every 10 s of a long step."""
 
     def __init__(self, elasticity, loads, steps: int, platen=None, stresses=(), contact=None):
         self.elasticity, self.loads, self.steps = elasticity, loads, int(steps)
         self.platen, self.stresses, self.contact = platen, list(stresses), contact
         self.state = None
+        self.progress = Progress(elasticity.mesh.comm.rank)
+        if contact is not None:
+            contact.monitor = self.progress
+        self.phases = self.counts = {}
         # fluid loads on a contact face: (load, +1 on the slave / -1 on the master)
         faces = {} if contact is None else {contact.slave_boundary: 1.0, contact.master_boundary: -1.0}
         self.fluid = [(ld, faces[ld.boundary]) for ld in loads if ld.kind == "fluid_pressure" and ld.boundary in faces]
@@ -104,11 +137,39 @@ class StaticStep:
     def _solve_once(self) -> bool:
         if self.contact is not None:
             self.state = self.contact.solve()
-            return self.state.solution.converged
+            sol, seconds = self.state.solution, self.state.seconds
+            for phase, key in (("assembly", "assemble"), ("amg_setup", "amg_setup"), ("solves", "solve")):
+                self.phases[phase] += seconds[key]
+            for key, n in (("contact_solves", 1), ("step_iterations", sol.iterations),
+                           ("step_krylov_iterations", sol.krylov_iterations)):
+                self.counts[key] += n
+            return sol.converged
         self.elasticity.solve_static()
         return all(r.converged for r in self.elasticity.info.solves)
 
     def run(self, step: int) -> tuple[list, dict, dict]:
+        self.progress.start(step)
+        self.phases = {"assembly": 0.0, "amg_setup": 0.0, "solves": 0.0}
+        self.counts = {"contact_solves": 0, "step_iterations": 0, "step_krylov_iterations": 0}
+        reports, figures, fields = self._run(step)
+        if self.contact is not None:
+            figures.update({f"seconds_{k}": v for k, v in self.phases.items()}, **self.counts)
+        return reports, figures, fields
+
+    def timed(self, figures: dict, start: float) -> dict:
+        """`figures` with ``seconds`` the wall time since `start` (the step's, taken by the
+        caller around everything it does for the step) and ``seconds_other`` the part of it
+        outside the solvers; logged as the step's summary line."""
+        figures["seconds"] = time.perf_counter() - start
+        if self.contact is not None:
+            figures["seconds_other"] = figures["seconds"] - sum(self.phases.values())
+        if self.progress.rank == 0:
+            keys = ("seconds", *(f"seconds_{p}" for p in (*self.phases, "other", "platen_search")), *self.counts)
+            log.info("load step %d: %s", self.progress.step,
+                     ", ".join(f"{k.replace('_', ' ')} {figures[k]:.4g}" for k in keys if k in figures))
+        return figures
+
+    def _run(self, step: int) -> tuple[list, dict, dict]:
         before = [load.current for load in self.loads]
         for load in self.loads:
             load.apply(step, self.steps, ramp=self.contact is not None)
@@ -116,10 +177,13 @@ class StaticStep:
         reports, figures = [], {}
         if self.platen is not None:
             closing = max(float(np.nanmin(self.contact.mortar.gap)), 0.0) if self.contact is not None else 0.0
+            search = time.perf_counter()
             try:
-                result = self.platen.load_to(self.stresses[step], self._solve_once, closing=closing, stale=changed)
+                result = self.platen.load_to(self.stresses[step], self._solve_once, closing=closing, stale=changed,
+                                             monitor=self.progress)
             except ContactLost as exc:
                 raise ContactLost(f"load step {step}: {exc}") from None
+            figures["seconds_platen_search"] = time.perf_counter() - search
             reports.append(("platen", result.converged, result.solves, result.mismatch, self.platen.tolerance,
                             f"{result.reason}: {result.stress:.6g} Pa for {result.target:.6g} Pa", ()))
             figures.update(platen_displacement=result.displacement, stress=result.stress, target_stress=result.target,
@@ -153,7 +217,7 @@ class StaticStep:
             figures.update({f"fluid_force_{load.name}_{c}": open_part[i] for c, i in AXES.items()})
         stats = state.summary()
         figures.update(iterations=sol.iterations, krylov_iterations=sol.krylov_iterations,
-                       seconds=state.seconds["solve"], active_nodes=stats["active_nodes"],
+                       active_nodes=stats["active_nodes"],
                        area_fraction=state.area_fraction, max_pressure=float(np.max(pressure, initial=0.0)),
                        **{f"force_{c}": force[i] for c, i in AXES.items()}, min_gap=stats["min_gap"],
                        mean_gap=state.mean_gap, closure=contact.initial_mean_gap - state.mean_gap, **platen,

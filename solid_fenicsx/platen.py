@@ -5,10 +5,14 @@ The platen is a Dirichlet condition on its boundary, ``u = -d n`` (all component
 platen also holds the face laterally), with ``n`` the boundary's outward normal. The mean
 normal stress is the force the body exerts on the platen along ``-n`` over the platen's
 area, ``sigma = -F . n / A``, and grows monotonically with ``d`` for an elastic body with
-frictionless contact. :meth:`Platen.load_to` finds ``d`` for a target ``sigma`` by
-bracketing from the last solve (steps of the body's elastic column, ``H sigma / E`` with
-``H`` its extent along ``n``, doubling until the target is bracketed) and regula falsi
-inside the bracket, each trial a full solve (with contact: from the last contact state).
+frictionless contact. :meth:`Platen.load_to` finds ``d`` for a target ``sigma`` by secant
+steps from the last solve, in ``log sigma`` while the stresses are positive (rough contact
+stiffens about exponentially with closure), each trial a full solve (with contact: from the
+last contact state): the first with the slope of the previous search's last two solves
+(near its target) or, for the first search, of the body's elastic column (``E / H`` with
+``H`` its extent along ``n``), the next through the last two trials, at most twice the last
+step until the target is bracketed, then kept inside the bracket (regula falsi when a secant
+step leaves it).
 The search is an inner solve: converged when ``|sigma / target - 1| <= tolerance``. When the
 stress no longer changes as the platen opens, the block is free of contact and its other
 loads (a fluid's pressure on a fracture face) alone push it onto the platen with more than the
@@ -82,7 +86,7 @@ class Platen:
         return -float(self.elasticity.boundary_force(self.boundary) @ self.normal) / self.area
 
     def load_to(self, target: float, solve: Callable[[], bool], closing: float = 0.0,
-                stale: bool = False) -> PlatenResult:
+                stale: bool = False, monitor: Callable[..., None] | None = None) -> PlatenResult:
         """Move the platen until the mean normal stress is `target`: ``solve()`` solves with
         the platen where it is set and returns whether that solve converged; `closing` (a
         contact's smallest initial gap) is added to the first step from an unloaded state.
@@ -92,11 +96,15 @@ class Platen:
         trials = []
 
         def trial(d):
+            if monitor is not None:
+                monitor(platen_trial=len(trials) + 1, platen_displacement=d, target_stress=target)
             self.set(d)
             ok = solve()
             s = self.stress()
             self.history.append((d, s))
             trials.append((d, s))
+            if monitor is not None:
+                monitor(last_trial_stress=s)
             return ok, s
 
         def result(converged, reason):
@@ -109,41 +117,41 @@ class Platen:
         start = self.history[-1][0] if self.history else 0.0
         if (stale or not self.history) and not trial(start)[0]:
             return result(False, f"the solve at displacement {start:g} m did not converge")
-        d0, s0 = self.history[-1]
-        step = (target - s0) * self.compliance + (closing if s0 <= 0 else 0.0)
-        lo, s_lo, hi, s_hi = (d0, s0, None, None) if s0 < target else (None, None, d0, s0)
-        s1 = s0
-        while lo is None or hi is None:  # bracket: steps of the elastic column, doubling
+        lo = hi = None  # the trials nearest the target from below and from above: (d, s)
+        (d, s), previous = self.history[-1], None
+        while abs(s - target) > self.tolerance * abs(target):
+            if s < target:
+                lo = (d, s)
+            else:
+                if lo is None and hi is not None and d < hi[0] and abs(s - hi[1]) <= 1e-6 * abs(hi[1]):
+                    raise ContactLost(f"the mean normal stress on the platen stays at {s:.6g} Pa however far it opens "
+                                      f"(to {d:.3g} m): free of contact, the block is pushed onto the platen by its "
+                                      f"other loads (a fluid's pressure on the fracture faces) with more than the "
+                                      f"target {target:.6g} Pa: the faces separate (loss of contact)")
+                hi = (d, s)
             if exhausted():
-                return result(False, f"target not bracketed in {self.max_solves} solves")
-            d = (lo if hi is None else hi) + step
-            ok, s1 = trial(d)
+                return result(False, f"target not bracketed in {self.max_solves} solves" if lo is None or hi is None
+                              else f"iteration limit: {self.max_solves} solves")
+            new = None
+            if previous is None and first >= 2:  # the first step: the slope of the last search's last two solves
+                new = _secant(self.history[first - 2], self.history[first - 1], target, (d, s))
+            elif previous is not None:  # a secant step through the last two trials
+                new = _secant(previous, (d, s), target, (d, s))
+            if new is None and previous is None:  # the first search: the elastic column's slope
+                new = d + (target - s) * self.compliance + (closing if s <= 0 else 0.0)
+            elif new is None:  # no stress change yet (the faces still apart): twice the last step
+                new = d + 2 * abs(d - previous[0]) * np.sign(target - s)
+            if (lo is None or hi is None) and previous is not None:  # unbracketed: at most twice the last step
+                new = d + np.clip(new - d, -2 * abs(d - previous[0]), 2 * abs(d - previous[0]))
+            if lo is not None and hi is not None:  # inside the bracket, away from its ends
+                width = hi[0] - lo[0]
+                if not lo[0] + 0.01 * width <= new <= hi[0] - 0.01 * width:
+                    new = min(max(_secant(lo, hi, target, lo), lo[0] + 0.05 * width), hi[0] - 0.05 * width)
+            previous = (d, s)
+            ok, s = trial(new)
+            d = new
             if not ok:
                 return result(False, f"the solve at displacement {d:g} m did not converge")
-            if abs(s1 - target) <= self.tolerance * abs(target):
-                break
-            if lo is None and abs(s1 - s_hi) <= 1e-6 * abs(s_hi):  # opened, and the stress did not change
-                raise ContactLost(f"the mean normal stress on the platen stays at {s1:.6g} Pa however far it opens "
-                                  f"(to {d:.3g} m): free of contact, the block is pushed onto the platen by its other "
-                                  f"loads (a fluid's pressure on the fracture faces) with more than the target "
-                                  f"{target:.6g} Pa: the faces separate (loss of contact)")
-            if s1 < target:
-                lo, s_lo = d, s1
-            else:
-                hi, s_hi = d, s1
-            step *= 2
-        while abs(s1 - target) > self.tolerance * abs(target):  # regula falsi in the bracket
-            if exhausted():
-                return result(False, f"iteration limit: {self.max_solves} solves")
-            d = lo + (target - s_lo) * (hi - lo) / (s_hi - s_lo)
-            d = min(max(d, lo + 0.05 * (hi - lo)), hi - 0.05 * (hi - lo))  # inside, away from the ends
-            ok, s1 = trial(d)
-            if not ok:
-                return result(False, f"the solve at displacement {d:g} m did not converge")
-            if s1 < target:
-                lo, s_lo = d, s1
-            else:
-                hi, s_hi = d, s1
         return result(True, "mean normal stress within the tolerance")
 
     def save_state(self) -> list:
@@ -153,6 +161,17 @@ class Platen:
         self.history = list(history)
         if history:
             self.set(history[-1][0])
+
+
+def _secant(p: tuple, q: tuple, target: float, at: tuple) -> float | None:
+    """The displacement where the secant of the trials `p` and `q` ((d, sigma) each), drawn
+    through the trial `at`, reaches `target`; in log(sigma) when all the stresses are positive
+    (contact stiffens about exponentially with closure: a straight line there), else in sigma.
+    None without a positive slope."""
+    (d0, s0), (d1, s1) = p, q
+    g = np.log if min(s0, s1, at[1], target) > 0 else (lambda v: v)
+    slope = (g(s1) - g(s0)) / (d1 - d0) if d1 != d0 else 0.0
+    return at[0] + (g(target) - g(at[1])) / slope if slope > 0 and np.isfinite(slope) else None
 
 
 def _flat_face(elasticity, boundary) -> tuple[np.ndarray, float]:

@@ -1,5 +1,6 @@
 """Smoke run of the contact benchmark (bench/contact.py --quick): both problems, both
-solvers, every figure in the JSON, the solvers agreeing on the same problems."""
+solvers, every figure in the JSON, the solvers agreeing on the same problems; the cost of a
+stress with the AMG set up from scratch and reused, the same closures."""
 
 import json
 
@@ -17,7 +18,7 @@ def test_quick_run_writes_every_figure(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "PASS" in printed or "MISS" in printed
     data = json.loads(out.read_text())
-    assert {"meta", "args", "hertz", "fracture", "goals"} <= set(data)
+    assert {"meta", "args", "hertz", "fracture", "goals", "stress"} <= set(data)
     assert "load_average_before" in data["meta"] and "load_average_after" in data["meta"]
     for problem in ("hertz", "fracture"):
         levels = data[problem]
@@ -30,3 +31,11 @@ def test_quick_run_writes_every_figure(tmp_path, capsys):
                 assert figures["wall_seconds"] > 0 and figures["krylov_iterations"] > 0
         for goal in ("active_set_iterations_do_not_grow", "time_2x_below_snes_vi_at_finest"):
             assert data["goals"][problem][goal]["status"] in ("PASS", "MISS")
+    assert [lv["case"] for lv in data["stress"]] == ["fracture_closure", "measured_fracture"]
+    for level in data["stress"]:
+        assert level["closure_difference"] < 1e-6 and level["seconds_reported_over_wall"] > 0.9
+        for name in ("from_scratch", "reused"):
+            steps = level[name]["steps"]
+            assert len(steps) == 2 and all(st["converged"] for st in steps)
+            assert all(st["contact_solves"] >= 1 and st["step_krylov_iterations"] > 0 for st in steps)
+        assert all(st["amg_setups"] == 1 for st in level["reused"]["steps"])

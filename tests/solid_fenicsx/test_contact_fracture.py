@@ -79,6 +79,8 @@ def test_loading_curve_stiffens(shape):
     assert np.all(np.diff(stiffness) > 0)  # the characteristic stiffening
     assert closure[-1] < p.contact.initial_mean_gap
     assert rows[-1]["mean_gap"] == pytest.approx(p.contact.initial_mean_gap - closure[-1], rel=1e-12)
+    # the platen's secant search from the last stress's slope: a later stress in a few solves
+    assert max(r["platen_solves"] for r in rows[1:]) <= 3
 
 
 def test_20_mpa_near_full_closure_in_one_step():
@@ -137,3 +139,61 @@ def test_too_few_iterations_stop_the_search_and_say_so():
     contact, platen = reports["contact active_set"], reports["platen"]
     assert not contact.converged and contact.iterations == 1
     assert not platen.converged and "did not converge" in platen.detail
+
+
+def test_a_step_reports_its_wall_time_split_into_its_phases():
+    """The step's ``seconds`` is the wall time of the participant's advance (not its last
+    solve's), split into assembly, AMG set-up, solves and the rest; the platen search and
+    the counts of all the step's solves beside it."""
+    import time
+
+    p = specimen([2e6, 5e6])
+    for k in range(2):
+        start = time.perf_counter()
+        _, reports, figures = step(p, k)
+        wall = time.perf_counter() - start
+        assert 0.97 * wall - 0.01 <= figures["seconds"] <= wall
+        parts = [figures[f"seconds_{k}"] for k in ("assembly", "amg_setup", "solves", "other")]
+        assert min(parts) >= 0 and sum(parts) == pytest.approx(figures["seconds"], rel=1e-9)
+        assert figures["seconds_platen_search"] <= figures["seconds"]
+        assert figures["contact_solves"] == figures["platen_solves"] == reports["platen"].iterations
+        assert figures["step_iterations"] >= figures["iterations"] + figures["contact_solves"] - 1
+        assert figures["step_krylov_iterations"] >= figures["krylov_iterations"]
+
+
+def test_a_long_step_logs_its_progress(monkeypatch, caplog):
+    """Progress lines (platen trial, active-set iteration and residual, CG iteration) come
+    whenever PROGRESS_SECONDS have passed; here every event, and the step's summary line."""
+    import logging
+
+    import solid_fenicsx.load_steps
+
+    monkeypatch.setattr(solid_fenicsx.load_steps, "PROGRESS_SECONDS", 0.0)
+    p = specimen([2e6])
+    with caplog.at_level(logging.INFO, logger="varcouple.solid_fenicsx"):
+        _, _, figures = step(p, 0)
+    lines = [r.getMessage() for r in caplog.records if r.name == "varcouple.solid_fenicsx"]
+    assert any("platen trial 1, platen displacement" in line for line in lines)
+    assert any(f"platen trial {int(figures['platen_solves'])}," in line for line in lines)
+    assert any("active set iteration" in line and "residual" in line for line in lines)
+    assert any("cg iteration" in line and "cg residual" in line for line in lines)
+    assert lines[-1].startswith("load step 0: seconds ") and "seconds amg setup" in lines[-1]
+
+
+def test_the_amg_set_up_once_per_solve_gives_the_closure_of_the_from_scratch_solves():
+    """The contact solves with the AMG set up once per solve (the default) against set up at
+    every active-set iteration: the same platen trials, contact set and closure to the
+    solver's tolerance, with fewer set-ups."""
+    reused, scratch = specimen([1e6, 5e6]), specimen([1e6, 5e6])
+    scratch.contact.options["amg_reuse"] = False
+    for k in range(2):
+        (a, _, fa), (b, _, fb) = step(reused, k), step(scratch, k)
+        assert fa["platen_solves"] == fb["platen_solves"]
+        assert fa["platen_displacement"] == pytest.approx(fb["platen_displacement"], rel=1e-8)
+        assert fa["closure"] == pytest.approx(fb["closure"], rel=1e-8)
+        assert np.array_equal(reused.static.state.active, scratch.static.state.active)
+        ua, ub = a["displacement"].data, b["displacement"].data
+        assert np.max(np.abs(ua - ub)) <= 1e-8 * np.max(np.abs(ub))
+        check_state(reused, fa, [1e6, 5e6][k])
+        assert reused.static.state.solution.info["amg_setups"] == 1
+        assert scratch.static.state.solution.info["amg_setups"] == scratch.static.state.solution.iterations

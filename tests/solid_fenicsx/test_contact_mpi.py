@@ -91,7 +91,7 @@ def test_varcouple_runs_a_contact_scene_on_two_ranks(tmp_path, capsys):
         a, b = one["figures"]["solid"], two["figures"]["solid"]
         assert a.keys() == b.keys() and a["active_nodes"] > 0
         scale = {"force": abs(a["force_z"]), "gap": 1e-9, "fluid": 1.0}
-        for key in set(a) - {"krylov_iterations", "seconds", "min_gap"}:
+        for key in {k for k in a if not k.startswith("seconds") and "krylov_iterations" not in k} - {"min_gap"}:
             atol = next((v for k, v in scale.items() if k in key), 0.0) * EQUAL
             assert b[key] == pytest.approx(a[key], rel=EQUAL, abs=atol), key
 
