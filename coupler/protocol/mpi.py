@@ -82,6 +82,9 @@ def confine(env: MutableMapping[str, str] | None = None) -> None:
     settings = mpi_environment(env=env)
     if in_job(env):
         settings = {key: value for key, value in settings.items() if key not in env}
+    else:  # a parent's singleton leftovers would make this process's MPI, and its mpiruns, fail
+        for key in SINGLETON_VARIABLES:
+            env.pop(key, None)
     env.update(settings)
 
 
@@ -90,11 +93,19 @@ def confine(env: MutableMapping[str, str] | None = None) -> None:
 JOB_VARIABLES = ("OMPI_", "PMIX_", "OPAL_", "ORTE_", "HWLOC_")
 
 
+#: what an isolated singleton (a process that initialised MPI without mpirun, as varcouple's own
+#: and pytest's do) writes into its C environment: its children inherit them, and an mpirun that
+#: sees ``OMPI_MCA_ess=singleton`` exits 1 without a word
+SINGLETON_VARIABLES = ("OMPI_MCA_ess", "OMPI_MCA_pmix", "OMPI_MCA_orte_ess_num_procs", "OMPI_APP_CTX_NUM_PROCS",
+                       "OMPI_MCA_orte_precondition_transports")
+
+
 def outside_job(env: Mapping[str, str]) -> dict[str, str]:
     """A copy of `env` without the variables of the MPI job it runs in, if any (then every
-    ``OMPI_*`` goes: mpirun sets its own ``OMPI_MCA_*`` among them)."""
+    ``OMPI_*`` goes: mpirun sets its own ``OMPI_MCA_*`` among them), or of the singleton a parent
+    process was (:data:`SINGLETON_VARIABLES`)."""
     if not in_job(env):
-        return dict(env)
+        return {k: v for k, v in env.items() if k not in SINGLETON_VARIABLES}
     return {k: v for k, v in env.items() if not k.startswith(JOB_VARIABLES)}
 
 

@@ -267,3 +267,22 @@ def test_confine_sets_this_process_and_keeps_a_jobs_settings():
     named = {INTERFACES_VAR: "eth0", "OMPI_MCA_btl": "self,vader"}
     confine(named)
     assert named["OMPI_MCA_btl_tcp_if_include"] == "eth0" and named["OMPI_MCA_btl"] == "self,vader,tcp"
+
+
+def test_a_parents_singleton_leftovers_are_not_inherited():
+    """A process that initialised MPI as an isolated singleton (pytest's, a script's) writes
+    OMPI_MCA_ess=singleton and its like into its C environment; a varcouple run it starts inherited
+    them and the participants' mpirun exited 1 without a word (a solid on 2 ranks 'died'). confine()
+    drops them from this process, mpi_environment() from what it starts; a job's own settings stay."""
+    from coupler.protocol.mpi import SINGLETON_VARIABLES, confine, mpi_environment
+
+    leftovers = {"OMPI_MCA_ess": "singleton", "OMPI_MCA_pmix": "isolated", "OMPI_MCA_orte_ess_num_procs": "1",
+                 "OMPI_APP_CTX_NUM_PROCS": "1", "OMPI_MCA_orte_precondition_transports": "84b7-e112"}
+    assert set(leftovers) == set(SINGLETON_VARIABLES)
+    env = {"PATH": "/usr/bin", **leftovers}
+    assert not set(leftovers) & set(mpi_environment(env=env))
+    confine(env)
+    assert not set(leftovers) & set(env) and env["OMPI_MCA_btl"] == "self,vader"
+    job = {"OMPI_COMM_WORLD_SIZE": "2", "OMPI_MCA_ess": "pmi"}  # inside mpirun's job: its settings stay
+    confine(job)
+    assert job["OMPI_MCA_ess"] == "pmi"
