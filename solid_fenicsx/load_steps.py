@@ -183,11 +183,11 @@ class StaticStep:
                                              monitor=self.progress)
             except ContactLost as exc:
                 raise ContactLost(f"load step {step}: {exc}") from None
-            figures["seconds_platen_search"] = time.perf_counter() - search
+            seconds = time.perf_counter() - search
             reports.append(("platen", result.converged, result.solves, result.mismatch, self.platen.tolerance,
                             f"{result.reason}: {result.stress:.6g} Pa for {result.target:.6g} Pa", ()))
             figures.update(platen_displacement=result.displacement, stress=result.stress, target_stress=result.target,
-                           platen_force=result.force, platen_solves=result.solves)
+                           platen_force=result.force, platen_solves=result.solves, seconds_platen_search=seconds)
         else:
             self._solve_once()
         if self.contact is None:
