@@ -30,6 +30,19 @@ class ParticipantFailure(CouplerError):
         self.args = (f"{where}: {self.args[0]}",)
         return self
 
+    def __reduce__(self):  # travels between the coupler's ranks as it was raised: type, text, notes
+        return _rebuilt, (type(self), self.args, dict(self.__dict__))
+
+
+def _rebuilt(cls, args: tuple, state: dict) -> ParticipantFailure:
+    """A :class:`ParticipantFailure` unpickled without its constructor (whose arguments differ
+    by subclass): its message (``args``, with any :meth:`~ParticipantFailure.at` prefix) and
+    attributes (``name``, the notes added to it) as they were."""
+    error = cls.__new__(cls)
+    error.args = args
+    error.__dict__.update(state)
+    return error
+
 
 class ParticipantError(ParticipantFailure):
     """The participant answered with an error (its handler raised): ``message`` is its text."""
@@ -52,9 +65,6 @@ class ParticipantInputError(ParticipantError, SceneError):
     def __init__(self, name: str, message: str):
         self.message = message
         ParticipantFailure.__init__(self, name, f"participant {name!r} refused its input: {message}")
-
-    def __reduce__(self):  # travels between the coupler's ranks as it was raised
-        return type(self), (self.name, self.message)
 
 
 class ParticipantDied(ParticipantFailure):

@@ -8,13 +8,16 @@ content."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 
 from cli_helpers import assert_clean_error, run_cli, transfer_case, write_mesh
 from coupler.errors import SceneError
-from coupler.protocol.errors import InputError, ParticipantInputError
+from coupler.protocol.errors import (InputError, ParticipantDied, ParticipantError, ParticipantInputError,
+                                     ParticipantStopped, ParticipantTimeout)
+from coupler.protocol.roles import ContractError
 from coupler.protocol.expressions import MAX_NODES, check_expression, evaluate_expression
 from coupler.run.local import LocalClient
 from transfer.generate import box_hexahedra
@@ -182,6 +185,8 @@ def test_a_scene_file_that_is_not_utf8_text_is_one_line(tmp_path, capsys, conten
     ("[x][0] > 0", ["is not allowed"]),
     ("x < 1 << 1000", ["LShift is not allowed"]),
     ("x < 'a'", ["'a' is not a number"]),
+    ("x(1) > 0", ["only the functions", "may be called"]),  # a variable called (before: a TypeError in the solid)
+    ("pi(2) > 0", ["only the functions", "may be called"]),
 ])
 def test_a_boundary_expression_too_large_or_beyond_floats_is_refused(tmp_path, capsys, expression, words):
     """Before: 3000 terms a RecursionError traceback (exit 1); 10**10**10 accepted, and the solid
@@ -281,20 +286,34 @@ def test_an_in_process_participant_refusing_its_input_is_bad_input():
         shape=[4, 4, 2], size=[0.05, 0.025], height=0.0001, aperture=0.001, min_aperture=0.0005, rms=0.0015,
         hurst=0.8, mismatch_length=0.0125, seed=4)}},
      "rigid_solid: generator 'rough_fracture': the lower surface reaches below the bottom"),
-    (lambda d: {"mesh": str(d / "none.vtu")}, "rigid_solid: "),
+    (lambda d: {"mesh": str(d / "none.vtu")}, "rigid_solid: {d}/none.vtu: file not found"),
 ], ids=["hexahedra", "generator_cannot_mesh", "no_file"])
 def test_a_fixed_solid_that_cannot_be_made_is_bad_input(tmp_path, config, words):
     """The fixed solid (served in the coupler's process): before, a ParticipantError (exit 4)."""
     from coupler.standins import RigidSolid
 
     with pytest.raises(ParticipantInputError, match="^participant 'solid' refused its input: InputError: "
-                                                    + words.replace("(", r"\(")):
+                                                    + re.escape(words.format(d=tmp_path))):
         LocalClient("solid", RigidSolid()).configure(config(tmp_path))
 
 
-def test_a_participant_input_error_travels_between_coupler_ranks():
+@pytest.mark.parametrize("error", [
+    lambda: ParticipantInputError("solid", "SolidMeshError: x"),
+    lambda: ParticipantError("fluid", "FloatingPointError: overflow"),
+    lambda: ParticipantDied("solid", "process exited with code 1"),
+    lambda: ParticipantStopped("fluid", "pid 7 stopped by SIGSTOP"),
+    lambda: ParticipantTimeout("solid", "advance", 300.0, progressed=True),
+    lambda: ContractError("fluid", "fluid", "advance output 'velocity': missing"),
+], ids=["input", "error", "died", "stopped", "timeout", "contract"])
+def test_a_participant_failure_travels_between_coupler_ranks_as_raised(error):
+    """Each participant failure (pickled by the coupler ranks' vote): its type, its text with
+    where it happened (``at``) and its notes kept (before: only the input error unpickled; the
+    others became a plain CouplerError on the other ranks, and the ``at`` prefix was lost)."""
     import pickle
 
-    again = pickle.loads(pickle.dumps(ParticipantInputError("solid", "SolidMeshError: x")))
-    assert type(again) is ParticipantInputError and str(again) == "participant 'solid' refused its input: " \
-                                                                   "SolidMeshError: x"
+    raised = error().at("time step 3, iteration 2")
+    raised.add_note("seen on coupler rank 1")
+    again = pickle.loads(pickle.dumps(raised))
+    assert type(again) is type(raised) and str(again) == str(raised) and str(again).startswith("time step 3")
+    assert again.name == raised.name and again.__notes__ == ["seen on coupler rank 1"]
+    assert isinstance(again, SceneError) == isinstance(raised, SceneError)
