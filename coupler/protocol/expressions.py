@@ -111,7 +111,8 @@ def check_expression(text: str, where: str) -> None:
                              f"{', '.join(CONSTANTS)} and {', '.join(FUNCTIONS)}")
         if isinstance(node, ast.Attribute):
             raise SceneError(f"{where}: attribute access ('.{node.attr}') is not allowed in {_shown(text)}")
-        if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS):
+        if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name)  # (an unknown name: said below)
+                                               and (node.func.id in FUNCTIONS or node.func.id not in allowed)):
             raise SceneError(f"{where}: only the functions {', '.join(FUNCTIONS)} may be called, in {_shown(text)}")
         if isinstance(node, ast.Constant) and (isinstance(node.value, bool)
                                                or not isinstance(node.value, (int, float))):
