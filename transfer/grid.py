@@ -46,9 +46,7 @@ class StructuredGrid:
         self.origin = np.asarray(origin, dtype=np.float64).reshape(3)
         self.spacing = np.asarray(spacing, dtype=np.float64).reshape(3)
         self.shape = tuple(int(n) for n in np.asarray(shape).reshape(3))
-        if not np.all(np.isfinite(self.origin)) or not np.all(np.isfinite(self.spacing)):
-            raise MeshError(f"{name}: origin and spacing must be finite")
-        check_coordinates(name, [self.origin, self.origin + self.spacing * np.asarray(self.shape)])
+        check_coordinates(name, [self.origin, self.spacing, self.origin + self.spacing * np.asarray(self.shape)])
         if np.any(self.spacing <= 0):
             raise MeshError(f"{name}: spacing must be positive, got {self.spacing.tolist()}")
         if min(self.shape) < 1:

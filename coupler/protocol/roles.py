@@ -22,6 +22,8 @@ from typing import Mapping
 import numpy as np
 
 from coupler.protocol.errors import ParticipantFailure
+from transfer.errors import MeshError
+from transfer.grid import StructuredGrid
 
 # -- field names (Steps 1-6 of paper 2.3) ---------------------------------------------------
 SOLID_FRACTION = "solid_fraction"  # Q0 volume fraction of the solid in each grid cell (Step 6 -> 1)
@@ -126,16 +128,16 @@ class ContractError(ParticipantFailure):
 
 
 def _grid_rows(name: str, role: str, grid, location: str) -> int:
+    """The rows of a grid participant's fields: its cells or points (:class:`transfer.StructuredGrid`
+    checks the grid)."""
     try:
-        origin, spacing = (np.asarray(grid[k], dtype=float) for k in ("origin", "spacing"))
         shape = np.asarray(grid["shape"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ContractError(name, role, f"geometry 'grid' must hold origin, spacing and shape: {exc}") from None
-    if (origin.shape != (3,) or spacing.shape != (3,) or shape.shape != (3,) or not np.all(spacing > 0)
-            or not np.issubdtype(shape.dtype, np.integer) or shape.min() < 1):
-        raise ContractError(name, role, f"geometry 'grid' must have 3 origin values, 3 positive spacings and 3 "
-                                        f"positive cell counts, got {grid!r}")
-    return int(np.prod(shape + 1) if location == "points" else np.prod(shape))
+        if not np.issubdtype(shape.dtype, np.integer):
+            raise ValueError(f"shape must be integers, got {grid['shape']!r}")
+        g = StructuredGrid(grid["origin"], grid["spacing"], shape, name="geometry 'grid'")
+    except (KeyError, TypeError, ValueError, MeshError) as exc:
+        raise ContractError(name, role, f"geometry 'grid' (origin, spacing, shape): {exc}") from None
+    return g.num_points if location == "points" else g.num_cells
 
 
 def check_geometry(name: str, header: Mapping, fields: Mapping) -> int | None:

@@ -11,7 +11,8 @@ from pathlib import Path
 from coupler.errors import SceneError
 from coupler.protocol.settings import (REQUIRED, Invalid, check_boolean, check_integer, check_number, check_numbers,
                                        check_shape, check_string, check_strings, check_vector)
-from transfer.mesh import COORDINATE_LIMIT
+from transfer.errors import MeshError
+from transfer.mesh import check_coordinates
 
 SCENE_FILE = "scene.toml"
 
@@ -79,10 +80,10 @@ class Table:
     def point(self, key):
         """A point or length of the geometry: 3 finite numbers within :data:`transfer.mesh.COORDINATE_LIMIT`."""
         value = self.vector(key)
-        largest = max(abs(v) for v in value)
-        if largest > COORDINATE_LIMIT:
-            raise self.error(key, f"{largest:g} overflows double precision in the volumes and moments of the "
-                                  f"transfers (at most {COORDINATE_LIMIT:g}); give the geometry in other units")
+        try:
+            check_coordinates(key, [value])
+        except MeshError as exc:
+            raise self.error(key, str(exc).removeprefix(f"{key}: ")) from None
         return value
 
     def shape(self, key, default=REQUIRED):

@@ -196,7 +196,7 @@ def test_an_unwritable_output_is_one_line_before_anything_runs(capsys):
     ({"nu = 0.25": "nu = nan"}, ["[materials.solid] nu", "finite"]),
     ({"upper = [1.0, 1.0, 1.0]": "upper = [1.0, inf, 1.0]"}, ["[geometry.fluid] upper", "finite numbers"]),
     ({"upper = [1.0, 1.0, 1.0]": "upper = [1e300, 1e300, 1e300]"},
-     ["[geometry.fluid] upper", "1e+300 overflows double precision", "give the geometry in other units"]),
+     ["[geometry.fluid] upper", "coordinates up to 1e+300 in magnitude overflow double precision", "give the geometry in other units"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nmode = \"client\""},
      ["[messaging] connect", "client mode needs the zenoh router"]),
     ({"max_iterations = 30": "max_iterations = 30\n\n[messaging]\nconnect = [\"foo:bar\"]"},
