@@ -132,8 +132,6 @@ def make_plan(scene) -> Plan:
         if name in scene.effects:
             rule.plan(scene, plan)
     plan.notes += [note for solver in scene.solvers.values() for note in solver.notes]
-    if scene.solid is not None and scene.solid.generator is not None:
-        from transfer.generators import notes
-
-        plan.notes += notes(scene.solid.generator["name"], scene.solid.generator["parameters"])
+    if scene.solid is not None:
+        plan.notes += scene.solid.notes
     return plan

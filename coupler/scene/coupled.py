@@ -21,7 +21,7 @@ from coupler.protocol.settings import REQUIRED
 from coupler.scene.participants import Solver, read_solver
 from coupler.scene.tables import Table, in_case, output_directory
 from coupler.protocol.expressions import check_expression
-from transfer.generators import GENERATORS, parameters
+from transfer.generators import GENERATORS, notes, parameters
 from transfer.grid import BOX_FACES
 
 LOAD_TYPES = ("dirichlet", "pressure", "traction", "body_force", "fluid_pressure", "platen")
@@ -45,6 +45,7 @@ class SolidGeometry:
     box: dict | None  # lower, upper, shape, jitter, seed
     boundaries: dict[str, str | int]  # name -> expression on facet midpoints, box face, or file/generator tag
     generator: dict | None = None  # {"name": ..., "parameters": {...}} (transfer.generators), defaults filled in
+    notes: tuple[str, ...] = ()  # what the generator did to its input that the user should know (its ``notes``)
 
 
 @dataclass
@@ -308,7 +309,7 @@ def _solid_geometry(path, case_dir, data) -> SolidGeometry:
         generator = _generator(t, case_dir)
         faces = dict(getattr(GENERATORS[generator["name"]], "FACES", {}))
         return SolidGeometry(mesh=None, box=None, boundaries={**faces, **_boundaries(path, t, None, faces)},
-                             generator=generator)
+                             generator=generator, notes=tuple(notes(generator["name"], generator["parameters"])))
     if mesh is not None:
         if box_keys:
             raise t.error("mesh", "give either a mesh file or the box keys (lower, upper, shape), not both")
