@@ -420,11 +420,6 @@ def error(message: str) -> None:
     print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 
-def _noted(message: str, exc: BaseException) -> str:
-    """`message` and the notes of `exc` (what else went wrong while it ended the run)."""
-    return "; ".join([message, *getattr(exc, "__notes__", ())])
-
-
 def _terminate(signum, frame):
     from coupler.errors import Terminated
 
@@ -465,10 +460,10 @@ def _main(argv: list[str] | None) -> int:
     try:
         return args.func(args)
     except Terminated as exc:
-        error(_noted(f"{exc}: participants stopped, the results written so far are kept", exc))
+        error(one_line(exc, f"{exc}: participants stopped, the results written so far are kept"))
         return EXIT_CODES["terminated"]
     except KeyboardInterrupt as exc:
-        error(_noted("interrupted: participants stopped, the results written so far are kept", exc))
+        error(one_line(exc, "interrupted: participants stopped, the results written so far are kept"))
         return EXIT_CODES["interrupted"]
     except NotConverged as exc:
         error(one_line(exc))

@@ -37,10 +37,12 @@ EXIT_CODES = {"completed": 0, "check_failed": 1, "invalid": 2, "not_converged": 
               "interrupted": 130, "terminated": 143}
 
 
-def one_line(exc: BaseException) -> str:
-    """An error as one line; an OSError as ``<file>: <reason>``; its notes (``add_note``: what
-    else went wrong while it ended the run) after it, separated by ``;``."""
-    if isinstance(exc, OSError) and exc.strerror:
+def one_line(exc: BaseException, message: str | None = None) -> str:
+    """An error (or `message` about it) as one line; an OSError as ``<file>: <reason>``; its notes
+    (``add_note``: what else went wrong while it ended the run) after it, separated by ``;``."""
+    if message is not None:
+        text = message
+    elif isinstance(exc, OSError) and exc.strerror:
         text = f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
     else:
         text = " ".join(str(exc).split()) or type(exc).__name__

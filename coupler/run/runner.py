@@ -183,7 +183,7 @@ def logging_to(path: Path):
 
 def _record_failure(summary: dict, exc: BaseException) -> None:
     summary["status"] = run_status(exc)
-    summary["error"] = "; ".join([f"{type(exc).__name__}: {exc}", *getattr(exc, "__notes__", ())])
+    summary["error"] = f"{type(exc).__name__}: {one_line(exc)}"
 
 
 def _write_end(out: Path, summary: dict, pictures: bool, log, failure: BaseException | None):
