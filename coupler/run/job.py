@@ -26,7 +26,7 @@ from coupler.errors import EXIT_CODES, CouplerError, RunFailed, Terminated
 from coupler.output.results import SUMMARY, write_summary
 from coupler.protocol.exits import describe_exit
 from coupler.protocol.mpi import mpi_environment
-from coupler.run.launch import alive, descendants
+from coupler.run.launch import descendants, proc_stat
 from coupler.run.outdir import LOCK
 from coupler.run.preflight import check_cores, check_memory, estimate
 
@@ -45,15 +45,6 @@ def _rank(pid: int) -> int | None:
         if item.startswith(b"OMPI_COMM_WORLD_RANK="):
             return int(item.split(b"=", 1)[1])
     return None
-
-
-def _started(pid: int) -> str | None:
-    """When `pid` started (its /proc stat field 22), to tell it from a later process of the same pid."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return None
-    return stat[stat.rindex(")") + 2:].split()[19]
 
 
 class Job:
@@ -95,9 +86,12 @@ class Job:
         """Note the processes under mpirun, and which is which rank."""
         known = set(self.ranks.values())
         for pid in descendants(self.popen.pid):
-            if pid not in self.seen and (started := _started(pid)) is not None:
-                self.seen[pid] = started
-            if pid not in known and (rank := _rank(pid)) is not None:  # (mpirun's fork before the exec: not yet)
+            if (st := proc_stat(pid)) is None:
+                continue
+            self.seen.setdefault(pid, st[3])
+            # the coupler's ranks are mpirun's children; a participant's ranks (under the participant's
+            # own mpirun) have a rank too but are not ours (not yet a rank: mpirun's fork before the exec)
+            if pid not in known and st[1] == self.popen.pid and (rank := _rank(pid)) is not None:
                 self.ranks.setdefault(rank, pid)
 
     def look(self) -> None:
@@ -108,7 +102,9 @@ class Job:
                 self.first_gone = gone[0]
 
     def _alive(self, pid: int) -> bool:
-        return alive(pid) and _started(pid) == self.seen[pid]
+        """`pid` is the process seen under mpirun (not a later one of the same pid) and runs."""
+        st = proc_stat(pid)
+        return st is not None and st[0] not in ("Z", "X") and st[3] == self.seen[pid]
 
     def wait(self) -> int:
         searched = -SEARCH

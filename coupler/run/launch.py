@@ -44,19 +44,20 @@ def tail(path: Path, lines: int = 15, max_bytes: int = 64 * 1024) -> str:
     return "\n".join(text.rstrip("\n").splitlines()[-lines:])
 
 
-def _proc_stat(pid: int) -> tuple[str, int, int] | None:
-    """(state, ppid, pgid) of a process from /proc, or None if it is gone."""
+def proc_stat(pid: int) -> tuple[str, int, int, str] | None:
+    """(state, ppid, pgid, start time) of a process from /proc, or None if it is gone (the start
+    time tells it from a later process of the same pid)."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
         return None
     fields = stat[stat.rindex(")") + 2:].split()
-    return fields[0], int(fields[1]), int(fields[2])
+    return fields[0], int(fields[1]), int(fields[2]), fields[19]
 
 
 def alive(pid: int) -> bool:
     """``pid`` exists and is not a zombie."""
-    st = _proc_stat(pid)
+    st = proc_stat(pid)
     return st is not None and st[0] not in ("Z", "X")
 
 
@@ -68,7 +69,7 @@ def descendants(pid: int) -> list[int]:
     children: dict[int, list[int]] = {}
     for entry in os.listdir("/proc"):
         if entry.isdigit():
-            st = _proc_stat(int(entry))
+            st = proc_stat(int(entry))
             if st is not None and st[0] not in ("Z", "X"):
                 children.setdefault(st[1], []).append(int(entry))
     out, todo = [], [pid]
@@ -208,7 +209,7 @@ class Launcher:
         if proc is None or proc.returncode is not None:
             return None
         for pid in [proc.pid, *descendants(proc.pid)]:
-            st = _proc_stat(pid)
+            st = proc_stat(pid)
             if st is not None and st[0] in ("T", "t"):
                 how = "SIGSTOP or SIGTSTP" if st[0] == "T" else "traced by a debugger"
                 return f"process {pid} is stopped (state {st[0]}: {how}); kill -CONT {pid} resumes it"

@@ -147,3 +147,21 @@ def test_the_ranks_per_core_must_be_a_number(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("VARCOUPLE_RANKS_PER_CORE", "many")
     assert main(["check", "--quick", str(ranks_case(tmp_path, 2))]) == 2
     assert "VARCOUPLE_RANKS_PER_CORE='many': not an integer" in capsys.readouterr().err
+
+
+def test_a_participants_ranks_under_the_coupler_are_not_taken_for_coupler_ranks(monkeypatch):
+    """Under the coupler's mpirun (pid 100) its ranks 0 and 1 (its children) and, below rank 0, a
+    solid on 4 ranks under its own mpirun (pid 200), whose processes have ranks 0..3 too: only
+    mpirun's children are coupler ranks (before: the solid's ranks 2 and 3 were watched as coupler
+    ranks 2 and 3, and their end at the run's close named as a coupler rank that died)."""
+    from coupler.run import job
+
+    tree = {101: (100, 0), 102: (100, 1), 200: (101, None), **{300 + r: (200, r) for r in range(4)}}
+    monkeypatch.setattr(job, "descendants", lambda pid: list(tree))
+    monkeypatch.setattr(job, "proc_stat", lambda pid: ("S", tree[pid][0], pid, "7") if pid in tree else None)
+    monkeypatch.setattr(job, "_rank", lambda pid: tree[pid][1])
+    watched = job.Job.__new__(job.Job)
+    watched.popen = type("Popen", (), {"pid": 100})()
+    watched.ranks, watched.seen = {}, {}
+    watched.search()
+    assert watched.ranks == {0: 101, 1: 102} and set(watched.seen) == set(tree)
