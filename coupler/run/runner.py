@@ -233,8 +233,8 @@ def scene_input(scene):
     nothing, an unknown tag, a generator's parameters) as what it is, an error of the scene file."""
     try:
         yield
-    except ParticipantInputError as exc:
-        raise SceneError(f"{scene.path}: {exc}") from None
+    except ParticipantInputError as exc:  # a SceneError already: named by the scene file, its notes kept
+        raise exc.at(str(scene.path))
 
 
 def check_inputs_kept(scene, plan: Plan, out: Path) -> None:

@@ -317,3 +317,19 @@ def test_a_participant_failure_travels_between_coupler_ranks_as_raised(error):
     assert type(again) is type(raised) and str(again) == str(raised) and str(again).startswith("time step 3")
     assert again.name == raised.name and again.__notes__ == ["seen on coupler rank 1"]
     assert isinstance(again, SceneError) == isinstance(raised, SceneError)
+
+
+def test_a_refusal_is_named_by_the_scene_file_and_keeps_its_notes(tmp_path):
+    """runner.scene_input prefixes the scene file and keeps the refusal as it was (before: a plain
+    SceneError of its text, the notes, such as which scene key feeds the refused input, lost)."""
+    from types import SimpleNamespace
+
+    from coupler.run.runner import scene_input
+
+    refused = ParticipantInputError("fluid", "InputError: [flow] inlet: selects no face")
+    refused.add_note("its inlet pressure comes from [flow] flow_rate")
+    with pytest.raises(ParticipantInputError) as info, scene_input(SimpleNamespace(path=tmp_path / "scene.toml")):
+        raise refused
+    assert str(info.value).startswith(f"{tmp_path / 'scene.toml'}: participant 'fluid' refused its input")
+    assert info.value.__notes__ == ["its inlet pressure comes from [flow] flow_rate"]
+    assert isinstance(info.value, SceneError)
