@@ -150,7 +150,7 @@ def asymptotic_rate(steps, last: int = 5) -> float:
 
 def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hierarchy: Hierarchy | None = None,
                      tol: float = 1e-12, maxiter: int = 200, presmooth: int = 3, postsmooth: int = 3,
-                     coarse_smooth: int = 3, callback=None) -> Solution:
+                     coarse_smooth: int = 3, callback=None, monitor=None) -> Solution:
     """Truncated nonsmooth multigrid (module docstring) on `hierarchy`, whose
     finest level must be the unknowns of `qp`. Stops when the step length
     ``||x_{k+1} - x_k||_2`` (the criterion reported) falls below `tol`, or after
@@ -189,6 +189,8 @@ def solve_multilevel(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, hi
         violation = max(violation, qp.infeasibility(x))
         if callback is not None:
             callback(k, x)
+        if monitor is not None:  # a caller's progress lines (nonsmooth.solvers.solve)
+            monitor(multigrid_iteration=k, step_length=steps[-1])
         if steps[-1] < tol:
             converged = True
             break

@@ -86,7 +86,7 @@ def petsc_bounds(qp: BoundConstrainedQP) -> tuple[PETSc.Vec, PETSc.Vec]:
 
 def solve_snes_vi(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, rtol: float = 1e-12,
                   atol: float = 0.0, max_iter: int = 200, ksp_rtol: float = 1e-12,
-                  amg: str = "hypre") -> Solution:
+                  amg: str = "hypre", monitor=None) -> Solution:
     """Solve the QP with SNES ``vinewtonrsls`` and CG + AMG on the inactive set.
 
     ``amg="hypre"`` (BoomerAMG) by default: GAMG inside vinewtonrsls fails in
@@ -123,7 +123,12 @@ def solve_snes_vi(qp: BoundConstrainedQP, x0: np.ndarray | None = None, *, rtol:
     snes.setTolerances(rtol=rtol, atol=atol, stol=1e-14, max_it=max_iter)
     # PETSc's default backtracking line search: with full steps ("basic") vinewtonrsls cycles on
     # SPD problems that are not M-matrices (tests/test_nonsmooth_active_set.py, CYCLING_A)
-    snes.setMonitor(lambda snes, it, norm: norms.append(float(norm)))
+    def heard(snes, it, norm):
+        norms.append(float(norm))
+        if monitor is not None:  # a caller's progress lines (nonsmooth.solvers.solve)
+            monitor(newton_iteration=it, residual=float(norm))
+
+    snes.setMonitor(heard)
     configure_cg_amg(snes.getKSP(), ksp_rtol, amg=amg)
     snes.solve(None, x)
     reason = snes.getConvergedReason()

@@ -24,7 +24,8 @@ _PROVIDERS = {"multilevel": "nonsmooth.multilevel"}
 
 
 def register(name: str, function: SolverFunction) -> None:
-    """Make a solver available under `name` (to :func:`solve` and scenes)."""
+    """Make a solver available under `name` (to :func:`solve` and scenes): ``function(qp, x0=...,
+    monitor=..., **options)``, calling ``monitor(**values)`` (when not None) at each iteration."""
     SOLVERS[name] = function
 
 
@@ -45,6 +46,7 @@ def get(method: str) -> SolverFunction:
     return SOLVERS[method]
 
 
-def solve(qp: BoundConstrainedQP, method: str = "active_set", x0=None, **options) -> Solution:
-    """Solve `qp` with the named solver."""
-    return get(method)(qp, x0=x0, **options)
+def solve(qp: BoundConstrainedQP, method: str = "active_set", x0=None, monitor=None, **options) -> Solution:
+    """Solve `qp` with the named solver; ``monitor(**values)``, when given, hears each of its
+    iterations (every solver takes it: a caller's progress lines)."""
+    return get(method)(qp, x0=x0, monitor=monitor, **options)

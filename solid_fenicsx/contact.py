@@ -174,7 +174,7 @@ class Contact:
         if self.distributed is None:
             self._serial_transformation(coordinates, fixed)
         self.x: np.ndarray | None = None  # the last transformed solution (the next solve's start)
-        self.monitor = None  # progress callback given to the active set solver (``monitor(**values)``)
+        self.monitor = None  # progress callback given to the contact solver (``monitor(**values)``)
         self._nullspace = None
         if solver == "multilevel" and "hierarchy" not in options:
             keys = ("levels", "coarse_shape", "margin", "threads")
@@ -255,8 +255,7 @@ class Contact:
         t0 = time.perf_counter()
         qp = self.problem()
         t1 = time.perf_counter()
-        monitor = {"monitor": self.monitor} if self.monitor is not None and self.solver == "active_set" else {}
-        sol = nonsmooth_solvers.solve(qp, self.solver, x0=self.x, **self.options, **monitor)
+        sol = nonsmooth_solvers.solve(qp, self.solver, x0=self.x, monitor=self.monitor, **self.options)
         t2 = time.perf_counter()
         self.x = sol.x
         owned = self.elasticity.V.dofmap.index_map.size_local * 3

@@ -176,6 +176,16 @@ def test_multilevel_equals_active_set_and_snes_vi(partial_contact):
     assert ml.converged and ml.history[-1] < 1e-12
 
 
+def test_the_multilevel_solver_takes_a_monitor(partial_contact):
+    """Through nonsmooth.solvers.solve, as the solid calls every solver: one call per iteration
+    with its step length (the criterion)."""
+    qp, H, _ = partial_contact
+    heard = []
+    sol = solve(qp, "multilevel", hierarchy=H, monitor=lambda **values: heard.append(values))
+    assert sol.converged and [v["step_length"] for v in heard] == sol.history
+    assert [v["multigrid_iteration"] for v in heard] == list(range(1, sol.iterations + 1))
+
+
 def test_every_iterate_is_feasible_and_the_energy_never_increases(partial_contact):
     qp, H, _ = partial_contact
     violations = []

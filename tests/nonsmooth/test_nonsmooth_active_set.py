@@ -283,6 +283,16 @@ def test_a_reused_amg_whose_cg_stops_short_is_reported_unconverged():
     assert "inner CG + GAMG reached its 12 iterations at active set iteration 2" in capped.reason
 
 
+def test_snes_vi_takes_a_monitor_too():
+    """The monitor is a keyword of every registered solver (the solid passes it whatever its
+    solver: it tested for "active_set" and gave the others no progress lines)."""
+    qp, _ = obstacle_2d(16)
+    heard = []
+    sol = solve(qp, "snes_vi", monitor=lambda **values: heard.append(values))
+    assert sol.converged and [v["newton_iteration"] for v in heard] == list(range(sol.iterations + 1))
+    assert heard[-1]["residual"] < 1e-10 * heard[0]["residual"]  # the function norm, iteration 0 first
+
+
 def test_the_monitor_hears_every_active_set_and_cg_iteration():
     qp, _ = obstacle_2d(16)
     heard = []
