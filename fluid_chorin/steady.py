@@ -30,7 +30,9 @@ than the march on the shipped hm_fracture grid (bench/hm.py --steady).
 from __future__ import annotations
 
 import itertools
+import logging
 import math
+import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -39,6 +41,10 @@ import scipy.sparse.linalg as spla
 from coupler.protocol.wire import SolveReport
 
 from .staggered import AXIS, along
+
+log = logging.getLogger("varcouple.fluid_chorin")
+#: between progress lines of a long Newton solve (the coupler's timeout counts from the latest)
+PROGRESS_SECONDS = 5.0
 
 #: a chord step whose update shrank by less than this factor gets a fresh Jacobian
 CONTRACTION = 0.2
@@ -210,19 +216,19 @@ class SteadyNewton:
         pin, mean = float(s.state.p.flat[0]), float(s.state.p.mean())
         x = self.pack(base, s.state.p)
         jacobians, factorizations, krylov, residual, last = 0, 0, 0, math.inf, math.inf
-        rtol, fresh, it = min(LINEAR_TOLERANCE, 0.1 * tolerance), True, 0
+        rtol, fresh, it, shown = min(LINEAR_TOLERANCE, 0.1 * tolerance), True, 0, time.monotonic()
         for it in range(1, max_iterations + 1):
             if fresh:
-                J = self.jacobian(x, base)
+                J = self.jacobian(x, base).tocsr()
                 jacobians += 1
                 if self.linear is None:
                     self.linear, factorizations = Saddle(J, self.nq), factorizations + 1
-                self.linear.J = J.tocsr()  # an earlier factorization preconditions while GMRES converges
+                self.linear.J = J  # an earlier factorization preconditions while GMRES converges
             F = -self.residual(x, base, pin)
             floor = ROUNDING * float(np.linalg.norm(F)) if it == 1 else floor  # near it, a step is rounding
             dx, iterations, solved = self.linear.solve(F, rtol, floor)
             krylov += iterations
-            if not solved:  # factorize the current Jacobian
+            if not solved and self.linear.lu_of is not J:  # precondition with the LU of this Jacobian
                 self.linear.destroy()
                 self.linear, factorizations = Saddle(J, self.nq), factorizations + 1
                 dx, iterations, solved = self.linear.solve(F, rtol, floor)
@@ -233,18 +239,23 @@ class SteadyNewton:
             residual = max(s.relative(step, q), s.relative([dx[self.nq:].reshape(p.shape)], [p], cells=True))
             if not np.isfinite(residual):
                 raise FloatingPointError(f"the steady Newton solve diverged at step {it}")
-            if residual < tolerance:
+            if time.monotonic() - shown >= PROGRESS_SECONDS:  # a long solve shows it moves
+                shown = time.monotonic()
+                log.info("steady Newton step %d of at most %d: change %.3g (tolerance %g), %d LU factorizations",
+                         it, max_iterations, residual, tolerance, factorizations)
+            if residual < tolerance and solved:  # (a small step of an unsolved system proves nothing)
                 break
             fresh = residual > CONTRACTION * last  # a fresh Jacobian at the new state
             last = residual
         q, p = self.unpack(x, base)
         if self.singular:
             p = p + (mean - p.mean())
-        converged = residual < tolerance
+        converged = residual < tolerance and solved
+        why = ("" if converged else f"; its last linear solve missed {rtol:g} even with the LU of its Jacobian"
+               if residual < tolerance else f"; limit of {max_iterations} Newton steps reached")
         report = SolveReport("chorin steady Newton", converged, it, residual, tolerance,
                              f"{jacobians} Jacobians, {factorizations} LU factorizations, {krylov} GMRES iterations "
-                             f"on {self.nq + self.ncell} unknowns"
-                             + ("" if converged else f"; limit of {max_iterations} Newton steps reached"))
+                             f"on {self.nq + self.ncell} unknowns" + why)
         return report, q, p
 
 
@@ -255,17 +266,16 @@ class Saddle:
     complement's diagonal ``C diag(A)^-1 B``) on the pressure diagonal, so the factorization
     needs no pivoting and keeps the fill of a symmetric ordering."""
 
-    def __init__(self, J: sp.spmatrix, nq: int):
-        J = J.tocsr()
-        self.J, self.nq = J, nq
+    def __init__(self, J: sp.csr_matrix, nq: int):
+        self.J = self.lu_of = J  # the system solved, and the one whose LU preconditions it
+        self.nq = nq
         A, B, C = J[:nq, :nq], J[:nq, nq:], J[nq:, :nq]
         schur = (abs(C) @ sp.diags(1.0 / np.abs(A.diagonal())) @ abs(B)).diagonal()
         n = J.shape[0]
         flip = np.concatenate([np.ones(nq), -np.ones(n - nq)])
-        K = (sp.diags(flip) @ J + sp.diags(np.concatenate([np.zeros(nq), REGULARIZATION * schur]))).tocsc()
+        K = (sp.diags(flip) @ J + sp.diags(np.concatenate([np.zeros(nq), REGULARIZATION * schur]))).tocsr()
         from petsc4py import PETSc
 
-        K = K.tocsr()
         K.sort_indices()
         self.K = PETSc.Mat().createAIJ(size=K.shape, csr=(K.indptr.astype(PETSc.IntType),
                                                           K.indices.astype(PETSc.IntType), K.data),
@@ -292,12 +302,13 @@ class Saddle:
 
     def solve(self, b: np.ndarray, rtol: float, atol: float) -> tuple[np.ndarray, int, bool]:
         """``J x = b`` to the residual ``max(rtol |b|, atol)`` in at most :data:`KRYLOV` iterations:
-        the solution, the iterations and whether it got there."""
+        the solution, the iterations and whether it got there, by the true residual (scipy's
+        ``info`` misjudges it both ways: its preconditioned estimate)."""
         count = [0]
 
         def counted(_):
             count[0] += 1
 
-        x, info = spla.gmres(self.J, b, M=self.M, tol=rtol, atol=atol, restart=KRYLOV, maxiter=1,
-                             callback=counted, callback_type="pr_norm")
-        return x, count[0], info == 0
+        x, _ = spla.gmres(self.J, b, M=self.M, tol=rtol, atol=atol, restart=KRYLOV, maxiter=1,
+                          callback=counted, callback_type="pr_norm")
+        return x, count[0], float(np.linalg.norm(self.J @ x - b)) <= max(rtol * float(np.linalg.norm(b)), atol)

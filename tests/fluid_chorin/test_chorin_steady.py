@@ -5,6 +5,8 @@ convection; a limit on the Newton steps is reported as not converged."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -79,6 +81,24 @@ def test_a_newton_step_limit_is_reported_not_converged():
     run = solver.steady()
     assert not run.converged and run.report.iterations == 2 and run.report.residual > CAVITY["tolerance"]
     assert "limit of 2 Newton steps reached" in run.report.detail
+
+
+def test_a_jacobian_is_factorized_once_and_an_unsolved_system_is_not_converged(monkeypatch):
+    """The LU is made at most once per Jacobian (scipy's GMRES ``info`` called solves failed whose
+    true residual met the tolerance, and the same Jacobian was factorized again); a linear solve
+    that misses its tolerance even with the LU of its own Jacobian leaves the solve not converged,
+    however small the step it gave (before: taken, and a tiny step reported as converged)."""
+    from fluid_chorin import steady as module
+
+    run = ChorinSolver(ChorinSpec.from_config({**CAVITY, "steady": "newton"})).steady()
+    jacobians, factorizations = (int(w) for w in re.findall(r"(\d+) (?:Jacobians|LU factorizations)", run.report.detail))
+    assert run.converged and 1 <= factorizations <= jacobians, run.report.detail
+
+    solve = module.Saddle.solve
+    monkeypatch.setattr(module.Saddle, "solve", lambda self, b, rtol, atol: (*solve(self, b, rtol, atol)[:2], False))
+    run = ChorinSolver(ChorinSpec.from_config({**CAVITY, "steady": "newton", "newton_iterations": 30})).steady()
+    assert not run.converged and ("its last linear solve missed" in run.report.detail
+                                  or "limit of 30 Newton steps reached" in run.report.detail)
 
 
 def test_newton_refuses_several_ranks():
