@@ -1,6 +1,7 @@
 """The Chorin fluid participant's settings, declared once (``[solvers.fluid]`` with
-``participant = "chorin"``; cases/README.md's reference is generated from it). Imports no
-solver: the coupler reads it to validate scenes (entry point ``varcouple.participants``)."""
+``participant = "chorin"``; cases/README.md's reference is generated from it), and what it
+cannot run (:func:`refuses`). Imports no solver: the coupler reads it to validate scenes
+(entry point ``varcouple.participants``)."""
 
 from coupler.protocol.penalization import PENALIZATION
 from coupler.protocol.settings import ParticipantSpec, Setting, Settings
@@ -13,9 +14,18 @@ SOLID_VELOCITIES = ("cells", "bodies", "none")
 #: how a steady scene's flow is solved (:meth:`fluid_chorin.solver.ChorinSolver.steady`)
 STEADY_METHODS = ("march", "newton")
 
+def refuses(scene) -> str | None:
+    """Why the Chorin fluid cannot run `scene` (None: it can): the steady Newton solve factorizes
+    the whole grid's system in one process."""
+    solver = scene.solvers["fluid"]
+    if solver.settings.get("steady") == "newton" and solver.ranks > 1:
+        return f"steady = 'newton' solves on one rank, got ranks = {solver.ranks}: use steady = 'march' on several ranks"
+    return None
+
+
 PARTICIPANT = ParticipantSpec(
     kind="chorin", module="fluid_chorin", role="fluid", needs=("flow",), accepts=("inlet_pressure",),
-    memory=(120 * 2**20, 2000),
+    memory=(120 * 2**20, 2000), refuses=refuses,
     description="incompressible flow on the structured grid by Chorin's projection on a staggered grid, in memory, "
                 "the solid immersed by volume penalization towards its velocity cell by cell",
     settings=PENALIZATION + Settings(

@@ -114,8 +114,8 @@ def test_the_scene_selects_chorin_and_checks_its_keys(tmp_path):
                              r"scene.toml: \[solvers.fluid\] ranks: 6 ranks need at least 2 cells each along z \(slab_axis "
                              r"'z'\), the grid has 11 \(\[geometry.fluid\] shape\)$"),
                             ('penalization = "wall"', 'steady = "newton"\nranks = 2',
-                             r"\[solvers.fluid\] steady = 'newton' solves on one rank, got ranks = 2: use steady = "
-                             r"'march'")):
+                             r"\[solvers.fluid\] participant = 'chorin': steady = 'newton' solves on one rank, got "
+                             r"ranks = 2: use steady = 'march'")):
         bad = copy_case(CASES / "small_fracture", tmp_path / f"bad_{new.split()[0]}", {**CHORIN, old: new})
         with pytest.raises(SceneError, match=match):
             load(bad)

@@ -90,9 +90,6 @@ def _check_slabs(scene) -> None:
             slab_bounds(scene.fluid.shape, solver.ranks, solver.settings["slab_axis"])
         except ValueError as exc:
             raise SceneError(f"{scene.path}: [solvers.fluid] ranks: {exc} ([geometry.fluid] shape)") from None
-    if solver.settings.get("steady") == "newton" and solver.ranks > 1:
-        raise SceneError(f"{scene.path}: [solvers.fluid] steady = 'newton' solves on one rank, got ranks = "
-                         f"{solver.ranks}: use steady = 'march' on several ranks")
 
 
 def _check_rate_control(scene) -> None:
