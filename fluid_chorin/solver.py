@@ -250,7 +250,6 @@ class ChorinSolver:
                            *(abs(f["value"][c]) for f in self.spec.faces.values() if f["kind"] == "velocity"))
         speed = self.slabs.max(speed)
         active = np.asarray(g.active)
-        inv_h2 = float(np.sum(1.0 / g.h[active] ** 2))
         bounds = [1.0 / self.open_rate()]
         u2 = float(np.sum(speed[active] ** 2))
         if u2 > 0 and explicit:

@@ -1,6 +1,6 @@
 """The fluid grid seen from the fracture's mean plane: its columns across the fracture (along the
-grid's thinner extent of y and z, as :class:`coupler.fsi.fracture.FractureFigures` takes it; a
-2D grid's single cell is in the plane), the local
+grid's thinner extent of y and z, :func:`across_axis`; a 2D grid's single cell is in the plane),
+the local
 aperture of each column and the plane grid the Reynolds equation is solved on.
 
 The aperture of a column is its open length, the integral of (1 - solid fraction) across the

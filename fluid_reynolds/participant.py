@@ -80,6 +80,10 @@ class ReynoldsParticipant(Participant):
         if not flow.percolating:
             log.warning("window %d iteration %d: no open path in the plane from the inlet xmin to the outlet xmax: "
                         "no flow", window, iteration)
+        if flow.dropped:
+            log.warning("window %d iteration %d: %.3g m^3/s of the inlet velocity's flow enters open cells that "
+                        "reach no outlet and is dropped (%.3g m^3/s taken)", window, iteration, flow.dropped,
+                        flow.flow_rate)
         self.report_solve("Reynolds (SuperLU)", flow.residual <= TOLERANCE, 1, flow.residual, TOLERANCE,
                           f"{int(flow.solved.sum())} of {flow.solved.size} plane cells open and connected")
         columns = spec.columns

@@ -28,7 +28,9 @@ PLANE_FACES = ("xmin", "xmax", "ymin", "ymax")
 class ReynoldsFlow:
     """The solution: ``pressure`` (ny, nx) [Pa] per cell; ``flux_x`` (ny, nx + 1) [m^3/s]
     through each face normal to x (positive along +x), ``flux_y`` (ny + 1, nx) along +y;
-    ``solved`` the cells in the system; ``residual`` ||A p - b|| / ||b|| of the solve."""
+    ``solved`` the cells in the system; ``residual`` ||A p - b|| / ||b|| of the solve;
+    ``dropped`` [m^3/s] the given inflow into inlet cells that reach no fixed pressure (taken by
+    nothing: not in the solve)."""
 
     pressure: np.ndarray
     flux_x: np.ndarray
@@ -36,6 +38,7 @@ class ReynoldsFlow:
     solved: np.ndarray
     percolating: bool
     residual: float
+    dropped: float = 0.0
 
     @property
     def flow_rate(self) -> float:
@@ -116,9 +119,11 @@ def solve(aperture: np.ndarray, spacing, viscosity: float, pressures: dict[str, 
         on = i >= 0
         np.add.at(diagonal, i[on], t[on])
         np.add.at(rhs, i[on], t[on] * float(p))
-    fed_inlet = np.zeros(ny)
+    fed_inlet, dropped = np.zeros(ny), 0.0
     if inflow is not None:  # into the solved cells only: an open pocket without an outlet takes nothing
-        fed_inlet = np.where(solved[:, 0], np.asarray(inflow, float).reshape(ny), 0.0)
+        given = np.asarray(inflow, float).reshape(ny)
+        fed_inlet = np.where(solved[:, 0], given, 0.0)
+        dropped = float(given.sum() - fed_inlet.sum())
         np.add.at(rhs, index[:, 0][solved[:, 0]], fed_inlet[solved[:, 0]])
     pressure = np.zeros(e.shape)
     residual = 0.0
@@ -148,4 +153,4 @@ def solve(aperture: np.ndarray, spacing, viscosity: float, pressures: dict[str, 
         flux[where] = sign * np.where(solved[c], half[face][c] * (float(value) - p[c]), 0.0)
     if inflow is not None:
         flux_x[:, 0] = fed_inlet
-    return ReynoldsFlow(pressure, flux_x, flux_y, solved, percolates(e), residual)
+    return ReynoldsFlow(pressure, flux_x, flux_y, solved, percolates(e), residual, dropped)

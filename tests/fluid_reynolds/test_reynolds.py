@@ -95,3 +95,18 @@ def test_a_fixed_inflow_gives_the_cubic_law_pressure_drop():
     # the pressure at the inlet face: the first cell's plus the half cell's drop
     inlet = flow.pressure[0, 0] + 12 * MU * (L / nx / 2) * u / e**2
     assert inlet == pytest.approx(12 * MU * L * u / e**2, rel=1e-12)
+
+
+def test_an_inflow_into_a_pocket_without_outlet_is_counted_as_dropped():
+    """An inlet cell that is closed (row 2) or sealed from the outlet (row 3, behind row 2's wall
+    and a closed cell) takes no flow (not in the solve); what it was given is ``dropped``, and the
+    rest still passes (the participant warns with it; before, it went unsaid)."""
+    e, u, ny, nx = 1.0e-4, 0.01, 4, 9
+    aperture = np.full((ny, nx), e)
+    aperture[2, :4] = 0.0  # a wall along x seals rows 3 from the outlet behind a closed column
+    aperture[3, 4] = 0.0
+    given = np.full(ny, u * e * W / ny)
+    flow = solve(aperture, (L / nx, W / ny), MU, {"xmax": 0.0}, inflow=given)
+    assert not flow.solved[2:, 0].any() and flow.dropped == pytest.approx(given[2:].sum(), rel=1e-12)
+    assert flow.flow_rate == pytest.approx(given[:2].sum(), rel=1e-12)
+    assert solve(np.full((ny, nx), e), (L / nx, W / ny), MU, {"xmax": 0.0}, inflow=given).dropped == 0.0
