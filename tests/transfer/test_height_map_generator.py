@@ -280,3 +280,27 @@ def test_a_pair_in_first_contact_loads_as_is(tmp_path):
     with pytest.raises(ValueError, match=r"^surfaces: the faces interpenetrate by 1e-09 m \(more than the tolerance "
                                          r"[0-9.e-]+ m, 1e-09 of the RMS height\)"):
         parameters("measured_fracture", {"surfaces": overlap, "height": 0.01})
+
+
+def test_the_notes_say_the_upper_lattices_remainder_and_mesh_nothing(tmp_path, monkeypatch):
+    """coarsen 4 of 31 cells: 8 lattice cells (the last 3 map cells wide: 7 x 4 + 3), ratio 3 of those
+    8: upper cells of 3, 3 and 2 lower cells (before: the upper remainder went unsaid, and the notes
+    built both blocks' lattices to say it)."""
+    from transfer.generators import measured_fracture
+
+    monkeypatch.setattr(measured_fracture, "mortar_lattices", None)  # notes must not mesh
+    path, _, _ = scan(tmp_path)
+    (line,) = notes("measured_fracture", {"surfaces": path, "height": 0.01, "coarsen": 4, "ratio": 3})
+    assert line.endswith("upper lattice 3 x 3, lower cells per upper cell 3, the last 2 (x), 3, the last 2 (y)")
+    even = write_npz(tmp_path / "even.npz", *(h[:25, :25] for h in scan(tmp_path)[1:]), (SCAN_DX, SCAN_DX))
+    assert notes("measured_fracture", {"surfaces": str(even), "height": 0.01, "coarsen": 4, "ratio": 3}) == []
+
+
+def test_a_closed_map_against_a_flat_face_is_not_closed_again(tmp_path):
+    """A scan against a plate: the flat face repeats its edges trivially; the closed upper map is
+    still refused with periodic (before: accepted, its first row and column repeated)."""
+    _, lower, upper = scan(tmp_path, periodic=True)
+    closed = np.pad(upper, ((0, 1), (0, 1)), mode="wrap")
+    plate = write_npz(tmp_path / "plate.npz", np.full(closed.shape, lower.min() - 1e-3), closed, (SCAN_DX, SCAN_DX))
+    with pytest.raises(ValueError, match=r"^periodic: the map's last row and column repeat its first already"):
+        parameters("measured_fracture", {"surfaces": str(plate), "height": 0.01, "coarsen": 8, "periodic": True})

@@ -87,8 +87,8 @@ def closed_map(p: dict) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
     """:func:`read_faces`, closed by its first row and column when ``periodic``."""
     lower, upper, spacing, origin = read_faces(p)
     if p["periodic"]:
-        if all(np.array_equal(h[0], h[-1]) and np.array_equal(h[:, 0], h[:, -1]) and np.ptp(h) > 0
-               for h in (lower, upper)):
+        if (all(np.array_equal(h[0], h[-1]) and np.array_equal(h[:, 0], h[:, -1]) for h in (lower, upper))
+                and any(np.ptp(h) > 0 for h in (lower, upper))):  # (a flat face, a plate, repeats trivially)
             raise ValueError("periodic: the map's last row and column repeat its first already (a closed map): "
                              "closing it again would repeat them; leave periodic false")
         lower, upper = (np.pad(h, ((0, 1), (0, 1)), mode="wrap") for h in (lower, upper))
@@ -138,41 +138,66 @@ def cells(p: dict) -> int:
 
 
 def _cells_note(nodes: np.ndarray) -> str:
-    """How many map cells the lattice cells of one axis span: "8" or "8, the last 7"."""
+    """How many cells of the finer lattice the cells of one axis span: "8" or "8, the last 7"."""
     steps = np.diff(nodes)
     return f"{steps[0]}" if np.all(steps == steps[0]) else f"{steps[0]}, the last {steps[-1]}"
 
 
-def _parts(p: dict) -> tuple[Lattices, dict]:
-    """The two blocks by index and the ``info`` of :func:`mesh`."""
+def _uneven(nodes: np.ndarray) -> bool:
+    """The cells of one axis are not all of one size (the last takes a remainder)."""
+    return len(np.unique(np.diff(nodes))) > 1
+
+
+def _sampled(p: dict) -> dict:
+    """The map of checked parameters `p` as the blocks sample it: the faces (the upper one raised
+    to ``min_aperture``), the lower face's lattice nodes ``i``, ``j`` (map node indices), the
+    upper face's (``ui``, ``uj``: lower lattice node indices), the lattices' extent and axes."""
     lower, upper, spacing, origin = closed_map(p)
-    up_map = raised(lower, upper, p["min_aperture"])
     i, j = _lattice(p, lower.shape)
     size = ((lower.shape[0] - 1) * spacing[0], (lower.shape[1] - 1) * spacing[1])
-    axes = (i * spacing[0], j * spacing[1])
-    low, up = lower[np.ix_(i, j)], up_map[np.ix_(i, j)]
-    lattices = mortar_lattices((len(i) - 1, len(j) - 1, p["layers"]), size, p["height"], (low, up), p["ratio"],
-                               origin, bottom=surface_mean(low, size, axes) - p["height"], axes=axes)
-    gap = up - low
-    lift = up_map - upper
-    info = {"map_nodes": f"{lower.shape[0] - p['periodic']} x {lower.shape[1] - p['periodic']}",
+    return {"lower": lower, "upper": upper, "raised": raised(lower, upper, p["min_aperture"]), "spacing": spacing,
+            "origin": origin, "i": i, "j": j, "ui": stations(len(i) - 1, p["ratio"]),
+            "uj": stations(len(j) - 1, p["ratio"]), "size": size, "axes": (i * spacing[0], j * spacing[1])}
+
+
+def _info(p: dict, m: dict) -> dict:
+    """The ``info`` of :func:`mesh` from the sampled map `m` (nothing meshed)."""
+    lower, i, j, size = m["lower"], m["i"], m["j"], m["size"]
+    gap = m["raised"][np.ix_(i, j)] - lower[np.ix_(i, j)]
+    lift = m["raised"] - m["upper"]
+    if p["periodic"]:  # the closing row and column repeat the first: count each map node once
+        lift = lift[:-1, :-1]
+    upper = (f"; upper lattice {len(m['ui']) - 1} x {len(m['uj']) - 1}, lower cells per upper cell "
+             f"{_cells_note(m['ui'])} (x), {_cells_note(m['uj'])} (y)" if p["ratio"] > 1 else "")
+    return {"map_nodes": f"{lower.shape[0] - p['periodic']} x {lower.shape[1] - p['periodic']}",
             **({"periodic": f"closed by its first row and column: {len(lower) - 1} x {len(lower[0]) - 1} cells, "
                             f"{size[0]:g} x {size[1]:g} m"} if p["periodic"] else {}),
-            "map_spacing": f"{spacing[0]:g} x {spacing[1]:g} m",
+            "map_spacing": f"{m['spacing'][0]:g} x {m['spacing'][1]:g} m",
             "lattice": f"{len(i) - 1} x {len(j) - 1}, map cells per lattice cell {_cells_note(i)} (x), "
-                       f"{_cells_note(j)} (y)",
-            "mean_aperture": surface_mean(gap, size, axes), "min_aperture": float(gap.min()),
+                       f"{_cells_note(j)} (y){upper}",
+            "mean_aperture": surface_mean(gap, size, m["axes"]), "min_aperture": float(gap.min()),
             "max_initial_aperture": float(gap.max()), "raised_nodes": int(np.sum(lift > 0)),
             "largest_lift": float(lift.max()), "cross_section": size[0] * size[1]}
-    return lattices, info
+
+
+def _parts(p: dict) -> tuple[Lattices, dict]:
+    """The two blocks by index and the ``info`` of :func:`mesh`."""
+    m = _sampled(p)
+    i, j, size, axes = m["i"], m["j"], m["size"], m["axes"]
+    low, up = m["lower"][np.ix_(i, j)], m["raised"][np.ix_(i, j)]
+    lattices = mortar_lattices((len(i) - 1, len(j) - 1, p["layers"]), size, p["height"], (low, up), p["ratio"],
+                               m["origin"], bottom=surface_mean(low, size, axes) - p["height"], axes=axes)
+    return lattices, _info(p, m)
 
 
 def notes(p: dict) -> list[str]:
-    """What was done to the map beyond sampling it: a remainder cell, the periodic closure, the
-    raised apertures (for the plan and the run's summary)."""
-    info = _parts(p)[1]
+    """What was done to the map beyond sampling it: a remainder cell (of the lower or the upper
+    lattice), the periodic closure, the raised apertures (for the plan and the run's summary).
+    Nothing is meshed."""
+    m = _sampled(p)
+    info = _info(p, m)
     out = []
-    if "the last" in info["lattice"] or p["periodic"]:
+    if p["periodic"] or any(_uneven(m[k]) for k in ("i", "j", "ui", "uj")):
         closed = f", periodic, {info['periodic']}" if p["periodic"] else ""
         out.append(f"measured_fracture: map of {info['map_nodes']} nodes{closed}; lattice {info['lattice']}")
     if info["raised_nodes"] and p["min_aperture"] > 0:
