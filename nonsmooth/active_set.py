@@ -48,9 +48,11 @@ from .problem import BoundConstrainedQP, NonsmoothSolveError, Solution
 
 log = logging.getLogger("varcouple.nonsmooth")
 
-#: a long solve logs its progress at least this often (seconds): the line is also the participant's
-#: progress, which keeps the coupler's [messaging] timeout from cutting it off (docs/protocol.md)
-PROGRESS_SECONDS = 10.0
+#: a long solve logs its progress when this many seconds have passed since its last line, checked
+#: after each iteration (so a line comes at least every 10 s while iterations take under 5 s): the
+#: line is also the participant's progress, which keeps the coupler's [messaging] timeout from
+#: cutting it off (docs/protocol.md)
+PROGRESS_SECONDS = 5.0
 
 
 def _fixed_system(A: sp.csr_matrix, b: np.ndarray, diag: np.ndarray, active: np.ndarray, value: np.ndarray):

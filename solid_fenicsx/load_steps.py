@@ -129,7 +129,7 @@ class StaticStep:
         self.progress = Progress(elasticity.mesh.comm.rank)
         if contact is not None:
             contact.monitor = self.progress
-        self.phases = self.counts = {}
+        self.phases, self.counts = {}, {}
         # fluid loads on a contact face: (load, +1 on the slave / -1 on the master)
         faces = {} if contact is None else {contact.slave_boundary: 1.0, contact.master_boundary: -1.0}
         self.fluid = [(ld, faces[ld.boundary]) for ld in loads if ld.kind == "fluid_pressure" and ld.boundary in faces]
