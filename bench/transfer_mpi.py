@@ -180,16 +180,15 @@ def cli(repeat: int, size: str, output: Path) -> dict:
 
     import meshio
 
-    ns, nt = (len(m.cells) for m in meshes(size))
-    print(f"varcouple transfer: P1 -> P1, {ns:,} x {nt:,} tets, 1 and 2 ranks, repeat {repeat}; load average "
-          f"{os.getloadavg()}", flush=True)
-    result = {"benchmark": "transfer_cli_mpi", "size": size, "source_tets": ns, "target_tets": nt,
-              "load_average_at_start": list(os.getloadavg()), "goal_speedup": GOAL_CLI_SPEEDUP,
-              "goal_memory_ratio": GOAL_CLI_MEMORY, "runs": {}, "base": {}}
     with tempfile.TemporaryDirectory() as tmp:
         base, files = Path(tmp) / "base", Path(tmp) / "files"
         _write_inputs("quick", base)
-        _write_inputs(size, files)
+        ns, nt = _write_inputs(size, files)
+        print(f"varcouple transfer: P1 -> P1, {ns:,} x {nt:,} tets, 1 and 2 ranks, repeat {repeat}; load average "
+              f"{os.getloadavg()}", flush=True)
+        result = {"benchmark": "transfer_cli_mpi", "size": size, "source_tets": ns, "target_tets": nt,
+                  "load_average_at_start": list(os.getloadavg()), "goal_speedup": GOAL_CLI_SPEEDUP,
+                  "goal_memory_ratio": GOAL_CLI_MEMORY, "runs": {}, "base": {}}
         for label, ranks, ext in CLI_RUNS:
             # the same command on the 750 x 1,296-tet pair: what the process costs whatever the mesh
             result["base"][label] = _command(base / f"src.{ext}", base / f"dst.{ext}", base / "out.vtu", ranks, base)

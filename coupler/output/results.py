@@ -123,8 +123,9 @@ def write_pieces(mesh: meshio.Mesh, path: Path, owner: np.ndarray) -> None:
                             point_data={k: np.asarray(v)[used] for k, v in mesh.point_data.items()},
                             cell_data={k: [np.asarray(v[0])[owner == i]] for k, v in mesh.cell_data.items()})
         names.append(f"{path.stem}_p{i}.vtu")
-        meshio.write(path.parent / names[-1], piece)
-    path.write_text(_pvtu(_layout(piece), names))
+        with atomic_path(path.parent / names[-1]) as tmp:
+            meshio.write(tmp, piece)
+    write_text(path, _pvtu(_layout(piece), names))
 
 
 def reduce_figures(figures: dict, how: dict[str, str], comm=None) -> dict:
