@@ -17,11 +17,12 @@ Values are numbered as the mesh's cells (blockMesh: x fastest, then y, then z).
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import numpy as np
+
+from transfer.atomic import atomic_path
 
 _NCOMP = {"scalar": 1, "vector": 3}
 _CLASS = {"scalar": "volScalarField", "vector": "volVectorField"}
@@ -156,9 +157,8 @@ def write_field(path, values, boundary: str, *, obj: str | None = None, dimensio
     out += _format_internal(values, binary)
     bnd = boundary if isinstance(boundary, bytes) else boundary.encode()
     out += b"\n\nboundaryField\n{\n" + bnd + b"\n}\n"
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(out)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(out)
 
 
 def replace_internal_field(path, values) -> None:
@@ -173,9 +173,8 @@ def replace_internal_field(path, values) -> None:
         raise FieldFormatError(f"{path}: no internalField")
     _, end = _parse_internal(data, m.end(), binary, path, len(values))
     out = data[:m.end()] + b"  " + _format_internal(values, binary) + data[end:]
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(out)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(out)
 
 
 def read_label_list(path) -> np.ndarray:

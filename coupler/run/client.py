@@ -151,11 +151,11 @@ class ParticipantClient:
         """Say that `verb` has waited `waited` seconds for an answer, with the participant's latest
         `progress` (when, message) on it, or why it is silent when its process is stopped."""
         where = ", ".join(f"{k} {header[k]}" for k in ("window", "iteration") if header and k in header)
-        stopped = self.process_stopped() if self.process_stopped else None
         if progress is not None:
             said = (f"; working, {time.monotonic() - progress[0]:.0f} s ago: {progress[1]} (the wait ends "
                     f"{timeout:g} s after its last progress: [messaging] timeout)")
-        else:
+        else:  # silent: why (a scan of /proc, only then)
+            stopped = self.process_stopped() if self.process_stopped else None
             said = (f"; it is stopped: {stopped}" if stopped else "; no progress reported") + \
                 f" (the wait ends at {timeout:g} s without progress: [messaging] timeout)"
         self.waiting(f"waiting for participant {self.name!r}: no answer to {verb!r}" + (f" ({where})" if where else "")
