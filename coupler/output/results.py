@@ -180,6 +180,15 @@ def _numbers(figures: dict, prefix: str = ""):
             yield key, v
 
 
+def read_summary(out: Path, name: str = SUMMARY) -> dict:
+    """The summary (or another JSON file `name`) in `out` as last written; {} when there is none
+    or it cannot be read (every write replaces it whole: a file is never half written)."""
+    try:
+        return json.loads((Path(out) / name).read_text())
+    except (OSError, ValueError):
+        return {}
+
+
 def write_summary(out: Path, summary: dict, name: str = SUMMARY, comm=None) -> None:
     """`summary` as JSON in ``out/name``, written atomically (by rank 0 of `comm` alone)."""
     if comm is not None and comm.Get_rank() != 0:

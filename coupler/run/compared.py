@@ -13,7 +13,6 @@ before the next run starts."""
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +21,7 @@ import numpy as np
 
 from coupler.errors import SceneError
 from coupler.fsi.monitors import MONITORS
+from coupler.output.results import read_summary
 from coupler.run.projection import project
 from transfer import TransferError
 from transfer.meshfile import MeshFile
@@ -226,7 +226,4 @@ def _value(step: dict, path: str):
 
 
 def _steps(directory: Path) -> list[dict]:
-    try:
-        return json.loads((directory / "summary.json").read_text()).get("steps", [])
-    except (OSError, ValueError):
-        return []
+    return read_summary(directory).get("steps", [])

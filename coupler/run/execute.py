@@ -30,9 +30,9 @@ def coupler_ranks(scene) -> int:
     return job if job > 1 else key
 
 
-def execute(scene, origin: str, log=print) -> dict:
+def execute(scene, origin: str, log=print, run_id: str | None = None) -> dict:
     """Run `scene` into ``scene.output_dir`` (`origin` names where that directory comes from),
-    locked for the run; its summary. A failure once the run started is a :class:`RunFailed`;
+    locked for the run, as run `run_id` (default a new one: its summary's ``run_id``); its summary. A failure once the run started is a :class:`RunFailed`;
     not converging stays :class:`NotConverged` and a scene key found wrong while running a
     :class:`SceneError`. In an MPI job of P > 1 ranks every rank runs the coupler
     (:mod:`coupler.run.ranks`); rank 0 locks the directory and logs."""
@@ -43,13 +43,13 @@ def execute(scene, origin: str, log=print) -> dict:
         from coupler.run.ranks import RanksRun, agree
 
         comm, run_class = MPI.COMM_WORLD, RanksRun
-        run_id = comm.bcast(new_run_id())
+        run_id = comm.bcast(run_id or new_run_id())
         if comm.rank:
             log = lambda line: None  # noqa: E731
         out = agree(comm, prepare, scene.output_dir, origin) if comm.rank == 0 else agree(comm, lambda: None)
         lock = OutputLock(scene.output_dir, run_id) if comm.rank == 0 else nullcontext()
     else:
-        run_id = new_run_id()
+        run_id = run_id or new_run_id()
         lock = OutputLock(scene.output_dir, run_id)
         out = prepare(scene.output_dir, origin)
     with ExitStack() as stack:

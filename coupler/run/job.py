@@ -12,7 +12,6 @@ processes they started that outlive mpirun are stopped.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
@@ -23,7 +22,7 @@ import time
 from pathlib import Path
 
 from coupler.errors import EXIT_CODES, CouplerError, RunFailed, Terminated
-from coupler.output.results import SUMMARY, write_summary
+from coupler.output.results import SUMMARY, read_summary, write_summary
 from coupler.protocol.exits import describe_exit
 from coupler.protocol.mpi import mpi_environment
 from coupler.run.launch import descendants, proc_stat
@@ -164,7 +163,7 @@ def relaunch(argv: list[str], scene, ranks: int) -> int:
         raise
     left = job.stop_left()
     out = Path(scene.output_dir)
-    summary = _read(out / SUMMARY)
+    summary = read_summary(out)
     if code in EXIT_CODES.values() and summary.get("status") != "running":
         job.said()
         return code  # the ranks ended the run and said how
@@ -184,15 +183,8 @@ def relaunch(argv: list[str], scene, ranks: int) -> int:
     raise RunFailed(message)
 
 
-def _read(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-
-
 def _release(lock: Path, pids) -> None:
     """Remove the output directory's lock if a rank of this job (now gone) held it."""
-    holder = _read(lock)
+    holder = read_summary(lock.parent, lock.name)
     if holder.get("pid") in set(pids):
         lock.unlink(missing_ok=True)

@@ -27,7 +27,7 @@ from coupler import scene as scenes
 from coupler.errors import CouplerError, SceneError, one_line, run_status
 from coupler.output.plots import save_figure
 from coupler.output.report import write_study_page
-from coupler.output.results import write_summary
+from coupler.output.results import read_summary, write_summary
 from coupler.plan.plan import make_plan
 from coupler.protocol.transport import new_run_id
 from coupler.run.compared import Compared
@@ -244,17 +244,17 @@ def _one_run(record: dict, scene, log) -> dict:
     """Run `scene` into its directory, filling `record` (in the study's list from the start) with
     its status, seconds, cost and check however the run ends; the run's summary. A failure of the
     run is recorded and the study goes on; a signal or anything else is recorded and raised."""
-    start, started = time.perf_counter(), time.time()
+    start, run_id = time.perf_counter(), new_run_id()
     summary = {}
     try:
-        summary = execute(scene, f"study run {record['name']}", log=log)
+        summary = execute(scene, f"study run {record['name']}", log=log, run_id=run_id)
         record["status"] = summary.get("status", "completed")
     except (CouplerError, TransferError, OSError) as exc:
         record.update(status=run_status(exc), message=one_line(exc))
         log(f"{record['status']}: {record['message']}")
-        summary = _own_summary(Path(scene.output_dir), started)
+        summary = _own_summary(Path(scene.output_dir), run_id)
     except BaseException as exc:  # a signal (or a bug): recorded, then the study stops
-        summary = _own_summary(Path(scene.output_dir), started)
+        summary = _own_summary(Path(scene.output_dir), run_id)
         own = summary.get("status", "running")
         record.update(status=run_status(exc) if own == "running" else own,
                       message=_why(exc) + ("" if own == "running" else
@@ -268,13 +268,10 @@ def _one_run(record: dict, scene, log) -> dict:
     return summary
 
 
-def _own_summary(directory: Path, since: float) -> dict:
-    """The summary.json this run wrote in `directory` (none from before `since`, its start), or {}."""
-    file = directory / "summary.json"
-    try:
-        return json.loads(file.read_text()) if file.stat().st_mtime >= since - 1.0 else {}
-    except (OSError, ValueError):
-        return {}
+def _own_summary(directory: Path, run_id: str) -> dict:
+    """The summary run `run_id` wrote in `directory` (not one an earlier run left there), or {}."""
+    summary = read_summary(directory)
+    return summary if summary.get("run_id") == run_id else {}
 
 
 def _why(exc: BaseException) -> str:

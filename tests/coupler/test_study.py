@@ -351,3 +351,16 @@ def test_a_signal_during_a_run_records_it_and_the_study(tmp_path, sig, code, sta
     assert json.loads((out / "run_01" / "summary.json").read_text())["status"] == status
     assert study["status"] == status and study["planned"]["runs"] == 2
     assert "study: 2 runs of" in stdout and re.search(r"about [0-9.]+ days", stdout)  # the count and the estimate
+
+
+def test_a_runs_record_takes_its_own_summary_not_one_left_there(tmp_path):
+    """The summary a study run is recorded from is the one with its run id: another run's summary
+    written in the same directory a moment before (a rerun into a kept directory) is not taken
+    (before: told apart by the file's time, within a second)."""
+    from coupler.output.results import write_summary
+    from coupler.run.study import _own_summary
+
+    write_summary(tmp_path, {"run_id": "earlier", "status": "completed"})
+    assert _own_summary(tmp_path, "this") == {}
+    write_summary(tmp_path, {"run_id": "this", "status": "failed"})
+    assert _own_summary(tmp_path, "this")["status"] == "failed"
