@@ -29,6 +29,7 @@ meshes reach the user before a run is launched.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import resource
@@ -86,15 +87,22 @@ def available_memory(limit: float | None = None) -> tuple[int, str]:
 
 def _mesh_cells(path: Path, where: str) -> int:
     """The cells of a mesh file: an XDMF file in dolfinx's layout from its XML (the solid reads
-    it in parallel: nothing here reads its HDF5 data), any other file read with meshio."""
+    it in parallel: nothing here reads its HDF5 data), any other file read with meshio; each
+    file read once while it is unchanged (a study estimates every run before the first)."""
+    try:
+        path = Path(path)
+        return _cells_of(path.resolve(), path.stat().st_mtime_ns if path.exists() else None)
+    except Exception as exc:  # noqa: BLE001 - any reader error is a bad input file
+        raise SceneError(f"{where}: {exc}") from None
+
+
+@functools.lru_cache(maxsize=64)
+def _cells_of(path: Path, mtime_ns: int | None) -> int:  # (a reader's error is not cached)
     from transfer.meshfile import MeshFile
     from transfer.xdmf import layout
 
-    try:
-        found = layout(Path(path)) if Path(path).suffix.lower() == ".xdmf" else None
-        return found.num_cells if found is not None else MeshFile.read(path).mesh.num_cells
-    except Exception as exc:  # noqa: BLE001 - any reader error is a bad input file
-        raise SceneError(f"{where}: {exc}") from None
+    found = layout(path) if path.suffix.lower() == ".xdmf" else None
+    return found.num_cells if found is not None else MeshFile.read(path).mesh.num_cells
 
 
 def _solid_cells(scene) -> tuple[int, str]:
@@ -165,7 +173,7 @@ def check_memory(scene, estimates: list[Estimate], ranks: int | None = None) -> 
     line = f"about {_size(total)} ({parts}); {_size(available)} available ({source})"
     if total > available and scene.resources["check_memory"]:
         ranks = ranks or scene.coupling["ranks"]
-        if ranks > 1 and sum(e.bytes for e in estimate(scene, 1)) <= available:
+        if ranks > 1 and total - COSTS["coupler_solid"][0] * (ranks - 1) <= available:  # it fits on one rank
             raise SceneError(f"{scene.path}: [coupling] ranks = {ranks}: about {_size(COSTS['coupler_solid'][0])} "
                              f"per coupler rank, the run would need {line}; give fewer ranks, or set "
                              f"[resources] check_memory = false to run it anyway")
