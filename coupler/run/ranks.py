@@ -47,6 +47,7 @@ from coupler.fsi.held import Held, assigned
 from coupler.fsi.ranks import MONITORS_RANKS, OPERATORS_RANKS, GridSlab, RanksContext
 from coupler.output.results import REDUCTIONS, Series, reduce_figures, write_summary
 from coupler.protocol.participant import idle_barrier
+from coupler.protocol.roles import check_geometry, check_outputs
 from coupler.protocol.wire import Field
 from coupler.run.client import CouplerSession, step_reports
 from coupler.run.launch import Launcher
@@ -277,6 +278,8 @@ class RanksRun(Run):
         geometry = [{k: np.asarray(f.data) for k, f in part.fields.items()} for part in replies]
 
         def held() -> Held:
+            for part in replies:  # each part's geometry against the role's contract (rows: its ids, below)
+                check_geometry(name, header, part.fields)
             for part, g in zip(replies, geometry):
                 if location not in g and self.clients[name].parts == 1:
                     g[location] = np.arange(StructuredGrid(header["grid"]["origin"], header["grid"]["spacing"],
@@ -417,6 +420,8 @@ class _Caller:
 def _joined(name: str, replies, held: Held, shapes: dict) -> dict[str, np.ndarray]:
     """The output fields at ``held.out_ids`` from this rank's parts (each checked: rank 0's fields,
     one row per id)."""
+    for part, ids in zip(replies, held.ids):  # each part's outputs against the role's contract, rows its ids
+        check_outputs(name, {k: np.asarray(f.data) for k, f in part.fields.items()}, len(ids))
     out = {}
     for k, (shape, dtype) in shapes.items():
         pieces = []

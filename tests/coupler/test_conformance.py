@@ -9,12 +9,15 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from coupler.plan.plan import make_plan
 from coupler.protocol import roles
+from coupler.protocol.mpi import mpi_environment
 from coupler.protocol.roles import DISPLACEMENT, PRESSURE, VELOCITY, ContractError, conformance
 from coupler.protocol.wire import Field
 from coupler.scene import load
@@ -194,6 +197,46 @@ def test_the_runner_refuses_a_reply_that_breaks_the_contract(tmp_path, monkeypat
                       r"expected \(\d+, 3\)")
     assert line.search(capsys.readouterr().err)
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == "failed" and line.search(summary["error"])
+
+
+BREAKING_SOLID = """
+import sys
+
+from coupler.cli import main
+from coupler.protocol.roles import DISPLACEMENT
+from coupler.protocol.wire import Field
+from coupler.standins import RigidSolid
+
+original = RigidSolid.advance
+
+
+def flat(self, *args):
+    out = original(self, *args)
+    return {**out, DISPLACEMENT: Field(DISPLACEMENT, out[DISPLACEMENT].data[:, :2])}
+
+
+RigidSolid.advance = flat
+sys.exit(main(["run", sys.argv[1], "-o", sys.argv[2]]))
+"""
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="mpirun not installed")
+def test_two_coupler_ranks_refuse_a_reply_that_breaks_the_contract(tmp_path):
+    """The same broken solid with the coupler on 2 ranks (each rank checks the parts it holds,
+    their rows their ids): exit 4 on the job, the contract's line (before: the ranks' runner did
+    not check, and the run went on with a displacement of 2 columns)."""
+    case = copy_case(CASES / "parallel_plates", tmp_path, {'participant = "openfoam"': 'participant = "chorin"',
+                                                           "max_iterations = 5000\n": ""})
+    (tmp_path / "broken.py").write_text(BREAKING_SOLID)
+    out = tmp_path / "out"
+    run = subprocess.run(["mpirun", "-q", "-n", "2", "--oversubscribe", sys.executable, str(tmp_path / "broken.py"),
+                          str(case), str(out)], capture_output=True, text=True, timeout=300,
+                         env=mpi_environment())  # (not this process's C environment: its MPI singleton's)
+    line = re.compile(r"participant 'solid' \(role solid\): advance output 'displacement': wrong shape \(\d+, 2\), "
+                      r"expected \(\d+, 3\)")
+    assert run.returncode == 4 and line.search(run.stderr), run.stderr
+    summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed" and line.search(summary["error"])
 
 
