@@ -10,7 +10,7 @@ LINEAR_SOLVERS = ("cg", "lu")
 PARTICIPANT = ParticipantSpec(
     kind="solid_fenicsx", module="solid_fenicsx", role="solid",
     memory=(120 * 2**20, 1000),  # P1 elasticity with CG + GAMG: 25k tets 130 MB, 197k tets 298 MB
-    contact_step=(10.0, 1.87),  # bench/first_step.py: 9.6k to 38k tets, measured / rule 0.77 .. 1.33
+    contact_step=(5.7, 2.05),  # bench/first_step.py: 9.6k to 38k tets, measured / rule 0.70 .. 1.75
     description="linear elasticity on tetrahedra with dolfinx 0.5.2 (static, elastodynamics, frictionless mortar "
                 "contact of two bodies or with a rigid plane, platen loads under stress control)",
     settings=Settings(
