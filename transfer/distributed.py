@@ -32,6 +32,7 @@ from .errors import NoOverlapError, OverlapWarning, TransferError
 from .grid import StructuredGrid
 from .heap import give_back
 from .mesh import Mesh
+from .partition import bisection
 from .assembly import (METHODS, assemble_rows, boxes_overlap, integration_rule, no_overlap_message,
                        overlap_warnings, pairing)
 from .spaces import FAMILIES, FunctionSpace
@@ -383,7 +384,6 @@ def scatter(mesh: Mesh | None, family: str, values, comm, root: int = 0) -> tupl
     :func:`transfer.partition.bisection`, as every rank would cut a mesh it held whole, and
     sends each rank its cells, their points and global dof ids, one rank at a time (the parts
     are not all held at once). Collective on `comm`."""
-    from .partition import bisection
 
     if comm.rank == root:
         owner = bisection(mesh, comm.size)

@@ -20,7 +20,9 @@ import numpy as np
 
 from .errors import MeshFileError, TransferError
 from .mesh import CELL_TYPES, Mesh
+from .meshfile import MeshFile, MeshFileField
 from .spaces import FAMILIES
+from .xdmf import MESH, layout
 
 
 def read_in_parts(path) -> bool:
@@ -30,8 +32,6 @@ def read_in_parts(path) -> bool:
 
 def _datasets(path) -> tuple[Path, str, str]:
     """(HDF5 file, topology dataset, geometry dataset) of the grid ``mesh`` of the XDMF `path`."""
-    from .xdmf import MESH, layout
-
     path = Path(path)
     try:
         found = layout(path)
@@ -161,8 +161,6 @@ class Pieces:
         import h5py
         import meshio
 
-        from .meshfile import MeshFile
-
         h5, topology, geometry = _agreed(comm, lambda: _datasets(path))
 
         def read():
@@ -188,8 +186,6 @@ class Pieces:
     @classmethod
     def read(cls, path, comm) -> "Pieces":
         """This rank's pieces of `path` (collective: a bad piece on any rank fails every rank)."""
-        from .meshfile import MeshFile
-
         files = _agreed(comm, lambda: sources(path))
         held = _agreed(comm, lambda: [MeshFile.read(files[i]) for i in mine(len(files), comm.rank, comm.size)])
         found = sorted({t for ts in comm.allgather([f.mesh.cell_type for f in held]) for t in ts})
@@ -222,7 +218,6 @@ class Pieces:
     def field(self, name: str):
         """The field `name` of every held piece, joined: a :class:`transfer.meshfile.MeshFileField`
         (its values at the joined points or cells; the same kind on every rank)."""
-        from .meshfile import MeshFileField
 
         fields = _agreed(self.comm, lambda: [f.field(name) for f in self.held])
         kinds = {k for ks in self.comm.allgather([f.kind for f in fields]) for k in ks}
@@ -239,8 +234,6 @@ class Pieces:
         on `root` (points in the order of their global ids, cells in piece order); None elsewhere.
         Collective."""
         import meshio
-
-        from .meshfile import MeshFile
 
         comm, held = self.comm, self.held
         names = comm.allgather([(set(f.raw.point_data), set(f.raw.cell_data)) for f in held])

@@ -22,6 +22,7 @@ from typing import Mapping
 import numpy as np
 
 from coupler.protocol.errors import ParticipantFailure
+from coupler.protocol.wire import Field
 from transfer.errors import MeshError
 from transfer.grid import StructuredGrid
 
@@ -215,8 +216,6 @@ def conformance(name: str, participant, config: Mapping, inputs=None) -> dict:
     check its announce, geometry and one ``advance`` against the role's contract; return the
     outputs. The advance gets zeros of the right shape for each field named in `inputs` (default:
     every input it announces). Raises :class:`ContractError` naming what is wrong."""
-    from coupler.protocol.wire import Field
-
     announced = participant.announce()
     check_announce(name, announced)
     participant.configure(dict(config))

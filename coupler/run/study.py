@@ -42,9 +42,8 @@ PLOT = "study.png"
 #: the runs a study starts without --max-runs
 MAX_RUNS = 100
 #: the rule of thumb a study's time is estimated with before it runs: seconds per run (starting its
-#: participants) and per cell and time step (the cells of every participant, [time] steps). Measured,
-#: machine shared: standin_flow 2.7 s a run (the rule: 8 s), small_fracture 18 s (18 s), hm_fracture
-#: 22 to 129 s (24 to 64 s): within a factor of a few, enough to tell minutes from days.
+#: participants) and per cell and time step (the cells of every participant, [time] steps): within a
+#: factor of a few of single runs of the shipped cases (not a benchmark), enough to tell minutes from days.
 RUN_SECONDS = (3.0, 1.0e-3)
 
 
