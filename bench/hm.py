@@ -63,8 +63,8 @@ def run_scene(replace: dict) -> dict:
             "fluid_cells": summary.get("sizes", {}).get("fluid", {}).get("cells"),
             "stress": [s["figures"]["solid"]["stress"] for s in steps],
             "iterations": [s["iterations"] for s in steps],
-            "fluid_steps": [sum(r["iterations"] for r in s["solves"].get("fluid", []) if "pseudo" in r["solver"])
-                            for s in steps],
+            "fluid_steps": [sum(r["iterations"] for r in s["solves"].get("fluid", [])  # pseudo-time or Newton steps
+                                if "pseudo" in r["solver"] or "Newton" in r["solver"]) for s in steps],
             "fracture": [{k: v for k, v in s["fracture"].items() if k != "warnings"} for s in steps],
             "warnings": summary.get("warnings", [])}
 

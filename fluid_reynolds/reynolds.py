@@ -68,7 +68,11 @@ def transmissibilities(aperture: np.ndarray, spacing, viscosity: float):
 def percolates(aperture: np.ndarray) -> bool:
     """Whether open cells (e > 0) connect the inlet column (x = 0) with the outlet column
     through shared faces."""
-    label, _ = ndimage.label(np.asarray(aperture) > 0)
+    return _connects(ndimage.label(np.asarray(aperture) > 0)[0])
+
+
+def _connects(label: np.ndarray) -> bool:
+    """Whether a component of `label` (0: none) holds cells of both the first and the last column."""
     return bool(set(np.unique(label[:, 0])) & set(np.unique(label[:, -1])) - {0})
 
 
@@ -153,4 +157,4 @@ def solve(aperture: np.ndarray, spacing, viscosity: float, pressures: dict[str, 
         flux[where] = sign * np.where(solved[c], half[face][c] * (float(value) - p[c]), 0.0)
     if inflow is not None:
         flux_x[:, 0] = fed_inlet
-    return ReynoldsFlow(pressure, flux_x, flux_y, solved, percolates(e), residual, dropped)
+    return ReynoldsFlow(pressure, flux_x, flux_y, solved, _connects(label), residual, dropped)
