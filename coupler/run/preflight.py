@@ -86,23 +86,26 @@ def available_memory(limit: float | None = None) -> tuple[int, str]:
 
 
 def _mesh_cells(path: Path, where: str) -> int:
-    """The cells of a mesh file: an XDMF file in dolfinx's layout from its XML (the solid reads
-    it in parallel: nothing here reads its HDF5 data), any other file read with meshio; each
-    file read once while it is unchanged (a study estimates every run before the first)."""
+    """The cells of a mesh file: an XDMF file in dolfinx's layout from its XML and its HDF5
+    file's header (the solid reads it in parallel: nothing here reads its data), any other file
+    read with meshio once while it is unchanged (a study estimates every run before the first)."""
+    from transfer.xdmf import layout
+
     try:
-        path = Path(path)
-        return _cells_of(path.resolve(), path.stat().st_mtime_ns if path.exists() else None)
+        path = Path(path).resolve()
+        found = layout(path) if path.suffix.lower() == ".xdmf" else None
+        if found is not None:
+            return found.num_cells
+        return _meshio_cells(path, path.stat().st_mtime_ns if path.exists() else None)
     except Exception as exc:  # noqa: BLE001 - any reader error is a bad input file
         raise SceneError(f"{where}: {exc}") from None
 
 
 @functools.lru_cache(maxsize=64)
-def _cells_of(path: Path, mtime_ns: int | None) -> int:  # (a reader's error is not cached)
+def _meshio_cells(path: Path, mtime_ns: int | None) -> int:  # (a reader's error is not cached)
     from transfer.meshfile import MeshFile
-    from transfer.xdmf import layout
 
-    found = layout(path) if path.suffix.lower() == ".xdmf" else None
-    return found.num_cells if found is not None else MeshFile.read(path).mesh.num_cells
+    return MeshFile.read(path).mesh.num_cells
 
 
 def _solid_cells(scene) -> tuple[int, str]:
