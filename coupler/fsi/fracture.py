@@ -2,7 +2,7 @@
 flow): the mechanical aperture e_m (contacts as zero), the contact area fraction, the flow rate
 Q through the sections x = const, the hydraulic aperture e_h = (12 mu Q L / (W dp))^(1/3) and
 the mean fluid pressure on the open parts of the faces, the fluid cells across the mean open
-aperture and the warnings on what these cost in accuracy (coupler/fsi/resolution.py); a table of
+aperture and across the narrowest throat of the widest open path, and the warnings on what these cost in accuracy (coupler/fsi/resolution.py); a table of
 them over the steps."""
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ from coupler.coupling.row_sums import RowSums
 from coupler.protocol.roles import GAP, IN_CONTACT, MORTAR_WEIGHT, PRESSURE, SLAVE, VELOCITY
 
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
-from .flow_rate import percolates, section_flow_rates
+from .flow_rate import column_open_lengths, percolates, section_flow_rates, throat_aperture
 from .context import OperatorContext, fluid_solid
 from .operators import open_share
 from .rate_control import FlowRateControl
-from .resolution import cells_across_warning, contact_area_warning
+from .resolution import apertures_warning, cells_across_warning, contact_area_warning, throat_warning
 
 
 class FractureFigures:
@@ -41,9 +41,9 @@ class FractureFigures:
         self.length, self.width = g.spacing[0] * g.shape[0], g.spacing[1] * g.shape[1]
         self.viscosity = scene.fluid_material["viscosity"]
         extents = np.asarray(g.spacing) * np.asarray(g.shape)
-        across = int(np.argmin(extents))  # the fracture lies across the grid's thinnest extent
-        self.h = float(g.spacing[across])
-        self.cell = tuple(float(g.spacing[d]) for d in range(3) if d != across)
+        self.across = int(np.argmin(extents))  # the fracture lies across the grid's thinnest extent
+        self.h = float(g.spacing[self.across])
+        self.cell = tuple(float(g.spacing[d]) for d in range(3) if d != self.across)
         self.told: set[str] = set()
         self.hold(ctx)
 
@@ -81,21 +81,24 @@ class FractureFigures:
         area, force = RowSums(comm).sum(np.array([np.sum(f["wet"]), np.sum(f["wet"] * f["pressure"])]))
         open_aperture = mean_open_aperture(gap, touching, weights, comm)
         fraction = contact_area_fraction(touching, weights, comm)
-        warnings = self.warnings(fraction, open_aperture)
-        return {"mechanical_aperture": mechanical_aperture(gap, touching, weights, comm),
-                "hydraulic_aperture": (hydraulic_aperture(rate, self.viscosity, self.length, self.width,
-                                                          self.pressure_drop) if self.pressure_drop else 0.0),
-                "pressure_drop": self.pressure_drop,
+        throat = throat_aperture(column_open_lengths(self.grid, f["fraction"], self.across, self.block, comm))
+        e_m = mechanical_aperture(gap, touching, weights, comm)
+        e_h = hydraulic_aperture(rate, self.viscosity, self.length, self.width,
+                                 self.pressure_drop) if self.pressure_drop else 0.0
+        warnings = self.warnings({"contact area": contact_area_warning(fraction, self.cell),
+                                  "cells across": cells_across_warning(open_aperture, self.h),
+                                  "throat": throat_warning(throat, self.h),
+                                  "apertures": apertures_warning(e_h, e_m)})
+        return {"mechanical_aperture": e_m, "hydraulic_aperture": e_h, "pressure_drop": self.pressure_drop,
                 "contact_area_fraction": fraction, "flow_rate": rate, "percolating": connected,
                 "mean_face_pressure": float(force / area) if area else 0.0,
                 "mean_open_aperture": open_aperture, "cells_across": open_aperture / self.h,
+                "throat_aperture": throat, "throat_cells_across": throat / self.h,
                 **({"warnings": warnings} if warnings else {})}
 
-    def warnings(self, contact_area: float, open_aperture: float) -> list[str]:
-        """This step's warnings on accuracy; each kind goes to the log (and summary.json's
-        ``warnings``) the first time only."""
-        found = {"contact area": contact_area_warning(contact_area, self.cell),
-                 "cells across": cells_across_warning(open_aperture, self.h)}
+    def warnings(self, found: dict[str, str | None]) -> list[str]:
+        """This step's warnings on accuracy (by kind, None: none); each kind goes to the log (and
+        summary.json's ``warnings``) the first time only."""
         for kind, text in found.items():
             if text and kind not in self.told:
                 self.told.add(kind)
@@ -105,7 +108,7 @@ class FractureFigures:
 
 def table(steps: list[dict]) -> list[str]:
     """The fracture's figures per step as text lines (the run's log)."""
-    lines = ["fracture  step  stress [Pa]  coupling  inner  e_m [um]  e_h [um]  contact  Q [m^3/s]  p_faces [Pa]  cells across"]
+    lines = ["fracture  step  stress [Pa]  coupling  inner  e_m [um]  e_h [um]  contact  Q [m^3/s]  p_faces [Pa]  cells across  throat cells"]
     for record in steps:
         f = record.get("fracture")
         if not f:
@@ -115,5 +118,6 @@ def table(steps: list[dict]) -> list[str]:
         lines.append(f"fracture  {record['step']:4d}  {solid.get('stress', float('nan')):11.4g}  "
                      f"{record['iterations']:8d}  {inner:5d}  {1e6 * f['mechanical_aperture']:8.3f}  "
                      f"{1e6 * f['hydraulic_aperture']:8.3f}  {f['contact_area_fraction']:7.3f}  "
-                     f"{f['flow_rate']:9.3e}  {f['mean_face_pressure']:12.5g}  {f['cells_across']:12.2f}")
+                     f"{f['flow_rate']:9.3e}  {f['mean_face_pressure']:12.5g}  {f['cells_across']:12.2f}  "
+                     f"{f['throat_cells_across']:12.2f}")
     return lines

@@ -1,11 +1,15 @@
 """What a hydro-mechanical fracture's figures cost in accuracy, as warnings: a contact area above
-one half, and a mean open aperture resolved by less than one fluid cell, with the number of
-cells across it and the flow rate's error the immersed plates measured at that resolution
+one half, a mean open aperture resolved by less than one fluid cell, the narrowest throat of the
+flow's widest path by less than :data:`THROAT_CELLS`, and e_h above e_m; with the number of
+cells across and the flow rate's error the immersed plates measured at that resolution
 (cases/parallel_plates/README.md: +12.5 %, +3.1 %, +0.78 %, +0.20 % at 4, 8, 16, 32 cells across,
 exact fractions and wall drag: 2 (h/w)^2)."""
 
 from __future__ import annotations
 
+#: cells across the narrowest throat of the widest open path below which its flow errs by more
+#: than the plates' 2 / n^2 = 12.5 %
+THROAT_CELLS = 4
 #: contact area fraction above which the open space is a few channels near percolation
 CONTACT_AREA_LIMIT = 0.5
 
@@ -39,3 +43,27 @@ def cells_across_warning(mean_open_aperture: float, h: float) -> str | None:
             f"cases/parallel_plates), {error} extrapolated to {n:.2f}; a rough fracture converges more slowly "
             f"(cases/hm_fracture/README.md): Q and e_h are not to be trusted; refine [geometry.fluid] shape across "
             f"the fracture to at least 8 cells across the mean aperture")
+
+
+def throat_warning(throat: float, h: float) -> str | None:
+    """The warning for a narrowest throat (:func:`coupler.fsi.flow_rate.throat_aperture`) under
+    :data:`THROAT_CELLS` fluid cells `h` across (None when wider, or closed: no path is its own warning)."""
+    n = throat / h
+    if throat <= 0 or n >= THROAT_CELLS:
+        return None
+    error = (f"{100 * plates_error(n):.0f} % at {n:.2f} (2 / n^2)" if n >= 1 else
+             f"under one cell it is open or closed by the rounding of the solid fractions")
+    return (f"fracture: the narrowest throat on the widest open path from inlet to outlet is {1e6 * throat:.3g} um, "
+            f"{n:.2f} fluid cells across: the flow through it errs by more than the immersed plates' "
+            f"{100 * plates_error(THROAT_CELLS):.1f} % at {THROAT_CELLS} cells ({error}), and the throat sets the "
+            f"flow rate: refine [geometry.fluid] shape across the fracture to at least {THROAT_CELLS} cells across it")
+
+
+def apertures_warning(hydraulic: float, mechanical: float) -> str | None:
+    """The warning for e_h above e_m (None at or below)."""
+    if hydraulic <= mechanical:
+        return None
+    return (f"fracture: e_h {1e6 * hydraulic:.4g} um exceeds e_m {1e6 * mechanical:.4g} um: the 3D flow between "
+            f"rough faces passes less than plates at their mean gap (the flow avoids the narrow parts and turns "
+            f"around the contacts); e_h above e_m says the gap is under-resolved across ([geometry.fluid] shape) "
+            f"or the fluid model overestimates the flow (the local cubic law does, cases/hm_fracture/README.md)")

@@ -98,7 +98,8 @@ def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path, capsys):
     """A soft rock closed to below two fluid cells: no open path through the grid's cells from
     inlet to outlet: flow rate and hydraulic aperture 0, the warning in the log and summary. At
     4 MPa its contact area exceeds 50 % and its mean open aperture (13 um) is under one fluid cell
-    (20 um): both accuracy warnings in that step's figures, each printed once."""
+    (20 um): both accuracy warnings in that step's figures, each printed once; the throat of the
+    widest column path is under 4 cells at every stress (its warning every step, printed once)."""
     soft = {"E = 1.0e10": "E = 3.0e8", "shape = [16, 16, 53]": "shape = [8, 8, 27]",
             "upper = [0.02, 0.02, 0.00031]": "upper = [0.02, 0.02, 0.00032]"}
     summary = run(copy_case(CASE, tmp_path, soft), tmp_path / "out")
@@ -112,9 +113,13 @@ def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path, capsys):
         assert f["cells_across"] == pytest.approx(f["mean_open_aperture"] / h, rel=1e-12)
         assert f["mean_open_aperture"] * (1 - f["contact_area_fraction"]) == pytest.approx(f["mechanical_aperture"],
                                                                                           rel=1e-9)
-    assert [len(s["fracture"].get("warnings", [])) for s in summary["steps"]] == [0, 0, 2]
+    assert [len(s["fracture"].get("warnings", [])) for s in summary["steps"]] == [1, 1, 3]
+    for step in summary["steps"]:
+        f = step["fracture"]
+        assert 0 < f["throat_aperture"] < f["mean_open_aperture"] and f["throat_cells_across"] < 4
+        assert f"{f['throat_cells_across']:.2f} fluid cells across" in f["warnings"][-1]
     assert last["contact_area_fraction"] > 0.5 and last["cells_across"] < 1
-    area, across = last["warnings"]
+    area, across, _ = last["warnings"]
     assert f"the contact area is {100 * last['contact_area_fraction']:.0f} % of the fracture plane (above 50 %)" in area
     assert "(2.5 x 2.5 mm in the plane)" in area
     n = last["cells_across"]
@@ -123,6 +128,7 @@ def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert printed.count("warning: fracture: the contact area is") == 1
     assert printed.count("warning: fracture: the mean open aperture") == 1
+    assert printed.count("warning: fracture: the narrowest throat") == 1
 
 
 @pytest.mark.parametrize("replace, where, reason", [

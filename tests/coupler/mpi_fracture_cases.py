@@ -11,7 +11,7 @@ import numpy as np
 from mpi4py import MPI
 
 from coupler.fsi.apertures import contact_area_fraction, mean_open_aperture, mechanical_aperture
-from coupler.fsi.flow_rate import percolates, section_flow_rates
+from coupler.fsi.flow_rate import column_open_lengths, percolates, section_flow_rates
 from coupler.fsi.open_gap import contact_share
 from coupler.fsi.ranks import GridSlab
 from transfer import StructuredGrid
@@ -70,6 +70,19 @@ def flow_rates() -> float:
     return relative(section_flow_rates(grid, velocity), section_flow_rates(grid, velocity[slab.ids], slab.block, comm))
 
 
+def open_lengths() -> dict:
+    """Each column's open length across z with the slabs along z (every rank a part of each
+    column) and along x (each column whole on one rank)."""
+    out = {}
+    for name, grid in {"across the cut": StructuredGrid((0, 0, 0), (1, 1, 1), (3, 2, 6)),
+                       "along the cut": StructuredGrid((0, 0, 0), (1, 1, 1), (6, 2, 3))}.items():
+        fraction = np.random.default_rng(5).uniform(size=grid.num_cells)
+        slab = GridSlab(comm, grid, name)
+        out[name] = relative(column_open_lengths(grid, fraction, 2),
+                             column_open_lengths(grid, fraction[slab.ids], 2, slab.block, comm))
+    return out
+
+
 def apertures() -> dict:
     rng = np.random.default_rng(4)
     n = 41
@@ -105,6 +118,7 @@ def contact_shares() -> dict:
 
 def main():
     result = {"ranks": comm.size, "percolation": percolation_cases(), "flow_rates": flow_rates(),
+              "open_lengths": open_lengths(),
               "apertures": apertures(), "contact_share": contact_shares()}
     if comm.rank == 0:
         print(json.dumps(result, default=lambda a: np.asarray(a).tolist()))

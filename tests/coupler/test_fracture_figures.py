@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from coupler.fsi.apertures import contact_area_fraction, hydraulic_aperture, mechanical_aperture
-from coupler.fsi.flow_rate import percolates, section_flow_rates
+from coupler.fsi.flow_rate import column_open_lengths, percolates, section_flow_rates, throat_aperture
 from coupler.fsi.open_gap import contact_share
 from transfer import FunctionSpace, Mesh, StructuredGrid
 
@@ -47,6 +47,58 @@ def test_percolation_needs_an_open_path_through_shared_faces():
     fraction[0, 0, 1] = 1.0
     fraction[0, 2, 2] = 0.0  # open cells meeting the channel diagonally only: no shared face
     assert not percolates(grid, fraction.ravel())
+
+
+def test_a_column_is_open_by_the_open_share_of_its_cells():
+    """Across z (axis 2) and across y (axis 1): sum of (1 - fraction) h over the column, the
+    plane's last axis along x; a block of the grid gives its own columns, the rest zero."""
+    grid = StructuredGrid((0, 0, 0), (1.0, 0.1, 0.002), (4, 3, 5))  # origin, spacing, shape
+    rng = np.random.default_rng(3)
+    fraction = rng.uniform(0, 1, (5, 3, 4))  # (z, y, x)
+    across_z = column_open_lengths(grid, fraction.ravel(), 2)
+    np.testing.assert_allclose(across_z, (1 - fraction).sum(axis=0) * 0.002, rtol=1e-14)
+    across_y = column_open_lengths(grid, fraction.ravel(), 1)
+    np.testing.assert_allclose(across_y, (1 - fraction).sum(axis=1) * 0.1, rtol=1e-14)
+    block = column_open_lengths(grid, fraction[:, :, 1:3].ravel(), 2, block=((1, 0, 0), (3, 3, 5)))
+    np.testing.assert_allclose(block[:, 1:3], across_z[:, 1:3], rtol=1e-14)
+    assert not block[:, [0, 3]].any()
+
+
+def test_the_throat_is_the_narrowest_column_of_the_widest_path():
+    """Plates: the aperture. A channel closed to 1 by one column: 1, however wide the rest. A
+    bypass of 2 beside it: 2 (the widest path detours). Columns touching at a corner only do
+    not connect; no path at all: 0."""
+    plates = np.full((3, 5), 7.0)
+    assert throat_aperture(plates) == 7.0
+    channel = np.zeros((3, 5))
+    channel[1] = [9, 9, 1, 9, 9]
+    assert throat_aperture(channel) == 1.0
+    channel[0, 1:4] = 2.0
+    assert throat_aperture(channel) == 2.0
+    diagonal = np.zeros((2, 4))
+    diagonal[0, :2], diagonal[1, 2:] = 5.0, 5.0
+    assert throat_aperture(diagonal) == 0.0
+    assert throat_aperture(np.zeros((3, 5))) == 0.0
+
+
+def test_the_throat_of_random_maps_is_the_bottleneck_of_a_brute_force_search():
+    """Against an independent search: the widest path by a maximin Dijkstra over the columns."""
+    import heapq
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        e = rng.uniform(0, 1, (6, 9)) * (rng.uniform(0, 1, (6, 9)) > 0.3)
+        best = np.zeros_like(e)
+        heap = [(-e[j, 0], j, 0) for j in range(6)]
+        best[:, 0] = e[:, 0]
+        heapq.heapify(heap)
+        while heap:
+            w, j, i = heapq.heappop(heap)
+            for jj, ii in ((j + 1, i), (j - 1, i), (j, i + 1), (j, i - 1)):
+                if 0 <= jj < 6 and 0 <= ii < 9 and min(-w, e[jj, ii]) > best[jj, ii]:
+                    best[jj, ii] = min(-w, e[jj, ii])
+                    heapq.heappush(heap, (-best[jj, ii], jj, ii))
+        assert throat_aperture(e) == best[:, -1].max()
 
 
 def square_face(n: int, m: int, z: float, shift: int) -> tuple[np.ndarray, np.ndarray]:

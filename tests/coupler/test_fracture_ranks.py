@@ -36,6 +36,8 @@ def test_percolation_joins_the_labels_across_the_slab_cut(result, case, connecte
 
 def test_sums_over_the_ranks_are_the_serial_figures(result):
     assert result["flow_rates"] < 1e-10
+    assert result["open_lengths"].keys() == {"across the cut", "along the cut"}
+    assert all(v < 1e-14 for v in result["open_lengths"].values()), result["open_lengths"]
     assert result["apertures"].keys() == {"mechanical_aperture", "mean_open_aperture", "contact_area_fraction"}
     assert all(v < 1e-10 for v in result["apertures"].values()), result["apertures"]
 

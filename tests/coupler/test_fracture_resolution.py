@@ -4,7 +4,8 @@ warnings' thresholds, the plates study's error in them, and each kind printed on
 import pytest
 
 from coupler.fsi.fracture import FractureFigures
-from coupler.fsi.resolution import cells_across_warning, contact_area_warning, plates_error
+from coupler.fsi.resolution import (apertures_warning, cells_across_warning, contact_area_warning, plates_error,
+                                   throat_warning)
 
 
 def test_the_plates_error_model_gives_the_measured_refinement_figures():
@@ -36,12 +37,35 @@ class Context:
         self.logged += texts
 
 
+def test_a_throat_under_four_cells_warns_with_its_cells_and_error():
+    assert throat_warning(4e-5, 1e-5) is None  # four cells across
+    assert throat_warning(0.0, 1e-5) is None  # no path: the percolation warning says it
+    text = throat_warning(2.5e-5, 1e-5)
+    assert "the narrowest throat on the widest open path from inlet to outlet is 25 um, 2.50 fluid cells" in text
+    assert "12.5 % at 4 cells (32 % at 2.50 (2 / n^2))" in text and "[geometry.fluid] shape" in text
+    assert "under one cell it is open or closed by the rounding" in throat_warning(5e-6, 1e-5)
+
+
+def test_a_hydraulic_aperture_above_the_mechanical_warns():
+    assert apertures_warning(8e-5, 8e-5) is None
+    text = apertures_warning(9.5e-5, 9.0e-5)
+    assert text.startswith("fracture: e_h 95 um exceeds e_m 90 um")
+
+
+class Context:
+    def __init__(self):
+        self.logged = []
+
+    def warn(self, texts):
+        self.logged += texts
+
+
 def test_each_kind_of_warning_is_logged_once_and_kept_per_step():
     monitor = FractureFigures.__new__(FractureFigures)
-    monitor.ctx, monitor.h, monitor.cell, monitor.told = Context(), 1e-5, (1e-3, 1e-3), set()
-    assert monitor.warnings(0.3, 2e-5) == []
-    first = monitor.warnings(0.6, 5e-6)
-    second = monitor.warnings(0.7, 4e-6)
-    assert len(first) == 2 and len(second) == 2 and first != second
-    assert len(monitor.ctx.logged) == 2
+    monitor.ctx, monitor.told = Context(), set()
+    assert monitor.warnings({"contact area": None, "throat": None}) == []
+    first = monitor.warnings({"contact area": "a 1", "throat": "t 1"})
+    second = monitor.warnings({"contact area": "a 2", "throat": "t 2", "apertures": None})
+    assert first == ["a 1", "t 1"] and second == ["a 2", "t 2"]
+    assert [t.split(" (per")[0] for t in monitor.ctx.logged] == ["a 1", "t 1"]
     assert all(t.endswith("(per step: summary.json steps[].fracture.warnings)") for t in monitor.ctx.logged)
