@@ -49,8 +49,9 @@ def residual_plot(path: Path, result) -> None:
 def solver_convergence(path: Path, steps: list[dict]) -> bool:
     """The criterion of every inner solve that reports its history, per iteration, one line per
     step (e.g. the nonsmooth multilevel method's step length); False when none does."""
-    curves = [(f"{name}: {r['solver']}, step {s['step']}", r["history"], r["tolerance"])
+    curves = [(f"{name}: {r['solver']}, step {s['step']}", np.abs(np.asarray(r["history"], float)), r["tolerance"])
               for s in steps for name, reports in s.get("solves", {}).items() for r in reports if r.get("history")]
+    curves = [c for c in curves if (c[1] > 0).any()]  # a criterion of exact zeros has no place on a log axis
     if not curves:
         return False
     import matplotlib
@@ -60,7 +61,7 @@ def solver_convergence(path: Path, steps: list[dict]) -> bool:
 
     fig, ax = plt.subplots(figsize=(6, 4))
     for label, history, _ in curves:
-        ax.semilogy(range(1, len(history) + 1), np.abs(np.asarray(history, float)), marker="o", ms=2,
+        ax.semilogy(range(1, len(history) + 1), np.where(history > 0, history, np.nan), marker="o", ms=2,
                     label=label if len(curves) <= 10 else None)
     for tolerance in sorted({t for _, _, t in curves if isinstance(t, float)}):
         ax.axhline(tolerance, color="k", ls="--", lw=0.8)

@@ -3,6 +3,7 @@ showing a known field's extremes where they are, and a page a real browser loads
 errors with every image resolved."""
 
 import json
+import warnings
 import shutil
 from pathlib import Path
 
@@ -220,6 +221,12 @@ def test_solvers_that_report_their_history_get_a_convergence_plot(tmp_path):
     assert solver_convergence(tmp_path / "convergence.png", steps)
     not_blank(tmp_path / "convergence.png")
     assert not solver_convergence(tmp_path / "none.png", [{"step": 0, "solves": {"solid": []}}])
+    exact = SolveReport("contact active_set", True, 1, 0.0, 1e-10, history=(0.0,))  # its criterion exactly met
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib warns of a log axis without positive values
+        assert not solver_convergence(tmp_path / "zeros.png", [{"step": 0, "solves": {"solid": [exact.as_dict()]}}])
+        assert solver_convergence(tmp_path / "both.png", [{"step": s, "solves": {"solid": [r.as_dict()]}}
+                                                          for s, r in enumerate((exact, report))])
 
 
 def test_the_mid_surface_lies_halfway_across_the_open_cells_of_a_column():
