@@ -268,14 +268,14 @@ PRESSURE_TOLERANCE = 0.01
 
 def fv_solution(tolerance: float, needs_ref: bool, transient: bool = False, outer_correctors: int = 50) -> str:
     """simpleFoam's (or, ``transient``, pimpleFoam's) solvers and loop. Steady: SIMPLEC, p by GAMG
-    smoothed by DICGaussSeidel (incomplete Cholesky, then Gauss-Seidel: the strong coupling across
-    flat cells, e.g. 286:1 in a thin gap, is what point Gauss-Seidel smooths slowly) to the
-    absolute tolerance :data:`PRESSURE_TOLERANCE` times ``tolerance``: once the outer residual of p
-    is below it p is not re-solved, and it stays above the round-off floor of p's normalised
-    residual, which grows with the cells' aspect ratio (about 5e-12 at 286:1: an absolute 1e-12
-    ran every solve to GAMG's 1000-iteration cap, and the velocity components that are zero in the
-    exact flow were stirred by each, their normalised residuals never settling; cases/lubrication
-    README, "OpenFOAM")."""
+    smoothed by DICGaussSeidel (incomplete Cholesky, then Gauss-Seidel: point Gauss-Seidel smooths
+    the strong coupling across flat cells, as in a thin gap, slowly) to the absolute tolerance
+    :data:`PRESSURE_TOLERANCE` times ``tolerance``, above the round-off floor of p's normalised
+    residual, which grows with the cells' aspect ratio: once p's outer residual is below it p is no
+    longer re-solved, and velocity components that are zero in the exact flow (whose normalised
+    residuals measure noise) can settle. An absolute 1e-12 ran every late solve on such cells to
+    GAMG's iteration cap, and the run never met residualControl (docs/benchmarks.md, "OpenFOAM on
+    flat cells")."""
     ref = "    pRefCell 0;\n    pRefValue 0;\n" if needs_ref else ""
     if transient:  # PIMPLE: outer iterations per time step until the initial residuals fall below tolerance
         return (_header("dictionary", "fvSolution", "system")
