@@ -149,7 +149,7 @@ def main(argv=None) -> dict:
     result["goals"] = goals(levels)
     result["meta"]["load_average_after"] = os.getloadavg()
     lines = table(levels) + [""]
-    lines.append("half-space on the faces' interpolant sampled finer (at the stresses of the thickest blocks): "
+    lines.append("half-space on the faces' interpolant sampled finer (at the last shape's stresses): "
                  + "; ".join(f"x{r['refine']}: " + ", ".join(f"{m * 1e6:.3f} um / {s:.3f}" for m, s in
                                                              zip(r["mean_aperture"], r["area_fraction"]))
                              for r in result["resolved_halfspace"]))
