@@ -54,7 +54,7 @@ def test_reference_gap_is_the_aperture_with_contacts_as_zero():
 def test_platen_closes_the_fracture_as_the_halfspace():
     """16 x 16 map cells of 1.25 mm, blocks 10 mm thick (half the size; the aperture has no power
     above 5 mm) in tetrahedra two spacings tall, 1 and 5 MPa: the mean aperture within 5 % of the
-    half-space's (measured -2.4 % and +2.6 %; bench/halfspace.py: -7.9 % .. +3.7 % for the
+    half-space's (measured -2.4 % and +2.6 %; bench/halfspace.py: -7.9 % .. +2.6 % for the
     shapes with tetrahedra one or two spacings tall at 1 to 5 MPa, the two methods' own
     discretizations at the map's spacing: docs/benchmarks.md), the contact area growing alike, the fracture closure d0 - mean aperture within 5 %
     of the half-space's, and the platen's displacement beyond it the blocks' compression (0.9 to 1
