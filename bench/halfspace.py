@@ -30,6 +30,7 @@ import json
 import os
 import platform
 import sys
+import tempfile
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -39,11 +40,85 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from solid_fenicsx.contact_halfspace import compare, fracture_map, halfspace  # noqa: E402
+from coupler.plan.plan import make_plan  # noqa: E402
+from coupler.scene import load  # noqa: E402
+from solid_fenicsx.contact_halfspace import fracture_map, halfspace  # noqa: E402
+from solid_fenicsx.participant import SolidParticipant  # noqa: E402
+from transfer.generators.height_maps import write_npz  # noqa: E402
 
+#: where the solid's configuration is taken from (its generator parameters, material and loads replaced)
+CASE = ROOT / "cases" / "measured_fracture"
 SIZE, APERTURE, RMS, E, NU = 0.02, 40e-6, 20e-6, 30e9, 0.25
 #: the goals' tolerances: mean aperture (relative), area slope (relative), blocks counted thick from
 GOALS = {"mean_aperture": 0.05, "area_slope": 0.25, "thick_from": 0.5}
+
+
+def solid(directory, lower: np.ndarray, upper: np.ndarray, size: float, height: float, layers: int,
+          E: float, nu: float, stresses, tolerance: float = 1e-3):
+    """The configured solid participant of the faces `lower`, `upper` (one period, (cells,
+    cells)) as a box of two blocks `height` thick with `layers` each (generator
+    ``measured_fracture``, the map ``periodic``: the box spans one period; free sides, the bottom
+    fixed, the rigid platen on top), the platen on top to the
+    `stresses` (one load step each, within `tolerance`); the map written to `directory`."""
+    surfaces = write_npz(Path(directory) / "surfaces.npz", lower.T, upper.T, (size / lower.shape[0],) * 2)
+    config = make_plan(load(CASE)).participant("solid").config
+    config["generator"]["parameters"].update(surfaces=str(surfaces), height=height, layers=layers, coarsen=1,
+                                             ratio=1, periodic=True, min_aperture=0.0, tolerance=None)
+    config["material"].update(E=E, nu=nu)
+    platen = next(ld for ld in config["loads"] if ld["type"] == "platen")
+    platen.update(value=[float(s) for s in stresses], area=size * size, tolerance=tolerance)
+    config["steps"] = len(platen["value"])
+    config["contact"]["search_distance"] = 2.0 * float(np.max(upper - lower)) + size / lower.shape[0]
+    p = SolidParticipant()
+    p.comm, p.rank = None, 0
+    p.configure(config)
+    return p
+
+
+def compare(lower: np.ndarray, upper: np.ndarray, size: float, height: float, layers: int, E: float, nu: float,
+            stresses, band: float = 0.125, tolerance: float = 1e-3, monitor=None) -> dict:
+    """Each stress in turn on the solid (:func:`solid`) and on the half-space at the stress the
+    platen reached: mean apertures, area fractions, closures, the platen displacement and its
+    part beyond the closure (the blocks' bulk compression), and the mean apertures of both on
+    the nodes farther than `band` x size from the box's sides (the free sides' share of the
+    difference). Raises RuntimeError when a solve of the solid did not converge."""
+    aperture = upper - lower
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        p = solid(tmp, lower, upper, size, height, layers, E, nu, stresses, tolerance)
+        xy = p.contact.mortar.slave.points[:, :2]
+        cell = size / lower.shape[0]
+        ij = np.rint(xy / cell).astype(int) % lower.shape[0]  # map node of each slave node (the sides wrap)
+        inner = np.all((xy > band * size) & (xy < (1 - band) * size), axis=1)
+        weights = p.contact.mortar.weights
+        d0 = p.contact.initial_mean_gap
+        for k, target in enumerate(stresses):
+            p.advance(k, 0, float(k), 1.0, {})
+            reports, figures = p.take_reports()
+            failed = [r for r in reports if not r.converged]
+            if failed:
+                raise RuntimeError(f"solid at {target:g} Pa: {failed[0].solver} did not converge: {failed[0].detail}")
+            gap = p.static.state.gap
+            ref = halfspace(aperture, size, E, nu, figures["stress"])
+            inner_ref = float(ref["gap"][ij[inner, 0], ij[inner, 1]].mean())
+            inner_solid = float(np.sum(weights[inner] * gap[inner]) / np.sum(weights[inner]))
+            bulk = figures["platen_displacement"] - figures["closure"]
+            rows.append({"stress": figures["stress"], "mean_aperture": figures["mean_gap"],
+                         "mean_aperture_halfspace": ref["mean_aperture"],
+                         "error_mean_aperture": figures["mean_gap"] / ref["mean_aperture"] - 1,
+                         "area_fraction": figures["area_fraction"], "area_fraction_halfspace": ref["area_fraction"],
+                         "closure": figures["closure"], "closure_halfspace": ref["closure"],
+                         "platen_displacement": figures["platen_displacement"], "bulk_compression": bulk,
+                         "bulk_compression_over_column": bulk / (figures["stress"] * 2 * height / E),
+                         "inner_mean_aperture": inner_solid, "inner_mean_aperture_halfspace": inner_ref,
+                         "error_inner_mean_aperture": inner_solid / inner_ref - 1,
+                         "contact_solves": int(figures["contact_solves"]), "seconds": figures["seconds"]})
+            if monitor is not None:
+                monitor(rows[-1])
+        out = {"cells": int(lower.shape[0]), "size": size, "height": height, "layers": layers, "E": E, "nu": nu,
+               "dofs": int(p.contact.num_dofs), "initial_mean_aperture": d0,
+               "initial_mean_aperture_map": float(aperture.mean()), "band": band, "steps": rows}
+    return out
 
 
 def interpolant(values: np.ndarray, refine: int) -> np.ndarray:

@@ -1,14 +1,16 @@
 """Rough contact against the periodic elastic half-space (solid_fenicsx.contact_halfspace,
 issue 30 item 4): the reference itself against Westergaard's sinusoid (its modulus, the sign of
 its surface, its gap as the aperture with contacts as zero), then the platen's closure of a
-fracture of the project's generator against it on the same sampled surface."""
+fracture of the project's generator against it on the same sampled surface (the comparison of
+bench/halfspace.py, which configures the solid from cases/measured_fracture)."""
 
 import numpy as np
 import pytest
 
 pytest.importorskip("tamaas", reason="tamaas (the half-space reference) is not installed: scripts/install.sh installs it")
 
-from solid_fenicsx.contact_halfspace import compare, effective_modulus, fracture_map, halfspace  # noqa: E402
+from solid_fenicsx.contact_halfspace import effective_modulus, fracture_map, halfspace  # noqa: E402
+from vc_helpers import load_bench  # noqa: E402
 
 E, NU, SIZE = 30e9, 0.25, 0.02
 
@@ -62,7 +64,7 @@ def test_platen_closes_the_fracture_as_the_halfspace():
     definitions fail: E for E* moves the half-space's mean aperture by 15 to 28 %, the mean over the
     open part alone moves the solid's by 2 and 13 %."""
     lower, upper = fracture_map(16, SIZE, 40e-6, 20e-6, mismatch_length=SIZE / 4)
-    out = compare(lower, upper, SIZE, SIZE / 2, 4, E, NU, [1e6, 5e6], tolerance=0.02)
+    out = load_bench("halfspace").compare(lower, upper, SIZE, SIZE / 2, 4, E, NU, [1e6, 5e6], tolerance=0.02)
     assert out["initial_mean_aperture"] == pytest.approx(np.mean(upper - lower), rel=2e-3)
     low, high = out["steps"]
     for row in out["steps"]:
