@@ -4,9 +4,9 @@ periodic pair: 20 mm square, Hurst 0.8, RMS 20 um per face, faces identical abov
 aperture 40 um), closed by varcouple's stress-controlled platen (two blocks of the generator
 ``measured_fracture``, E = 30 GPa, nu = 0.25, frictionless mortar contact) at 1, 5 and 20 MPa,
 and by tamaas's periodic half-space (composite surface, E* = E / (2 (1 - nu^2)), the stress the
-platen reached) on the same sampled surface. Per block height (size / 8 to size, tetrahedra about
-as tall as the map's spacing) and stress: the mean aperture (whole plane, contacts as zero) of
-both and its relative difference, the same over the nodes farther than size / 8 from the box's
+platen reached) on the same sampled surface. Per block shape (height size / 8 to size in
+tetrahedra one map spacing tall; the half-size blocks also in tetrahedra two spacings tall) and
+stress: the mean aperture (whole plane, contacts as zero) of both and its relative difference, the same over the nodes farther than size / 8 from the box's
 free sides, the contact area fractions, the fracture closure (d0 minus the mean aperture) of both
 and the platen displacement (the closure plus the blocks' bulk compression, also given against
 the elastic column's stress x 2 height / E). Also the half-space on the faces' piecewise-linear
@@ -14,8 +14,9 @@ interpolant sampled 2, 4 and 8 times finer: how far the sampled surface's own so
 the resolved one.
 
 Goals: the mean aperture within 5 % of the half-space's at every stress for the blocks at least
-half the size thick (either tetrahedron height); the contact area's trend the same (the log-log slope of area fraction against
-stress between successive stresses within 25 % of the half-space's).
+half the size thick (either tetrahedron height); the contact area's trend the same (the log-log
+slope of area fraction against stress between successive stresses within 25 % of the
+half-space's).
 
     .venv/bin/python bench/halfspace.py [--quick] [--cells 16] [-o OUT.json]
 
@@ -58,8 +59,8 @@ def solid(directory, lower: np.ndarray, upper: np.ndarray, size: float, height: 
     """The configured solid participant of the faces `lower`, `upper` (one period, (cells,
     cells)) as a box of two blocks `height` thick with `layers` each (generator
     ``measured_fracture``, the map ``periodic``: the box spans one period; free sides, the bottom
-    fixed, the rigid platen on top), the platen on top to the
-    `stresses` (one load step each, within `tolerance`); the map written to `directory`."""
+    fixed), the rigid platen on top to the `stresses` (one load step each, within `tolerance`);
+    the map written to `directory`."""
     surfaces = write_npz(Path(directory) / "surfaces.npz", lower.T, upper.T, (size / lower.shape[0],) * 2)
     config = make_plan(load(CASE)).participant("solid").config
     config["generator"]["parameters"].update(surfaces=str(surfaces), height=height, layers=layers, coarsen=1,
