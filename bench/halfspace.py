@@ -5,8 +5,8 @@ aperture 40 um), closed by varcouple's stress-controlled platen (two blocks of t
 ``measured_fracture``, E = 30 GPa, nu = 0.25, frictionless mortar contact) at 1, 5 and 20 MPa,
 and by tamaas's periodic half-space (composite surface, E* = E / (2 (1 - nu^2)), the stress the
 platen reached) on the same sampled surface. Per block shape (height size / 8 to size in
-tetrahedra one map spacing tall; the half-size blocks also in tetrahedra two spacings tall) and
-stress: the mean aperture (whole plane, contacts as zero) of both and its relative difference, the same over the nodes farther than size / 8 from the box's
+tetrahedra one map spacing tall; the half-size blocks also in tetrahedra two spacings tall, the
+quarter-size ones two and half a spacing tall) and stress: the mean aperture (whole plane, contacts as zero) of both and its relative difference, the same over the nodes farther than size / 8 from the box's
 free sides, the contact area fractions, the fracture closure (d0 minus the mean aperture) of both
 and the platen displacement (the closure plus the blocks' bulk compression, also given against
 the elastic column's stress x 2 height / E). Also the half-space on the faces' piecewise-linear
@@ -203,9 +203,11 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     out = Path(a.output) if a.output else ROOT / "bench" / "results" / f"halfspace{'_quick' if a.quick else ''}.json"
     cells = a.cells or (8 if a.quick else 16)
-    # (block height / size, tetrahedra per map spacing in height): one spacing tall, and the
-    # half-size blocks also two spacings tall (the tetrahedra's height's share of the difference)
-    shapes = [(0.5, 0.5)] if a.quick else [(0.125, 1.0), (0.25, 1.0), (0.5, 1.0), (1.0, 1.0), (0.5, 0.5)]
+    # (block height / size, tetrahedra per map spacing in height): one spacing tall; the half-size
+    # blocks also two spacings tall, the quarter-size ones two and half a spacing tall (the
+    # tetrahedra's height's share of the difference)
+    shapes = [(0.5, 0.5)] if a.quick else [(0.125, 1.0), (0.25, 1.0), (0.5, 1.0), (1.0, 1.0), (0.5, 0.5), (0.25, 0.5),
+                                           (0.25, 2.0)]
     stresses = [1e6, 5e6] if a.quick else [1e6, 5e6, 20e6]
     refines = [1, 2] if a.quick else [1, 2, 4, 8]
     result = {"meta": {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "platform": platform.platform(),
