@@ -3,7 +3,8 @@
 #   1. Debian packages (OpenFOAM, dolfinx, MPI, numpy/scipy/..., compilers) via apt;
 #   2. a venv at <repo>/.venv that sees Debian's Python packages (--system-site-packages);
 #   3. the build tools (scikit-build-core, nanobind, pytest) and the project itself,
-#      editable, with the C++ kernels (re)built on every run.
+#      editable, with the C++ kernels (re)built on every run; tamaas, the half-space
+#      contact reference of a test and a bench (without its declared numpy>=2).
 #
 # Safe to run again: apt is skipped when every package is already installed, the venv
 # is reused, and only the project (C++ extension included) is rebuilt.
@@ -155,6 +156,15 @@ log "pip: building and installing varcouple (editable, C++ kernels rebuilt)"
 t_build=$SECONDS
 (cd "$ROOT" && pip install -c "$CONSTRAINTS" --no-build-isolation -e '.[test]')
 log "pip: project built in $((SECONDS - t_build))s"
+
+# tamaas: the periodic elastic half-space contact solver, the reference of bench/halfspace.py
+# and tests/solid_fenicsx/test_contact_halfspace.py (bench and test only). Its 2.9 wheel
+# declares numpy>=2 but runs on Debian's numpy 1.24 (pybind11, no numpy C API), so it is
+# installed without its declared dependencies and checked by importing it.
+log "pip: tamaas (half-space reference for the rough-contact test, --no-deps)"
+pip install --no-deps 'tamaas==2.9.*'
+"$VENV/bin/python" -c 'import tamaas' 2>/dev/null \
+  || die "tamaas does not import with Debian's numpy: $("$VENV/bin/python" -c 'import tamaas' 2>&1 | tail -1)"
 
 # ---------------------------------------------------------------- checks + summary
 # numpy must be Debian's, imported from the system site packages, never from the venv.

@@ -19,7 +19,8 @@ Modules: :mod:`.mesh` (meshes and boundary tags), :mod:`.constitutive`
 control); frictionless contact (paper 2.2, eq. 7-11): :mod:`.mortar` (contact faces, slave
 normals, ``T = D^-1 B`` with the dual basis, weighted gap), :mod:`.obstacle` (a rigid plane,
 T = 0), :mod:`.contact` (the transformed system of eq. 10 as a bound-constrained QP, pressure),
-:mod:`.contact_hertz` (the Hertz case and its theory). Case geometry comes from
+:mod:`.contact_hertz` (the Hertz case and its theory), :mod:`.contact_halfspace` (the periodic
+half-space of rough contact, tamaas). Case geometry comes from
 :mod:`transfer.generators`. :mod:`.settings`: the participant's declared settings, read by the
 coupler without dolfinx.
 """
