@@ -30,6 +30,10 @@ from coupler.protocol.transport import (COUPLER, DEFAULT_TIMEOUT, SHM_THRESHOLD,
 from coupler.protocol.wire import Field, SolveReport, as_fields, check_finite, check_reply, decode, encode
 
 log = logging.getLogger("varcouple.client")
+#: zenoh's own limit on a query (a week): never reached; the wait follows the participant's
+#: progress and cancels the query (a limit of the timeout would end a working solve that reports
+#: progress as a zenoh "Timeout" error reply once the call outlasts it)
+QUERY_SECONDS = 7 * 86400.0
 
 
 class _Call:
@@ -290,7 +294,7 @@ class ParticipantClient:
         call = _Call(query_key)
         self.session.get(query_key, callback(call.replies.append, call.done.set),
                          payload=zbytes(payload, self.shared_memory),
-                         timeout=timeout + 5.0,  # ours fires first
+                         timeout=QUERY_SECONDS,  # the wait in :meth:`exchange` decides; it cancels the query
                          cancellation_token=call.cancel)
         return call
 
