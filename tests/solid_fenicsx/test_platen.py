@@ -10,6 +10,7 @@ pytest.importorskip("dolfinx")
 from coupler.plan.plan import make_plan  # noqa: E402
 from coupler.scene import load  # noqa: E402
 from solid_fenicsx.participant import SolidParticipant  # noqa: E402
+from solid_fenicsx.platen import Platen  # noqa: E402
 
 #: a unit-height block, nu = 0: under a platen on top and rollers below and on two sides the
 #: stress is uniaxial whatever the platen holds laterally: sigma = E d / H exactly (P1 too)
@@ -105,3 +106,25 @@ def test_a_platen_must_be_flat(tmp_path):
         Platen(s, "zmax")
     platen = Platen(Elasticity(box_mesh(shape=(2, 2, 2)), E=1e9, nu=0.3), "zmax")
     assert np.array_equal(platen.normal, [0.0, 0.0, 1.0]) and platen.area == pytest.approx(1.0, rel=1e-12)
+
+
+class CurvePlaten(Platen):
+    """The platen's search on a stress curve sigma(d) in place of the solid's solves."""
+
+    def __init__(self, curve, compliance: float):
+        self.curve, self.compliance, self.tolerance, self.max_solves = curve, compliance, 1e-3, 40
+        self.history, self.d, self.area = [], 0.0, 1.0
+
+    def set(self, displacement: float) -> None:
+        self.d = displacement
+
+    def stress(self) -> float:
+        return self.curve(self.d)
+
+
+def test_a_stiffening_contact_is_found_by_secant_steps_in_few_solves():
+    """The usual curve (contact stiffening exponentially with closure): found in a handful of
+    solves; the search steps towards the target from every trial (a trial above it is followed by
+    one at a smaller displacement), so the bracket's ends never come inverted."""
+    found = CurvePlaten(lambda d: 1e5 * np.expm1(d / 1e-5), compliance=1e-11).load_to(2e6, solve=lambda: True)
+    assert found.converged and found.stress == pytest.approx(2e6, rel=1e-3) and found.solves <= 8
