@@ -414,24 +414,25 @@ def test_a_solid_without_boundary_triangles_on_two_coupler_ranks(tmp_path):
         assert [h["solid_rows"] > 0 for h in held] == [True, solid_ranks > 1]
 
 
-#: figures that are round-off where the serial run has them 0 or near it, compared absolutely: the solid's
-#: volume outside the grid (0 or one ulp of 1: its volume and the fluid cells' sums in another order) and
-#: the spread of the sections' flow rates (3e-13 with OpenFOAM: its mass balance to the solver's tolerance)
-#: and how far a flow rate is from its target (a Stokes flow reaches it to round-off)
-ROUND_OFF = {"/geometry_update/solid_volume_outside_grid", "/check/Q_spread",
-             "/steps/0/flow_rate_control/relative_error"}
+#: figures that are round-off where the serial run has them 0 or near it, compared absolutely, with the
+#: largest each may be: the solid's volume outside the grid (0 or one ulp of 1: its volume and the fluid
+#: cells' sums in another order), the relative spread of the sections' flow rates (OpenFOAM's mass balance,
+#: to its pressure solve's tolerance: 4e-10, fluid_openfoam.case.PRESSURE_TOLERANCE) and how far a flow
+#: rate is from its target (a Stokes flow reaches it to round-off)
+ROUND_OFF = {"/geometry_update/solid_volume_outside_grid": 1e-12, "/check/Q_spread": 1e-9,
+             "/steps/0/flow_rate_control/relative_error": 1e-12}
 
 
 def assert_same_but_round_off(serial, ranks, label: str) -> dict:
     """Every field, every summary figure and the check's report to 1e-10, the same iterations; the
     figures of :data:`ROUND_OFF` to 1e-15 absolutely. The differences found."""
     found = differences(serial, ranks)
-    for key in ROUND_OFF:
+    for key, largest in ROUND_OFF.items():
         figures = [summary(d) for d in (serial, ranks)]
         for part in key.strip("/").split("/"):
             figures = [f[int(part)] if isinstance(f, list) else f.get(part, {}) for f in figures]
         if figures != [{}, {}]:
-            assert abs(figures[0] - figures[1]) < 1e-15 and max(figures) < 1e-12, (label, key, figures)
+            assert abs(figures[0] - figures[1]) < 1e-15 and max(figures) < largest, (label, key, figures)
     worst = max((k for k in found if k.removeprefix("summary ") not in ROUND_OFF), key=found.get)
     assert found[worst] < TOLERANCE, f"{label}: {worst} differs by {found[worst]:.2e}"
     assert summary(ranks)["iterations"] == summary(serial)["iterations"], label

@@ -26,6 +26,7 @@ class Recorder:
 
 comm, idle = MPI.COMM_WORLD, float(sys.argv[1])
 handler = Recorder()
+comm.Barrier()  # the clocks start together (a rank slower to start had less to wait)
 cpu, wall = time.process_time(), time.perf_counter()
 if comm.rank == 0:
     root = _MpiRoot(handler, comm)
@@ -60,6 +61,7 @@ from mpi4py import MPI
 from coupler.run.ranks import agree
 
 comm, idle = MPI.COMM_WORLD, float(sys.argv[1])
+comm.Barrier()  # the clocks start together (a rank slower to start had less to wait)
 cpu, wall = time.process_time(), time.perf_counter()
 for _ in range(2):  # rank 0 waits for its participant's reply; rank 1 has no participant part
     agree(comm, time.sleep, idle if comm.rank == 0 else 0.0)
