@@ -1,6 +1,8 @@
-"""PETSc's sparse LU factorization of a scipy matrix on one process, for the blocks of the
-steady Newton solve's preconditioner (:class:`fluid_chorin.steady.Block`): nested-dissection
-ordering, no pivoting (the blocks factorized are diagonally dominant or Laplacian-like)."""
+"""PETSc for the steady Newton solve (:mod:`fluid_chorin.steady`) on one process, for the blocks
+of its preconditioner (:class:`fluid_chorin.steady.Block`): the sparse LU factorization of a
+scipy matrix (nested-dissection ordering, no pivoting: the blocks are diagonally dominant) and
+one V-cycle of hypre's BoomerAMG (a Laplacian-like block); and GMRES preconditioned by a Python
+function."""
 
 from __future__ import annotations
 
@@ -8,24 +10,35 @@ import numpy as np
 import scipy.sparse as sp
 
 
-class Factor:
-    """The LU factors of the square matrix ``M``; :meth:`solve` applies ``M^-1``."""
+def _matrix(M: sp.spmatrix):
+    from petsc4py import PETSc
 
-    def __init__(self, M: sp.spmatrix):
+    M = sp.csr_matrix(M)
+    M.sort_indices()
+    out = PETSc.Mat().createAIJ(size=M.shape, csr=(M.indptr.astype(PETSc.IntType), M.indices.astype(PETSc.IntType),
+                                                   M.data), comm=PETSc.COMM_SELF)
+    out.assemble()
+    return out
+
+
+class Factor:
+    """An approximate inverse of the square matrix ``M``: its LU factors, or (``multigrid``) one
+    V-cycle of BoomerAMG; :meth:`solve` applies it."""
+
+    def __init__(self, M: sp.spmatrix, multigrid: bool = False):
         from petsc4py import PETSc
 
-        M = sp.csr_matrix(M)
-        M.sort_indices()
-        self.M = PETSc.Mat().createAIJ(size=M.shape, csr=(M.indptr.astype(PETSc.IntType),
-                                                          M.indices.astype(PETSc.IntType), M.data),
-                                       comm=PETSc.COMM_SELF)
-        self.M.assemble()
+        self.M = _matrix(M)
         self.ksp = PETSc.KSP().create(comm=PETSc.COMM_SELF)
         self.ksp.setOperators(self.M)
         self.ksp.setType("preonly")
         pc = self.ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorOrdering("nd")
+        if multigrid:
+            pc.setType("hypre")
+            pc.setHYPREType("boomeramg")
+        else:
+            pc.setType("lu")
+            pc.setFactorOrdering("nd")
         self.ksp.setUp()
         self.x, self.b = self.M.createVecs()
 
@@ -55,11 +68,7 @@ def gmres(J: sp.spmatrix, b: np.ndarray, apply, rtol: float, atol: float, iterat
     the solution and the iterations made."""
     from petsc4py import PETSc
 
-    J = sp.csr_matrix(J)
-    J.sort_indices()
-    M = PETSc.Mat().createAIJ(size=J.shape, csr=(J.indptr.astype(PETSc.IntType), J.indices.astype(PETSc.IntType),
-                                                 J.data), comm=PETSc.COMM_SELF)
-    M.assemble()
+    M = _matrix(J)
     ksp = PETSc.KSP().create(comm=PETSc.COMM_SELF)
     ksp.setOperators(M)
     ksp.setType("gmres")

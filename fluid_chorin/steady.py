@@ -21,8 +21,8 @@ through the convection only, so it is kept over steps and over solves while each
 shrinks the change to :data:`CONTRACTION` of the last. The pressure gradient, the divergence, the drag and the open faces'
 rows are assembled directly, anew for each solve (the solid moves between them). Each Newton
 step solves its linear system by GMRES, right-preconditioned by a block factorization
-(:class:`Block`: line solves of the velocity block along the finest direction and a Schur
-complement with the lines' lumped inverse), built once per solid and kept over the steps while
+(:class:`Block`: line solves of the velocity block along the finest direction and a multigrid
+cycle on a Schur complement with the lines' lumped inverse), built once per solid and kept over the steps while
 GMRES converges in :data:`KRYLOV` iterations; the first step to :data:`LINEAR_TOLERANCE`, the
 later ones inexactly (:data:`FORCING`). Measured against the march: docs/benchmarks.md
 (bench/hm.py --steady).
@@ -308,7 +308,8 @@ class Block:
     across a thin gap, where viscosity and drag dominate; one tridiagonal system per line) and
     ``L`` its lumped inverse ``diag(Ah^-1 1)``: a line's response to a uniform pressure gradient,
     the column's Poiseuille conductance in a gap (``diag(A)^-1`` would take a cell's, too small by
-    about ``n^2 / 6`` at ``n`` cells across). Both are factorized by :class:`fluid_chorin.petsc.Factor`."""
+    about ``n^2 / 6`` at ``n`` cells across). ``Ah`` by its LU factors, ``S`` (Laplacian-like)
+    by one V-cycle of algebraic multigrid (:class:`fluid_chorin.petsc.Factor`)."""
 
     def __init__(self, J: sp.csr_matrix, nq: int, lines: np.ndarray, drag: list):
         self.J = self.built_for = J  # the system solved, and the one whose blocks precondition it
@@ -318,8 +319,15 @@ class Block:
         keep = lines[A.row] == lines[A.col]
         self.B, self.C = J[:nq, nq:].tocsr(), J[nq:, :nq].tocsr()
         self.line = Factor(sp.csr_matrix((A.data[keep], (A.row[keep], A.col[keep])), shape=A.shape))
-        L = sp.diags(self.line.solve(np.ones(nq)))
-        self.schur = Factor(J[nq:, nq:] - self.C @ L @ self.B)
+        # -S = B^T |L| B + (open faces) -E: symmetric positive definite; a pinned pressure (E's
+        # identity row) made an identity row and column, the cell held in the preconditioner
+        S = (self.C @ sp.diags(self.line.solve(np.ones(nq))) @ self.B - J[nq:, nq:]).tocsr()
+        pinned = J[nq:, nq:].nnz > 0
+        if pinned:
+            keep = sp.diags(np.r_[0.0, np.ones(S.shape[0] - 1)])
+            S = keep @ S @ keep + sp.diags(np.r_[1.0, np.zeros(S.shape[0] - 1)])
+        self.schur = Factor(S, multigrid=True)
+        self.sign = np.r_[1.0 if pinned else -1.0, -np.ones(S.shape[0] - 1)]  # S^-1 = -(-S)^-1 but the pin
 
     def serves(self, drag: list) -> bool:
         """Whether it was built for this drag (a solid moved since: GMRES stalls with it)."""
@@ -328,7 +336,7 @@ class Block:
     def apply(self, r: np.ndarray) -> np.ndarray:
         r = np.asarray(r).ravel()
         f, g = r[:self.nq], r[self.nq:]
-        p = self.schur.solve(g - self.C @ self.line.solve(f))
+        p = self.sign * self.schur.solve(g - self.C @ self.line.solve(f))
         return np.concatenate([self.line.solve(f - self.B @ p), p])
 
     def destroy(self) -> None:
