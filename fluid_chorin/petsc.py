@@ -1,8 +1,7 @@
-"""PETSc for the steady Newton solve (:mod:`fluid_chorin.steady`) on one process, for the blocks
-of its preconditioner (:class:`fluid_chorin.steady.Block`): the sparse LU factorization of a
-scipy matrix (nested-dissection ordering, no pivoting: the blocks are diagonally dominant) and
-one V-cycle of hypre's BoomerAMG (a Laplacian-like block); and GMRES preconditioned by a Python
-function."""
+"""PETSc for the steady Newton solve (:mod:`fluid_chorin.steady`) on one process: the sparse LU
+factorization of a scipy matrix for the blocks of its preconditioner
+(:class:`fluid_chorin.steady.Block`; nested-dissection ordering, no pivoting: the blocks are
+diagonally dominant or Laplacian-like), and GMRES preconditioned by a Python function."""
 
 from __future__ import annotations
 
@@ -22,10 +21,9 @@ def _matrix(M: sp.spmatrix):
 
 
 class Factor:
-    """An approximate inverse of the square matrix ``M``: its LU factors, or (``multigrid``) one
-    V-cycle of BoomerAMG; :meth:`solve` applies it."""
+    """The LU factors of the square matrix ``M``; :meth:`solve` applies ``M^-1``."""
 
-    def __init__(self, M: sp.spmatrix, multigrid: bool = False):
+    def __init__(self, M: sp.spmatrix):
         from petsc4py import PETSc
 
         self.M = _matrix(M)
@@ -33,12 +31,8 @@ class Factor:
         self.ksp.setOperators(self.M)
         self.ksp.setType("preonly")
         pc = self.ksp.getPC()
-        if multigrid:
-            pc.setType("hypre")
-            pc.setHYPREType("boomeramg")
-        else:
-            pc.setType("lu")
-            pc.setFactorOrdering("nd")
+        pc.setType("lu")
+        pc.setFactorOrdering("nd")
         self.ksp.setUp()
         self.x, self.b = self.M.createVecs()
 

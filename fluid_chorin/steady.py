@@ -21,8 +21,8 @@ through the convection only, so it is kept over steps and over solves while each
 shrinks the change to :data:`CONTRACTION` of the last. The pressure gradient, the divergence, the drag and the open faces'
 rows are assembled directly, anew for each solve (the solid moves between them). Each Newton
 step solves its linear system by GMRES, right-preconditioned by a block factorization
-(:class:`Block`: line solves of the velocity block along the finest direction and a multigrid
-cycle on a Schur complement with the lines' lumped inverse), built once per solid and kept over the steps while
+(:class:`Block`: line solves of the velocity block along the finest direction and a Schur
+complement with the lines' lumped inverse), built once per solid and kept over the steps while
 GMRES converges in :data:`KRYLOV` iterations; the first step to :data:`LINEAR_TOLERANCE`, the
 later ones inexactly (:data:`FORCING`). Measured against the march: docs/benchmarks.md
 (bench/hm.py --steady).
@@ -308,8 +308,11 @@ class Block:
     across a thin gap, where viscosity and drag dominate; one tridiagonal system per line) and
     ``L`` its lumped inverse ``diag(Ah^-1 1)``: a line's response to a uniform pressure gradient,
     the column's Poiseuille conductance in a gap (``diag(A)^-1`` would take a cell's, too small by
-    about ``n^2 / 6`` at ``n`` cells across). ``Ah`` by its LU factors, ``S`` (Laplacian-like)
-    by one V-cycle of algebraic multigrid (:class:`fluid_chorin.petsc.Factor`)."""
+    about ``n^2 / 6`` at ``n`` cells across). Both by their LU factors
+    (:class:`fluid_chorin.petsc.Factor`): GMRES then takes about as many iterations at 8 as at
+    32 cells across a gap, where one V-cycle of algebraic multigrid on ``S`` (very anisotropic:
+    its coupling across the gap is ``12 (n h_x / H)^2`` times the one along) takes 4 to 10 times
+    as many at 32 across (measured on a plates channel)."""
 
     def __init__(self, J: sp.csr_matrix, nq: int, lines: np.ndarray, drag: list):
         self.J = self.built_for = J  # the system solved, and the one whose blocks precondition it
@@ -321,13 +324,17 @@ class Block:
         self.line = Factor(sp.csr_matrix((A.data[keep], (A.row[keep], A.col[keep])), shape=A.shape))
         # -S = B^T |L| B + (open faces) -E: symmetric positive definite; a pinned pressure (E's
         # identity row) made an identity row and column, the cell held in the preconditioner
-        S = (self.C @ sp.diags(self.line.solve(np.ones(nq))) @ self.B - J[nq:, nq:]).tocsr()
+        S = (self.C @ sp.diags(self.lumped()) @ self.B - J[nq:, nq:]).tocsr()
         pinned = J[nq:, nq:].nnz > 0
         if pinned:
             keep = sp.diags(np.r_[0.0, np.ones(S.shape[0] - 1)])
             S = keep @ S @ keep + sp.diags(np.r_[1.0, np.zeros(S.shape[0] - 1)])
-        self.schur = Factor(S, multigrid=True)
+        self.schur = Factor(S)
         self.sign = np.r_[1.0 if pinned else -1.0, -np.ones(S.shape[0] - 1)]  # S^-1 = -(-S)^-1 but the pin
+
+    def lumped(self) -> np.ndarray:
+        """``L``: each velocity unknown's response to a unit force on its whole line."""
+        return self.line.solve(np.ones(self.nq))
 
     def serves(self, drag: list) -> bool:
         """Whether it was built for this drag (a solid moved since: GMRES stalls with it)."""
