@@ -1,7 +1,8 @@
-"""PETSc for the steady Newton solve (:mod:`fluid_chorin.steady`) on one process: the sparse LU
-factorization of a scipy matrix for the blocks of its preconditioner
-(:class:`fluid_chorin.steady.Block`; nested-dissection ordering, no pivoting: the blocks are
-diagonally dominant or Laplacian-like), and GMRES preconditioned by a Python function."""
+"""PETSc for the steady Newton solve (:mod:`fluid_chorin.steady`) on one process, for the blocks
+of its preconditioner (:class:`fluid_chorin.steady.Block`): the sparse LU factorization of a
+scipy matrix (nested-dissection ordering, no pivoting: the blocks are diagonally dominant or
+Laplacian-like) or one V-cycle of hypre's BoomerAMG; and GMRES preconditioned by a Python
+function."""
 
 from __future__ import annotations
 
@@ -21,9 +22,10 @@ def _matrix(M: sp.spmatrix):
 
 
 class Factor:
-    """The LU factors of the square matrix ``M``; :meth:`solve` applies ``M^-1``."""
+    """An inverse of the square matrix ``M``: its LU factors, or (``multigrid``) one V-cycle of
+    BoomerAMG; :meth:`solve` applies it."""
 
-    def __init__(self, M: sp.spmatrix):
+    def __init__(self, M: sp.spmatrix, multigrid: bool = False):
         from petsc4py import PETSc
 
         self.M = _matrix(M)
@@ -31,8 +33,12 @@ class Factor:
         self.ksp.setOperators(self.M)
         self.ksp.setType("preonly")
         pc = self.ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorOrdering("nd")
+        if multigrid:
+            pc.setType("hypre")
+            pc.setHYPREType("boomeramg")
+        else:
+            pc.setType("lu")
+            pc.setFactorOrdering("nd")
         self.ksp.setUp()
         self.x, self.b = self.M.createVecs()
 

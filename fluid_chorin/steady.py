@@ -18,14 +18,15 @@ The Jacobian of the momentum terms is probed: central differences, exact for the
 convection, with the unknowns coloured by their index modulo 3 in each direction (every term
 reads its neighbours at most one index away), 27 colours per component; it depends on the state
 through the convection only, so it is kept over steps and over solves while each Newton step
-shrinks the change to :data:`CONTRACTION` of the last. The pressure gradient, the divergence, the drag and the open faces'
-rows are assembled directly, anew for each solve (the solid moves between them). Each Newton
-step solves its linear system by GMRES, right-preconditioned by a block factorization
-(:class:`Block`: line solves of the velocity block along the finest direction and a Schur
-complement with the lines' lumped inverse), built once per solid and kept over the steps while
-GMRES converges in :data:`KRYLOV` iterations; the first step to :data:`LINEAR_TOLERANCE`, the
-later ones inexactly (:data:`FORCING`). Measured against the march: docs/benchmarks.md
-(bench/hm.py --steady).
+shrinks the change to :data:`CONTRACTION` of the last. The pressure gradient, the divergence,
+the drag and the open faces' rows are assembled directly, anew for each solve (the solid moves
+between them). Each Newton step solves its linear system by GMRES, right-preconditioned by a
+block factorization (:class:`Block`: line solves of the velocity block along the finest
+direction and a Schur complement with the lines' lumped inverse, by a multigrid cycle while
+GMRES converges with it in half of :data:`KRYLOV` iterations, else by LU from then on), built
+once per solid and kept over the steps while GMRES converges; the first step to
+:data:`LINEAR_TOLERANCE`, the later ones inexactly (:data:`FORCING`). Measured against the
+march: docs/benchmarks.md (bench/hm.py --steady).
 """
 
 from __future__ import annotations
@@ -54,7 +55,8 @@ LINEAR_TOLERANCE = 1e-10
 #: GMRES's relative residual in the later steps (inexact Newton: a step's error is this fraction
 #: of the step, itself near the solve's tolerance when the solve ends)
 FORCING = 0.1
-#: GMRES iterations per Newton step at most (beyond, the preconditioner is built afresh)
+#: GMRES iterations per Newton step at most (beyond, the preconditioner is built afresh; with its
+#: Schur complement by multigrid half as many, beyond: by LU)
 KRYLOV = 120
 #: a linear residual below this fraction of the solve's first one is rounding error
 ROUNDING = 1e-13
@@ -108,13 +110,16 @@ class SteadyNewton:
         #: the line of each velocity unknown: its component and its face's indices but along the
         #: direction of the finest spacing (the thin gap's across)
         axis = AXIS[min((d for d in range(3) if g.active[d]), key=lambda d: g.h[d])]
+        span = sum(m.size for m in self.free)
         self.lines = np.concatenate([
-            c * sum(m.size for m in self.free) + np.ravel_multi_index(tuple(np.delete(np.indices(m.shape), axis, axis=0)),
-                                               tuple(np.delete(m.shape, axis)))[m] for c, m in enumerate(self.free)])
+            c * span + np.ravel_multi_index(tuple(np.delete(np.indices(m.shape), axis, axis=0)),
+                                            tuple(np.delete(m.shape, axis)))[m] for c, m in enumerate(self.free)])
         #: the probed momentum terms' Jacobian, kept over steps and solves while Newton contracts
         self.terms: sp.csr_matrix | None = None
-        #: the preconditioner, kept over solves while it makes GMRES converge
+        #: the preconditioner, kept over steps while it makes GMRES converge
         self.linear: Block | None = None
+        #: its Schur complement by multigrid, until GMRES misses with it: by LU from then on
+        self.multigrid = True
 
     # ------------------------------------------------------------------ the equations
     def unpack(self, x: np.ndarray, base: list) -> tuple[list, np.ndarray]:
@@ -260,16 +265,18 @@ class SteadyNewton:
                 if self.linear is None or not self.linear.serves(s.drag):  # built for another solid
                     if self.linear is not None:
                         self.linear.destroy()
-                    self.linear, builds = Block(J, self.nq, self.lines, s.drag), builds + 1
+                    self.linear, builds = Block(J, self.nq, self.lines, s.drag, self.multigrid), builds + 1
                 self.linear.J = J  # over Newton steps the preconditioner serves while GMRES converges
             F = -self.residual(x, base, pin)
             floor = ROUNDING * float(np.linalg.norm(F)) if it == 1 else floor  # near it, a step is rounding
             eta = rtol if it == 1 else max(rtol, FORCING)
             dx, iterations, solved = self.linear.solve(F, eta, floor)
             krylov += iterations
-            if not solved and self.linear.built_for is not J:  # precondition with this Jacobian's blocks
+            # missed: precondition with this Jacobian's blocks, and if that missed, by LU
+            while not solved and (self.linear.built_for is not J or self.linear.multigrid):
+                self.multigrid = self.multigrid and self.linear.built_for is not J
                 self.linear.destroy()
-                self.linear, builds = Block(J, self.nq, self.lines, s.drag), builds + 1
+                self.linear, builds = Block(J, self.nq, self.lines, s.drag, self.multigrid), builds + 1
                 dx, iterations, solved = self.linear.solve(F, eta, floor)
                 krylov += iterations
             x = x + dx
@@ -293,8 +300,9 @@ class SteadyNewton:
         why = ("" if converged else f"; its last linear solve missed {eta:g} even with its Jacobian's preconditioner"
                if residual < tolerance else f"; limit of {max_iterations} Newton steps reached")
         report = SolveReport("chorin steady Newton", converged, it, residual, tolerance,
-                             f"{jacobians} Jacobians ({probes} probed), {builds} preconditioners, {krylov} GMRES "
-                             f"iterations on {self.nq + self.ncell} unknowns" + why)
+                             f"{jacobians} Jacobians ({probes} probed), {builds} preconditioners (Schur complement by "
+                             f"{'multigrid' if self.multigrid else 'LU'}), {krylov} GMRES iterations on "
+                             f"{self.nq + self.ncell} unknowns" + why)
         return report, q, p
 
 
@@ -308,14 +316,16 @@ class Block:
     across a thin gap, where viscosity and drag dominate; one tridiagonal system per line) and
     ``L`` its lumped inverse ``diag(Ah^-1 1)``: a line's response to a uniform pressure gradient,
     the column's Poiseuille conductance in a gap (``diag(A)^-1`` would take a cell's, too small by
-    about ``n^2 / 6`` at ``n`` cells across). Both by their LU factors
-    (:class:`fluid_chorin.petsc.Factor`): GMRES then takes about as many iterations at 8 as at
-    32 cells across a gap, where one V-cycle of algebraic multigrid on ``S`` (very anisotropic:
-    its coupling across the gap is ``12 (n h_x / H)^2`` times the one along) takes 4 to 10 times
-    as many at 32 across (measured on a plates channel)."""
+    about ``n^2 / 6`` at ``n`` cells across). ``Ah`` by its LU factors, ``S`` by one V-cycle of
+    algebraic multigrid (``multigrid``; a tenth of the LU's set-up on the shipped hm_fracture grid,
+    about as many GMRES iterations) or its LU factors (:class:`fluid_chorin.petsc.Factor`). With
+    the LU GMRES takes about as many iterations at 8 as at 32 cells across a gap; with the V-cycle
+    (``S`` is very anisotropic there: its coupling across the gap about ``12 (n h_x / H)^2`` times
+    the one along) 2 and 10 times as many as with the LU on a duct."""
 
-    def __init__(self, J: sp.csr_matrix, nq: int, lines: np.ndarray, drag: list):
+    def __init__(self, J: sp.csr_matrix, nq: int, lines: np.ndarray, drag: list, multigrid: bool = False):
         self.J = self.built_for = J  # the system solved, and the one whose blocks precondition it
+        self.multigrid = multigrid
         self.drag = [a.copy() for a in drag]
         self.nq = nq
         A = J[:nq, :nq].tocoo()
@@ -329,7 +339,7 @@ class Block:
         if pinned:
             keep = sp.diags(np.r_[0.0, np.ones(S.shape[0] - 1)])
             S = keep @ S @ keep + sp.diags(np.r_[1.0, np.zeros(S.shape[0] - 1)])
-        self.schur = Factor(S)
+        self.schur = Factor(S, multigrid)
         self.sign = np.r_[1.0 if pinned else -1.0, -np.ones(S.shape[0] - 1)]  # S^-1 = -(-S)^-1 but the pin
 
     def lumped(self) -> np.ndarray:
@@ -351,8 +361,8 @@ class Block:
         self.schur.destroy()
 
     def solve(self, b: np.ndarray, rtol: float, atol: float) -> tuple[np.ndarray, int, bool]:
-        """``J x = b`` to the residual ``max(rtol |b|, atol)`` in at most :data:`KRYLOV` iterations
-        (:func:`fluid_chorin.petsc.gmres`, right-preconditioned): the solution, the iterations and
-        whether it got there, by the true residual."""
-        x, count = gmres(self.J, b, self.apply, rtol, atol, KRYLOV)
+        """``J x = b`` to the residual ``max(rtol |b|, atol)`` in at most :data:`KRYLOV` iterations,
+        half as many with the multigrid cycle (:func:`fluid_chorin.petsc.gmres`, right-preconditioned):
+        the solution, the iterations and whether it got there, by the true residual."""
+        x, count = gmres(self.J, b, self.apply, rtol, atol, KRYLOV // 2 if self.multigrid else KRYLOV)
         return x, count, float(np.linalg.norm(self.J @ x - b)) <= max(rtol * float(np.linalg.norm(b)), atol)
