@@ -10,6 +10,13 @@ import numpy as np
 import scipy.sparse as sp
 
 
+def has_multigrid() -> bool:
+    """Whether this PETSc has hypre (BoomerAMG)."""
+    from petsc4py import PETSc
+
+    return bool(PETSc.Sys.hasExternalPackage("hypre"))
+
+
 def _matrix(M: sp.spmatrix):
     from petsc4py import PETSc
 

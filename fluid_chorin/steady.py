@@ -41,7 +41,7 @@ import scipy.sparse as sp
 
 from coupler.protocol.wire import SolveReport
 
-from .petsc import Factor, gmres
+from .petsc import Factor, gmres, has_multigrid
 from .staggered import AXIS, along
 
 log = logging.getLogger("varcouple.fluid_chorin")
@@ -118,8 +118,9 @@ class SteadyNewton:
         self.terms: sp.csr_matrix | None = None
         #: the preconditioner, kept over steps while it makes GMRES converge
         self.linear: Block | None = None
-        #: its Schur complement by multigrid, until GMRES misses with it: by LU from then on
-        self.multigrid = True
+        #: its Schur complement by multigrid (if PETSc has hypre), until GMRES misses with it: by LU
+        #: from then on
+        self.multigrid = has_multigrid()
 
     # ------------------------------------------------------------------ the equations
     def unpack(self, x: np.ndarray, base: list) -> tuple[list, np.ndarray]:
