@@ -15,8 +15,8 @@ SOLID_VELOCITIES = ("cells", "bodies", "none")
 STEADY_METHODS = ("march", "newton")
 
 def refuses(scene) -> str | None:
-    """Why the Chorin fluid cannot run `scene` (None: it can): the steady Newton solve factorizes
-    the whole grid's system in one process."""
+    """Why the Chorin fluid cannot run `scene` (None: it can): the steady Newton solve assembles
+    and factorizes the whole grid's blocks in one process."""
     solver = scene.solvers["fluid"]
     if solver.settings.get("steady") == "newton" and solver.ranks > 1:
         return f"steady = 'newton' solves on one rank, got ranks = {solver.ranks}: use steady = 'march' on several ranks"
@@ -35,9 +35,9 @@ PARTICIPANT = ParticipantSpec(
                 "dynamics: in one outer iteration) that ends the solve", default=1e-7, positive=True),
         Setting("steady", "string", "without dynamics, how the steady flow is solved: march (pseudo-time steps to the "
                 "steady state, up to max_iterations), newton (Newton on the steady velocity-pressure system of the "
-                "grid, GMRES preconditioned by a sparse LU; one rank only; the same steady state; its time grows less "
-                "with the cells across a fracture than the march's, but its factorization makes it slower than the "
-                "march on the shipped hm_fracture grid: bench/hm.py --steady)", default="march", choices=STEADY_METHODS),
+                "grid, GMRES preconditioned by line solves along the finest direction and a Schur complement with their "
+                "lumped inverse; one rank only; the same steady state; its time grows less with the cells across a "
+                "fracture than the march's: bench/hm.py --steady)", default="march", choices=STEADY_METHODS),
         Setting("newton_iterations", "integer", "without dynamics and steady = newton: Newton steps per coupling "
                 "iteration at most", default=30, minimum=1),
         Setting("substeps", "integer", "with dynamics: at least this many time steps per coupling step (more when "
