@@ -87,4 +87,7 @@ def record(names: list[str]) -> None:
 
 
 if __name__ == "__main__":
+    import os
+
+    os.environ["VARCOUPLE_PICTURES"] = "0"  # as the tests run the cases (conftest.no_pictures): no picture figures
     record(sys.argv[1:] or sorted(p.name for p in CASES.iterdir() if (p / "scene.toml").is_file()))
