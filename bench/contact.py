@@ -49,6 +49,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.output import finish  # noqa: E402
+
 from coupler.plan.plan import make_plan  # noqa: E402
 from coupler.scene import load  # noqa: E402
 from solid_fenicsx.contact_hertz import PUSH, hertz_contact  # noqa: E402
@@ -290,11 +292,7 @@ def main(argv=None) -> dict:
                      f" -> {g['snes_vi_iterations']['finest_max']}; time SNES VI / active set at the finest level "
                      f"{g['time_2x_below_snes_vi_at_finest']['ratio']:.2f} (goal >= 2) "
                      f"{g['time_2x_below_snes_vi_at_finest']['status']}")
-    print("\n".join(lines))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2, default=float))
-    print(f"written {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out}")
-    return result
+    return finish(result, lines, out)
 
 
 if __name__ == "__main__":

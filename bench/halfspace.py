@@ -27,7 +27,6 @@ The machine is shared: the load average before and after is recorded; times are 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -40,6 +39,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from bench.output import finish  # noqa: E402
 
 from coupler.plan.plan import make_plan  # noqa: E402
 from coupler.scene import load  # noqa: E402
@@ -239,11 +240,7 @@ def main(argv=None) -> dict:
                  f"{g['area_trend_same']['worst_slope_difference']:.1%} {g['area_trend_same']['status']}")
     lines.append(f"load average before {result['meta']['load_average_before'][0]:.2f}, after "
                  f"{result['meta']['load_average_after'][0]:.2f}")
-    print("\n".join(lines))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2, default=float))
-    print(f"written {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out}")
-    return result
+    return finish(result, lines, out)
 
 
 if __name__ == "__main__":
