@@ -160,11 +160,13 @@ log "pip: project built in $((SECONDS - t_build))s"
 # tamaas: the periodic elastic half-space contact solver, the reference of bench/halfspace.py
 # and tests/solid_fenicsx/test_contact_halfspace.py (bench and test only). Its 2.9 wheel
 # declares numpy>=2 but runs on Debian's numpy 1.24 (pybind11, no numpy C API), so it is
-# installed without its declared dependencies and checked by importing it.
+# installed without its declared dependencies (and under the constraints holding Debian's numpy,
+# so that pip refuses rather than fetches numpy 2 should --no-deps ever go) and checked by
+# importing it beside dolfinx; the numpy check below proves numpy is still Debian's.
 log "pip: tamaas (half-space reference for the rough-contact test, --no-deps)"
-pip install --no-deps 'tamaas==2.9.*'
-"$VENV/bin/python" -c 'import tamaas' 2>/dev/null \
-  || die "tamaas does not import with Debian's numpy: $("$VENV/bin/python" -c 'import tamaas' 2>&1 | tail -1)"
+pip install -c "$CONSTRAINTS" --no-deps 'tamaas==2.9.*'
+"$VENV/bin/python" -c 'import dolfinx, tamaas' 2>/dev/null \
+  || die "tamaas does not import beside dolfinx on Debian's numpy: $("$VENV/bin/python" -c 'import dolfinx, tamaas' 2>&1 | tail -1)"
 
 # ---------------------------------------------------------------- checks + summary
 # numpy must be Debian's, imported from the system site packages, never from the venv.
