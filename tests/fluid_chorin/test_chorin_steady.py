@@ -84,10 +84,11 @@ def test_a_newton_step_limit_is_reported_not_converged():
 
 
 def test_a_jacobian_is_factorized_once_and_an_unsolved_system_is_not_converged(monkeypatch):
-    """The LU is made at most once per Jacobian (scipy's GMRES ``info`` called solves failed whose
-    true residual met the tolerance, and the same Jacobian was factorized again); a linear solve
-    that misses its tolerance even with the LU of its own Jacobian leaves the solve not converged,
-    however small the step it gave (before: taken, and a tiny step reported as converged)."""
+    """The preconditioner is built at most once per Jacobian (scipy's GMRES ``info`` once called
+    solves failed whose true residual met the tolerance, and the same Jacobian was factorized
+    again); a linear solve that misses its tolerance even with its own Jacobian's preconditioner
+    (the Schur complement by LU) leaves the solve not converged, however small the step it gave
+    (before: taken, and a tiny step reported as converged)."""
     from fluid_chorin import steady as module
 
     run = ChorinSolver(ChorinSpec.from_config({**CAVITY, "steady": "newton"})).steady()
