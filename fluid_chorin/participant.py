@@ -16,10 +16,13 @@ are labelled across the slabs from those inputs (:func:`transfer.bodies.rigid_bo
 allgather of each slab's face planes and one of its bodies' sums).
 
 Steady (no ``transient``): each ``advance`` makes pseudo-time steps (or Newton steps,
-``steady = "newton"``) from the current state (a warm start) to the tolerance. Transient: from
-``t`` over ``dt``. Both report the stepping and the pressure Poisson solves (``report_solve``).
+``steady = "newton"``) from the current state (a warm start) to the tolerance, and with
+``error_estimate`` solves the same flow on the grid coarsened across the gap
+(:mod:`fluid_chorin.coarsened`) from its own last state, reporting its flow rate as the figure
+``coarse_flow_rate`` (``report_figures``). Transient: from ``t`` over ``dt``. Each reports the
+stepping and the pressure Poisson solves (``report_solve``).
 
-State: in memory. ``save_state(w)`` copies the velocity, pressure and time;
+State: in memory. ``save_state(w)`` copies the velocity, pressure and time (of the coarse flow too);
 ``restore_state(w)`` goes back to the copy, so a repeated window gives identical outputs.
 """
 
@@ -34,6 +37,7 @@ from coupler.protocol.participant import Participant
 from coupler.protocol.roles import INLET_PRESSURE, PRESSURE, SOLID_FRACTION, SOLID_VELOCITY, VELOCITY
 from coupler.protocol.wire import Field
 
+from .coarsened import CoarsenedFlow, across_direction
 from .solver import ChorinSolver, Run, State
 from .spec import ChorinSpec
 
@@ -47,7 +51,9 @@ class ChorinParticipant(Participant):
 
     def __init__(self):
         self.solver: ChorinSolver | None = None
-        self.saved: dict[int, State] = {}
+        #: the steady flow on the grid coarsened across the gap (``error_estimate``; None: none)
+        self.coarse: CoarsenedFlow | None = None
+        self.saved: dict[int, tuple[State, State | None]] = {}
 
     def announce(self) -> dict:
         return {"kind": self.kind, "provides": [PRESSURE, VELOCITY],
@@ -56,6 +62,9 @@ class ChorinParticipant(Participant):
     def configure(self, config: dict) -> None:
         spec = ChorinSpec.from_config(config)
         self.solver, self.saved = ChorinSolver(spec, self.comm), {}
+        across = across_direction(spec)
+        self.coarse = (CoarsenedFlow(self.solver, across)
+                       if spec.error_estimate and not spec.transient and across is not None else None)
         slabs = self.solver.slabs
         log.info("fluid_chorin: grid %s (%d cells), nu %g, drag %g 1/s, %s%s", spec.grid.shape, spec.grid.num_cells,
                  spec.nu, self.solver.d_max, "transient" if spec.transient else f"steady ({spec.steady})",
@@ -79,19 +88,30 @@ class ChorinParticipant(Participant):
         if problem:
             raise ValueError(problem)
         arrays = {name: np.asarray(inputs[name].data, dtype=float) for name in INPUT_SHAPES if name in inputs}
+        solvers = [s for s in (solver, self.coarse) if s is not None]
         if INLET_PRESSURE in arrays:
-            solver.set_inlet_pressure(float(arrays.pop(INLET_PRESSURE)[0]))
+            pressure = float(arrays.pop(INLET_PRESSURE)[0])
+            for s in solvers:
+                s.set_inlet_pressure(pressure)
         if arrays:
             fraction = arrays.get(SOLID_FRACTION, solver.solid_fraction)
-            solver.set_solid(fraction, arrays.get(SOLID_VELOCITY))
+            for s in solvers:
+                s.set_solid(fraction, arrays.get(SOLID_VELOCITY))
+        self.solved(window, iteration, lambda: solver.transient(t, dt) if solver.spec.transient else solver.steady())
+        if self.coarse is not None:
+            self.solved(window, iteration, self.coarse.steady)
+            self.report_figures(coarse_flow_rate=self.coarse.flow_rate())
+        pressure, velocity = solver.part_fields()
+        return {PRESSURE: Field(PRESSURE, pressure, "Pa"), VELOCITY: Field(VELOCITY, velocity, "m/s")}
+
+    def solved(self, window, iteration, solve) -> None:
+        """Run ``solve`` (returns a :class:`fluid_chorin.solver.Run`), log and report it."""
         t0 = time.perf_counter()
-        run = solver.transient(t, dt) if solver.spec.transient else solver.steady()
+        run = solve()
         log.info("window %d iteration %d: %s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
                  iteration, run.report.solver, run.report.iterations, run.report.residual, len(run.poisson),
                  time.perf_counter() - t0)
         self.report(run)
-        pressure, velocity = solver.part_fields()
-        return {PRESSURE: Field(PRESSURE, pressure, "Pa"), VELOCITY: Field(VELOCITY, velocity, "m/s")}
 
     def input_problem(self, inputs) -> str | None:
         """An input whose shape is not one row per input cell of this rank (:data:`INPUT_SHAPES`)
@@ -127,11 +147,15 @@ class ChorinParticipant(Participant):
     def save_state(self, window):
         if self.solver is None:
             raise RuntimeError("save_state before configure")
-        self.saved[int(window)] = self.solver.state.copy()
+        self.saved[int(window)] = (self.solver.state.copy(),
+                                   None if self.coarse is None else self.coarse.solver.state.copy())
         for w in [w for w in self.saved if w < int(window) - 1]:
             del self.saved[w]  # keep the last two windows
 
     def restore_state(self, window):
         if int(window) not in self.saved:
             raise KeyError(f"no state saved for window {window} (saved: {sorted(self.saved)})")
-        self.solver.state = self.saved[int(window)].copy()
+        fine, coarse = self.saved[int(window)]
+        self.solver.state = fine.copy()
+        if self.coarse is not None:
+            self.coarse.solver.state = coarse.copy()

@@ -40,6 +40,10 @@ PARTICIPANT = ParticipantSpec(
                 "fracture than the march's: bench/hm.py --steady)", default="march", choices=STEADY_METHODS),
         Setting("newton_iterations", "integer", "without dynamics and steady = newton: Newton steps per coupling "
                 "iteration at most", default=30, minimum=1),
+        Setting("error_estimate", "boolean", "without dynamics: also solve each steady flow on the grid coarsened 2x "
+                "across the thin gap (pairs of cells merged, their solid fractions averaged: exact) and report its "
+                "flow rate (figure coarse_flow_rate), from which the coupler estimates the error of a fracture's "
+                "hydraulic aperture (summary.json fracture.hydraulic_aperture_error)", default=True),
         Setting("substeps", "integer", "with dynamics: at least this many time steps per coupling step (more when "
                 "the explicit stability bound asks)", default=1, minimum=1),
         Setting("outer_correctors", "integer", "with dynamics: predictor-projection outer iterations per time step "

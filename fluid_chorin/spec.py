@@ -46,6 +46,7 @@ class ChorinSpec:
     slab_axis: str
     steady: str
     newton_iterations: int
+    error_estimate: bool
 
     @property
     def nu(self) -> float:

@@ -3,7 +3,9 @@ one half, a mean open aperture resolved by less than one fluid cell, the narrowe
 flow's widest path by less than :data:`THROAT_CELLS`, and e_h above e_m; with the number of
 cells across and the flow rate's error the immersed plates measured at that resolution
 (cases/parallel_plates/README.md: +12.5 %, +3.1 %, +0.78 %, +0.20 % at 4, 8, 16, 32 cells across,
-exact fractions and wall drag: 2 (h/w)^2)."""
+exact fractions and wall drag: 2 (h/w)^2). And the error estimate of e_h from the flow rate on
+the grid coarsened 2x across the gap (:func:`aperture_error`), with its warning above
+:data:`ERROR_LIMIT`."""
 
 from __future__ import annotations
 
@@ -12,6 +14,16 @@ from __future__ import annotations
 THROAT_CELLS = 4
 #: contact area fraction above which the open space is a few channels near percolation
 CONTACT_AREA_LIMIT = 0.5
+#: the order of convergence of e_h across the gap the error estimate assumes (Richardson: the
+#: error of the fine e_h is |e_h - e_h,c| / (2^p - 1)). Measured on hm_fracture
+#: (cases/hm_fracture/README.md, "Converged e_h"): the observed order is about 1 from 8 cells
+#: across on (1.10 / 0.98 / 0.82 at 1 / 2 / 4 MPa) but 0.3 between 4, 8 and 16, where p = 1 gives
+#: 0.55 to 0.67 of the true error at 8 across and 0.76 at 16 across, 4 MPa: p = 1/2 (the factor
+#: 2.41) is the largest order that brackets the true error on that study's grids; on plates, whose
+#: flow converges at second order, it overestimates by 3 / (2^p - 1) = 7.2
+ASSUMED_ORDER = 0.5
+#: the relative error estimate of e_h above which a step warns
+ERROR_LIMIT = 0.05
 
 
 def plates_error(cells_across: float) -> float:
@@ -67,3 +79,28 @@ def apertures_warning(hydraulic: float, mechanical: float) -> str | None:
             f"rough faces passes less than plates at their mean gap (the flow avoids the narrow parts and turns "
             f"around the contacts); e_h above e_m says the gap is under-resolved across ([geometry.fluid] shape) "
             f"or the fluid model overestimates the flow (the local cubic law does, cases/hm_fracture/README.md)")
+
+
+def coarse_aperture(hydraulic: float, rate: float, coarse_rate: float) -> float:
+    """e_h on the coarsened grid at the same pressure drop: the cubic law's e_h is proportional
+    to Q^(1/3), so e_h,c = e_h (Q_c / Q)^(1/3) (0 when no flow passes the coarse grid)."""
+    ratio = coarse_rate / rate if rate else 0.0
+    return hydraulic * ratio ** (1.0 / 3.0) if ratio > 0 else 0.0
+
+
+def aperture_error(hydraulic: float, coarse: float, order: float = ASSUMED_ORDER) -> float:
+    """Richardson's estimate of the error of e_h on the fine grid from e_h,c on the grid 2x
+    coarser: |e_h - e_h,c| / (2^p - 1) at the order ``p`` (:data:`ASSUMED_ORDER`)."""
+    return abs(hydraulic - coarse) / (2.0 ** order - 1.0)
+
+
+def error_warning(hydraulic: float, error: float, cells_across: float) -> str | None:
+    """The warning for an estimated error of e_h above :data:`ERROR_LIMIT` of it (None below)."""
+    if hydraulic <= 0 or error <= ERROR_LIMIT * hydraulic:
+        return None
+    return (f"fracture: e_h {1e6 * hydraulic:.4g} um is uncertain by about +-{1e6 * error:.3g} um "
+            f"({100 * error / hydraulic:.0f} %, above {100 * ERROR_LIMIT:.0f} %): estimated from the flow rate on the "
+            f"fluid grid coarsened 2x across the fracture (Richardson at order {ASSUMED_ORDER:g}, "
+            f"cases/hm_fracture/README.md); the gap is {cells_across:.1f} cells across: refine [geometry.fluid] shape "
+            f"across the fracture")
+

@@ -425,7 +425,7 @@ class Run:
             for key, figures in (op.figures() if hasattr(op, "figures") else {}).items():
                 record.setdefault(key, {}).update(figures)  # operators of one kind share a key
         for name, monitor in self.monitors.items():
-            record[name] = monitor.figures(self.outputs)
+            record[name] = monitor.figures(self.outputs, self.figures)
         largest = self.max_displacement()
         if largest is not None:
             record["max_displacement"] = largest

@@ -3,9 +3,11 @@ warnings' thresholds, the plates study's error in them, and each kind printed on
 
 import pytest
 
-from coupler.fsi.fracture import FractureFigures
-from coupler.fsi.resolution import (apertures_warning, cells_across_warning, contact_area_warning, plates_error,
-                                   throat_warning)
+from types import SimpleNamespace
+
+from coupler.fsi.fracture import FractureFigures, table
+from coupler.fsi.resolution import (ASSUMED_ORDER, aperture_error, apertures_warning, cells_across_warning,
+                                   coarse_aperture, contact_area_warning, error_warning, plates_error, throat_warning)
 
 
 def test_the_plates_error_model_gives_the_measured_refinement_figures():
@@ -69,3 +71,64 @@ def test_each_kind_of_warning_is_logged_once_and_kept_per_step():
     assert first == ["a 1", "t 1"] and second == ["a 2", "t 2"]
     assert [t.split(" (per")[0] for t in monitor.ctx.logged] == ["a 1", "t 1"]
     assert all(t.endswith("(per step: summary.json steps[].fracture.warnings)") for t in monitor.ctx.logged)
+
+
+def test_the_coarse_aperture_is_the_cubic_law_at_the_same_pressure_drop():
+    """e_h is proportional to Q^(1/3): Q_c = 1.331 Q gives 1.1 e_h; no coarse flow: 0."""
+    assert coarse_aperture(8e-5, 2e-9, 1.331 * 2e-9) == pytest.approx(8.8e-5, rel=1e-12)
+    assert coarse_aperture(8e-5, 2e-9, 0.0) == 0.0 and coarse_aperture(8e-5, 2e-9, -1e-12) == 0.0
+
+
+def test_richardson_at_the_assumed_order():
+    """|e_h - e_h,c| / (2^p - 1): at p = 1 the difference itself, at the assumed 1/2 2.41 times it."""
+    assert aperture_error(80e-6, 90e-6, order=1.0) == pytest.approx(10e-6, rel=1e-12)
+    assert ASSUMED_ORDER == 0.5
+    assert aperture_error(80e-6, 70e-6) == pytest.approx(10e-6 / (2 ** 0.5 - 1), rel=1e-12)
+
+
+def test_an_estimated_error_above_five_percent_warns():
+    assert error_warning(80e-6, 4e-6, 8.0) is None  # 5 %
+    text = error_warning(80e-6, 8e-6, 7.5)
+    assert text.startswith("fracture: e_h 80 um is uncertain by about +-8 um (10 %, above 5 %)")
+    assert "the gap is 7.5 cells across" in text and "[geometry.fluid] shape" in text
+    assert error_warning(0.0, 0.0, 0.0) is None  # no flow: nothing to warn about
+
+
+def monitor(settings: dict, kind: str = "chorin") -> FractureFigures:
+    """The figures' estimate part, with a scene whose fluid is `kind` with `settings`."""
+    m = FractureFigures.__new__(FractureFigures)
+    solver = SimpleNamespace(kind=kind, settings=settings)
+    m.ctx = SimpleNamespace(scene=SimpleNamespace(solvers={"fluid": solver}))
+    return m
+
+
+def test_the_estimate_from_the_fluids_coarse_flow_rate_or_the_reason_without_it():
+    """With the fluid's coarse flow rate: e_h on the coarse grid, the error absolute and relative;
+    without it no number, the reason: a fluid that declares no estimate (named), the setting off,
+    a step without the figure (transient), no flow."""
+    found = monitor({"error_estimate": True}).error_estimate(80e-6, 2e-9, 1.331 * 2e-9)
+    assert found["coarse_hydraulic_aperture"] == pytest.approx(88e-6, rel=1e-12)
+    assert found["hydraulic_aperture_error"] == pytest.approx(8e-6 / (2 ** ASSUMED_ORDER - 1), rel=1e-12)
+    assert found["hydraulic_aperture_relative_error"] == pytest.approx(0.1 / (2 ** ASSUMED_ORDER - 1), rel=1e-12)
+    for settings, kind, reason in (
+            ({"steady": "x"}, "openfoam", "the fluid participant 'openfoam' gives no coarse_flow_rate"),
+            ({}, "reynolds", "its model has no second grid across the fracture"),
+            ({"error_estimate": False}, "chorin", "[solvers.fluid] error_estimate = false"),
+            ({"error_estimate": True}, "chorin", "the fluid gave no coarse_flow_rate this step")):
+        missing = monitor(settings, kind).error_estimate(80e-6, 2e-9, None)
+        assert list(missing) == ["hydraulic_aperture_error_missing"] and reason in missing[
+            "hydraulic_aperture_error_missing"]
+    assert monitor({}).error_estimate(0.0, 0.0, 0.0) == {
+        "hydraulic_aperture_error_missing": "no flow through the fracture (e_h = 0)"}
+
+
+def test_the_log_table_shows_the_estimate_or_why_there_is_none():
+    common = {"mechanical_aperture": 9e-5, "hydraulic_aperture": 8e-5, "contact_area_fraction": 0.1,
+              "flow_rate": 2e-9, "mean_face_pressure": 2.5e5, "cells_across": 8.0, "throat_cells_across": 6.0}
+    steps = [{"step": 0, "iterations": 3, "fracture": {**common, "hydraulic_aperture_error": 8e-6,
+                                                       "hydraulic_aperture_relative_error": 0.1}},
+             {"step": 1, "iterations": 2, "fracture": {**common, "hydraulic_aperture_error_missing": "why"}}]
+    header, first, second, note = table(steps)
+    assert "e_h error [um]" in header and "8.000 (10.0%)" in first and "  -  " in second
+    assert note == "fracture  no e_h error estimate: why"
+
