@@ -11,9 +11,11 @@ import time
 from pathlib import Path
 
 
-def run_edited(case: Path, replace: dict, edit=None, prefix: str = "varcouple-bench-") -> tuple[int, float, dict]:
+def run_edited(case: Path, replace: dict, edit=None, prefix: str = "varcouple-bench-",
+               inspect=None) -> tuple[int, float, dict]:
     """(exit code, wall seconds, summary) of ``varcouple run`` on a copy of `case` whose scene has
-    every {old: new} of `replace` applied, then ``edit(text) -> text`` when given."""
+    every {old: new} of `replace` applied, then ``edit(text) -> text`` when given; ``inspect(out)``
+    reads the run's output directory (its logs) before it is removed."""
     from coupler.cli import main
 
     with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
@@ -29,4 +31,6 @@ def run_edited(case: Path, replace: dict, edit=None, prefix: str = "varcouple-be
         start = time.perf_counter()
         code = main(["run", str(copy), "--output", str(out)])
         seconds = time.perf_counter() - start
+        if inspect is not None:
+            inspect(out)
         return code, seconds, json.loads((out / "summary.json").read_text())

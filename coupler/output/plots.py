@@ -77,8 +77,9 @@ def solver_convergence(path: Path, steps: list[dict]) -> bool:
 
 def apertures_plot(path: Path, steps: list[dict]) -> bool:
     """A hydro-mechanical fracture's mechanical and hydraulic apertures e_m and e_h (the
-    per-step ``"fracture"`` figures) against the confining stress (the platen's), and the contact
-    area fraction on a second axis; False when no step has both."""
+    per-step ``"fracture"`` figures; e_h with bars of its error estimate where the step has one)
+    against the confining stress (the platen's), and the contact area fraction on a second axis;
+    False when no step has both."""
     rows = [(s["figures"]["solid"]["stress"], s["fracture"]) for s in steps
             if s.get("fracture") and "stress" in s.get("figures", {}).get("solid", {})]
     if not rows:
@@ -92,8 +93,10 @@ def apertures_plot(path: Path, steps: list[dict]) -> bool:
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(stress, [1e6 * f["mechanical_aperture"] for _, f in rows], "o-", color="#31688e",
             label="mechanical aperture $e_m$")
-    ax.plot(stress, [1e6 * f["hydraulic_aperture"] for _, f in rows], "s-", color="#35b779",
-            label="hydraulic aperture $e_h$")
+    error = [1e6 * f.get("hydraulic_aperture_error", np.nan) for _, f in rows]
+    ax.errorbar(stress, [1e6 * f["hydraulic_aperture"] for _, f in rows],
+                yerr=None if np.all(np.isnan(error)) else error, fmt="s-", color="#35b779", capsize=3,
+                label="hydraulic aperture $e_h$" + ("" if np.all(np.isnan(error)) else " (bars: its error estimate)"))
     ax.set_xlabel("confining stress [MPa]")
     ax.set_ylabel("aperture [µm]")
     ax.set_ylim(bottom=0)

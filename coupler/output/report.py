@@ -140,8 +140,10 @@ PLOTS = {"residuals.png": ("Coupling residuals", "The relative interface residua
                                              "(dashed: the check's fit)."),
          "apertures.png": ("Apertures against stress", "The fracture's mechanical aperture e_m (the mean gap, "
                                                        "contacts as zero), hydraulic aperture e_h (the cubic law's "
-                                                       "gap for the measured flow rate) and contact area fraction "
-                                                       "at each confining stress.")}
+                                                       "gap for the measured flow rate; bars: its error estimated "
+                                                       "from the fluid grid coarsened 2x across the gap, where the "
+                                                       "fluid gives one) and contact area fraction at each confining "
+                                                       "stress.")}
 
 
 def write_page(out: Path, summary: dict, pictures: list) -> Path:

@@ -66,6 +66,25 @@ def test_rough_fracture_apertures_and_flow_fall_with_stress(coarse):
     assert step["iterations"] <= 8
 
 
+def test_each_step_estimates_the_error_of_e_h_from_the_coarsened_grid(coarse):
+    """The Chorin fluid's flow rate on its grid coarsened 2x across (53 cells: 27) gives e_h there
+    and the estimate (Richardson at order 1/2) per step; at 10 cells across the mean aperture of
+    8 x 8 columns it is 39 to 61 % (e_h on the coarse grid 12 to 14 um above: measured), so each
+    step warns, printed once."""
+    for step in coarse["steps"]:
+        f, fluid = step["fracture"], step["figures"]["fluid"]
+        assert f["coarse_hydraulic_aperture"] ** 3 == pytest.approx(
+            f["hydraulic_aperture"] ** 3 * fluid["coarse_flow_rate"] / f["flow_rate"], rel=1e-12)
+        assert f["hydraulic_aperture_error"] == pytest.approx(
+            (f["coarse_hydraulic_aperture"] - f["hydraulic_aperture"]) / (2 ** 0.5 - 1), rel=1e-12)
+        assert f["hydraulic_aperture_relative_error"] == pytest.approx(
+            f["hydraulic_aperture_error"] / f["hydraulic_aperture"], rel=1e-12)
+        assert 0.2 < f["hydraulic_aperture_relative_error"] < 1.0
+        assert any(w.startswith(f"fracture: e_h {1e6 * f['hydraulic_aperture']:.4g} um is uncertain") for w in f["warnings"])
+        assert any("on the grid coarsened 2x across z" in r["solver"] and r["converged"] for r in step["solves"]["fluid"])
+    assert sum("is uncertain by about" in w for w in coarse["warnings"]) == 1
+
+
 def _without_flow(text: str) -> str:
     """The same scene as pure contact: effects elasticity and contact, no fluid tables."""
     text = text.replace('effects = ["elasticity", "contact", "flow"]', 'effects = ["elasticity", "contact"]')
@@ -125,7 +144,9 @@ def test_a_closed_path_gives_zero_flow_and_a_message(tmp_path, capsys):
     n = last["cells_across"]
     assert f"is {n:.2f} fluid cells across ([geometry.fluid] cells 20 um across the fracture)" in across
     assert f"{200 / n ** 2:.0f} % extrapolated" in across and "+3.1 % at 8" in across
+    assert all("hydraulic_aperture_error" not in s["fracture"] for s in summary["steps"])
     printed = capsys.readouterr().out
+    assert "fracture  no e_h error estimate: no flow through the fracture (e_h = 0)" in printed
     assert printed.count("warning: fracture: the contact area is") == 1
     assert printed.count("warning: fracture: the mean open aperture") == 1
     assert printed.count("warning: fracture: the narrowest throat") == 1

@@ -319,3 +319,21 @@ def test_the_report_of_a_fracture_run_shows_apertures_against_stress_and_the_map
     e_m, e_h = nearest(tmp_path / "apertures.png", (49, 104, 142)), nearest(tmp_path / "apertures.png", (53, 183, 121))
     assert e_m[0] < e_h[0], (e_m, e_h)
     assert not apertures_plot(tmp_path / "none.png", [{"step": 0, "figures": {"solid": {"stress": 1e6}}}])
+
+
+def test_the_apertures_plot_draws_the_error_estimate_of_e_h_as_bars(tmp_path):
+    """Steps with ``hydraulic_aperture_error`` (15 um on an axis of about 100 um): the e_h line's
+    green spans more pixel rows than without (the bars above and below each marker)."""
+    from coupler.output.plots import apertures_plot
+
+    def green_rows(path):
+        img = image(path)
+        return np.unique(np.nonzero(np.linalg.norm(img - np.array([53.0, 183.0, 121.0]), axis=2) < 30)[0]).size
+
+    steps = hm_summary()["steps"]
+    assert apertures_plot(tmp_path / "plain.png", steps)
+    for step in steps:
+        step["fracture"]["hydraulic_aperture_error"] = 1.5e-5
+    assert apertures_plot(tmp_path / "bars.png", steps)
+    not_blank(tmp_path / "bars.png")
+    assert green_rows(tmp_path / "bars.png") > green_rows(tmp_path / "plain.png") + 20

@@ -1,7 +1,8 @@
 """Flows of the Chorin fluid solved on the ranks of MPI.COMM_WORLD (tests/fluid_chorin/test_chorin_mpi.py):
-``mpirun -n N python tests/fluid_chorin/mpi_chorin_cases.py CASE POISSON SLAB_AXIS OUT.npz [progress]`` writes
-rank 0's gathered pressure and velocity to OUT.npz and prints the run's figures as JSON (with
-``progress``: a progress line due at every pseudo-time step, and the lines each rank logged).
+``mpirun -n N python tests/fluid_chorin/mpi_chorin_cases.py CASE POISSON SLAB_AXIS OUT.npz [progress|coarsened]``
+writes rank 0's gathered pressure and velocity to OUT.npz and prints the run's figures as JSON
+(with ``progress``: a progress line due at every pseudo-time step, and the lines each rank
+logged; with ``coarsened``: the flow rate on the grid coarsened across, :func:`coarse_rate`).
 :func:`solve` with ``comm=None`` is the serial reference."""
 
 from __future__ import annotations
@@ -23,13 +24,14 @@ def cavity(n: int = 16, re: float = 100.0) -> tuple[dict, tuple]:
              "boundaries": {"zmin": "empty", "zmax": "empty", "ymax": {"velocity": [1.0, 0.0, 0.0]}}}, ())
 
 
-def plates() -> tuple[dict, tuple]:
-    """The immersed plates of cases/parallel_plates (8 cells across, 'wall' penalization: the drag
-    of a cell from its neighbours' fractions), pressure driven."""
+def plates(cells_across: int = 8, offset: float = 0.3) -> tuple[dict, tuple]:
+    """The immersed plates of cases/parallel_plates (w = 1 mm, L = 2 mm, dp = 0.01 Pa, mu = 1e-3 Pa s;
+    8 cells across, 'wall' penalization: the drag of a cell from its neighbours' fractions),
+    pressure driven."""
     from transfer import FunctionSpace, StructuredGrid, Transfer
     from transfer.generators import GENERATORS, parameters
 
-    p = parameters("plates", {"aperture": 1e-3, "length": 2e-3, "cells_across": 8, "offset": 0.3})
+    p = parameters("plates", {"aperture": 1e-3, "length": 2e-3, "cells_across": cells_across, "offset": offset})
     grid = GENERATORS["plates"].grid(p)
     G = StructuredGrid(grid["origin"], grid["spacing"], grid["shape"])
     mesh = GENERATORS["plates"].mesh(p).mesh
@@ -84,6 +86,19 @@ def solve(case: str, poisson: str, slab_axis: str, comm=None) -> tuple[ChorinSol
     return solver, run
 
 
+def coarse_rate(solver: ChorinSolver, case: str) -> tuple[float, list[int]]:
+    """The steady flow of ``case`` on ``solver``'s grid coarsened across (fluid_chorin/coarsened.py),
+    each rank given the rows of its input cells only: its flow rate (NaN: not converged) and the
+    coarse slabs' bounds."""
+    from fluid_chorin.coarsened import CoarsenedFlow, across_direction
+
+    _, solid = CASES[case]()
+    coarse = CoarsenedFlow(solver, across_direction(solver.spec))
+    rows = solver.slabs.input_ids()
+    coarse.set_solid(*(a[rows] for a in solid))
+    return coarse.flow_rate() if coarse.steady().converged else float("nan"), coarse.solver.slabs.bounds
+
+
 def same_solid(solver: ChorinSolver, case: str) -> bool:
     """Whether this rank's drag, solid velocity (on the faces of its own cells) and dilatation
     (its own cells) equal, bit for bit, those of one process given the whole grid; with rigid
@@ -109,7 +124,7 @@ def same_solid(solver: ChorinSolver, case: str) -> bool:
             and equal(solver.fraction, whole.fraction, False))
 
 
-def main(case: str, poisson: str, slab_axis: str, out: str, progress: str = "") -> None:
+def main(case: str, poisson: str, slab_axis: str, out: str, mode: str = "") -> None:
     import logging
 
     from mpi4py import MPI
@@ -118,7 +133,7 @@ def main(case: str, poisson: str, slab_axis: str, out: str, progress: str = "") 
 
     comm = MPI.COMM_WORLD
     lines = []
-    if progress:
+    if mode == "progress":
         fluid_chorin.solver.PROGRESS_SECONDS = 0.0
         handler = logging.Handler()
         handler.emit = lambda record: lines.append(record.getMessage())
@@ -128,13 +143,15 @@ def main(case: str, poisson: str, slab_axis: str, out: str, progress: str = "") 
     logged = comm.gather(sum("pseudo-time step" in line for line in lines), root=0)
     planes = comm.gather(list(solver.slabs.input_planes), root=0)
     same = comm.gather(same_solid(solver, case), root=0)
+    coarse = coarse_rate(solver, case) if mode == "coarsened" else None
     pressure, velocity = solver.cell_pressure(), solver.cell_velocity()
     if comm.rank == 0:
         np.savez(out, pressure=pressure, velocity=velocity)
         print(json.dumps({"ranks": comm.size, "converged": run.converged, "iterations": run.report.iterations,
                           "poisson": run.poisson[-1].method, "poisson_converged": all(p.converged for p in run.poisson),
                           "slabs": solver.slabs.bounds, "direction": solver.slabs.d, "progress_lines": logged,
-                          "input_planes": planes, "same_solid": same}))
+                          "input_planes": planes, "same_solid": same,
+                          **({"coarse_rate": coarse[0], "coarse_slabs": coarse[1]} if coarse else {})}))
 
 
 if __name__ == "__main__":

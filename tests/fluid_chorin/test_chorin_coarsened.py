@@ -15,8 +15,7 @@ from fluid_chorin.coarsened import CoarsenedFlow, across_direction, coarsened_sp
 from fluid_chorin.participant import ChorinParticipant
 from fluid_chorin.solver import ChorinSolver
 from fluid_chorin.spec import ChorinSpec
-from transfer import FunctionSpace, StructuredGrid, Transfer
-from transfer.generators import GENERATORS, parameters
+from mpi_chorin_cases import plates
 
 W, DP, MU = 1e-3, 1e-2, 1e-3  # the gap [m], the pressure difference [Pa], the viscosity [Pa s]
 
@@ -40,15 +39,10 @@ def test_merged_pairs_keep_the_solid_volume_and_its_momentum():
 
 
 def plates_solver(n: int, offset: float, steady: str) -> tuple[ChorinSolver, np.ndarray]:
-    """cases/parallel_plates' geometry (w = 1 mm, L = 2 mm) at `n` cells across, solved."""
-    p = parameters("plates", {"aperture": W, "length": 2e-3, "cells_across": n, "offset": offset})
-    grid = GENERATORS["plates"].grid(p)
-    G = StructuredGrid(grid["origin"], grid["spacing"], grid["shape"])
-    volumes = Transfer.assemble(FunctionSpace(GENERATORS["plates"].mesh(p).mesh, "P0"), FunctionSpace(G, "Q0"), "l2").D
-    config = {"grid": grid, "inlet": {"pressure": DP}, "outlet": {"pressure": 0.0}, "rho": 1000.0, "mu": MU,
-              "boundaries": {"zmin": "empty", "zmax": "empty"}, "tolerance": 1e-9, "steady": steady}
-    solver = ChorinSolver(ChorinSpec.from_config(config))
-    fraction = np.asarray(volumes.diagonal()) / G.cell_measures()
+    """cases/parallel_plates' geometry (mpi_chorin_cases.plates: w = 1 mm, L = 2 mm, dp = 0.01 Pa,
+    mu = 1e-3 Pa s) at `n` cells across, solved."""
+    config, (fraction,) = plates(n, offset)
+    solver = ChorinSolver(ChorinSpec.from_config({**config, "steady": steady}))
     solver.set_solid(fraction)
     assert solver.steady().converged
     return solver, fraction

@@ -73,6 +73,22 @@ def test_slabs_on_several_ranks_give_the_serial_fields(tmp_path, case, poisson, 
     assert_equal(parallel["velocity"], serial.cell_velocity())
 
 
+@pytest.mark.parametrize("slab_axis, ranks, fine, coarse", [("longest", 2, [0, 6, 13], [0, 3, 7]),
+                                                           ("y", 3, [0, 4, 8, 13], [0, 2, 4, 7])])
+def test_the_flow_on_the_coarsened_grid_on_ranks_is_the_serial_one(tmp_path, slab_axis, ranks, fine, coarse):
+    """The plates' flow rate on the grid coarsened across y (fluid_chorin/coarsened.py: the error
+    estimate's) on 2 and 3 ranks equals the serial one to EQUAL, the slabs cut across the gap
+    itself, the coarse grid's cuts at other planes than the fine one's (the pairs joined over the
+    ranks)."""
+    from mpi_chorin_cases import coarse_rate
+
+    serial, _ = solve("plates", "direct", slab_axis)
+    rate, _ = coarse_rate(serial, "plates")
+    figures = run_mpi(SCRIPT, ranks, "plates", "direct", slab_axis, tmp_path / "fields.npz", "coarsened")
+    assert figures["slabs"] == fine and figures["coarse_slabs"] == coarse
+    assert abs(figures["coarse_rate"] - rate) <= EQUAL * abs(rate) and rate > 0
+
+
 def test_rank_0_alone_logs_the_progress_of_a_steady_solve(tmp_path):
     """Progress lines of a long steady solve come from rank 0, not once per rank."""
     figures = run_mpi(SCRIPT, 2, "cavity", "direct", "longest", tmp_path / "fields.npz", "progress")
