@@ -34,7 +34,8 @@ import time
 import numpy as np
 
 from coupler.protocol.participant import Participant
-from coupler.protocol.roles import INLET_PRESSURE, PRESSURE, SOLID_FRACTION, SOLID_VELOCITY, VELOCITY
+from coupler.protocol.roles import (COARSE_FLOW_RATE, INLET_PRESSURE, PRESSURE, SOLID_FRACTION, SOLID_VELOCITY,
+                                    VELOCITY)
 from coupler.protocol.wire import Field
 
 from .coarsened import CoarsenedFlow, across_direction
@@ -100,7 +101,7 @@ class ChorinParticipant(Participant):
         self.solved(window, iteration, lambda: solver.transient(t, dt) if solver.spec.transient else solver.steady())
         if self.coarse is not None:
             self.solved(window, iteration, self.coarse.steady)
-            self.report_figures(coarse_flow_rate=self.coarse.flow_rate())
+            self.report_figures(**{COARSE_FLOW_RATE: self.coarse.flow_rate()})
         pressure, velocity = solver.part_fields()
         return {PRESSURE: Field(PRESSURE, pressure, "Pa"), VELOCITY: Field(VELOCITY, velocity, "m/s")}
 

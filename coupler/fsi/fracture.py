@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from coupler.coupling.row_sums import RowSums
-from coupler.protocol.roles import GAP, IN_CONTACT, MORTAR_WEIGHT, PRESSURE, SLAVE, VELOCITY
+from coupler.protocol.roles import COARSE_FLOW_RATE, GAP, IN_CONTACT, MORTAR_WEIGHT, PRESSURE, SLAVE, VELOCITY
 
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
 from .flow_rate import column_open_lengths, percolates, section_flow_rates, throat_aperture
@@ -22,9 +22,6 @@ from .operators import open_share
 from .rate_control import FlowRateControl
 from .resolution import (aperture_error, apertures_warning, cells_across_warning, coarse_aperture,
                          contact_area_warning, error_warning, throat_warning)
-
-#: the fluid's figure of the flow rate on its grid coarsened 2x across the gap
-COARSE_FLOW_RATE = "coarse_flow_rate"
 
 
 class FractureFigures:

@@ -40,6 +40,8 @@ CONTACT_PRESSURE = "contact_pressure"
 GAP = "gap"
 SLAVE = "slave"
 MORTAR_WEIGHT = "mortar_weight"
+# optional figures of an advance reply (``report_figures``: one number, in the header)
+COARSE_FLOW_RATE = "coarse_flow_rate"  # a fluid's flow rate on its grid coarsened 2x across the gap [m^3/s]
 # geometry arrays (docs/protocol.md, "Parts")
 POINTS, CELLS = "points", "cells"
 POINT_IDS, CELL_IDS, INPUT_IDS = "point_ids", "cell_ids", "input_ids"

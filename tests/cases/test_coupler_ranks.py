@@ -558,6 +558,7 @@ def assert_same_fracture(serial, ranks, label: str, cancelled: tuple[str, ...] =
     figures = [json.loads((d / "summary.json").read_text())["steps"][0]["fracture"] for d in (serial, ranks)]
     assert figures[0]["percolating"] is figures[1]["percolating"] is True
     assert 0 < figures[1]["contact_area_fraction"] < 1 and "summary /steps/0/fracture/flow_rate" in found
+    assert "summary /steps/0/fracture/hydraulic_aperture_error" in found  # the fluid's coarse flow rate's estimate
     return found
 
 

@@ -95,3 +95,14 @@ def test_a_fracture_closed_below_the_open_path_gives_no_flow_and_the_warning(tmp
     last = summary["steps"][-1]["fracture"]
     assert not last["percolating"] and last["flow_rate"] == 0.0 and last["hydraulic_aperture"] == 0.0
     assert any("no connected open path" in w for w in summary["warnings"])
+
+
+def test_a_fracture_on_the_reynolds_fluid_says_why_e_h_has_no_error_estimate(tmp_path):
+    """The plane has no grid across the gap to coarsen: no coarse flow rate, no number; the step's
+    figures name the fluid and the reason (hm_fracture at 1 MPa, 8 x 8 columns)."""
+    summary = run("hm_fracture", "reynolds", tmp_path, {"stress = [1.0e6, 2.0e6, 4.0e6]": "stress = [1.0e6]",
+                                                         "steps = 3": "steps = 1"})
+    f = summary["steps"][0]["fracture"]
+    assert f["hydraulic_aperture"] > 0 and "hydraulic_aperture_error" not in f
+    reason = "the fluid participant 'reynolds' gives no coarse_flow_rate"
+    assert f["hydraulic_aperture_error_missing"].startswith(reason)
