@@ -64,7 +64,8 @@ def run_scene(replace: dict) -> dict:
             "stress": [s["figures"]["solid"]["stress"] for s in steps],
             "iterations": [s["iterations"] for s in steps],
             "fluid_steps": [sum(r["iterations"] for r in s["solves"].get("fluid", [])  # pseudo-time or Newton steps
-                                if "pseudo" in r["solver"] or "Newton" in r["solver"]) for s in steps],
+                                if ("pseudo" in r["solver"] or "Newton" in r["solver"])
+                                and "coarsened" not in r["solver"]) for s in steps],  # not the error estimate's
             "fracture": [{k: v for k, v in s["fracture"].items() if k != "warnings"} for s in steps],
             "warnings": summary.get("warnings", [])}
 
