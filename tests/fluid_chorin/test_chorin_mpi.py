@@ -74,7 +74,8 @@ def test_slabs_on_several_ranks_give_the_serial_fields(tmp_path, case, poisson, 
 
 
 @pytest.mark.parametrize("slab_axis, ranks, fine, coarse", [("longest", 2, [0, 6, 13], [0, 3, 7]),
-                                                           ("y", 3, [0, 4, 8, 13], [0, 2, 4, 7])])
+                                                           pytest.param("y", 3, [0, 4, 8, 13], [0, 2, 4, 7],
+                                                                        marks=pytest.mark.slow)])
 def test_the_flow_on_the_coarsened_grid_on_ranks_is_the_serial_one(tmp_path, slab_axis, ranks, fine, coarse):
     """The plates' flow rate on the grid coarsened across y (fluid_chorin/coarsened.py: the error
     estimate's) on 2 and 3 ranks equals the serial one to EQUAL, the slabs cut across the gap
