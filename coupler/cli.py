@@ -235,8 +235,10 @@ def _project_distributed(args, say):
             u = values if key == "source" else u
     source = files["source"] = None  # rank 0 keeps a target file alone: the output is that mesh with the field
     field = field and MeshFileField(field.name, kind, field.values[:0])
-    reads = comm.gather(MeshFile.reads)
-    say(f"read    files opened per rank {reads}")
+    reads = comm.gather((MeshFile.reads, MeshFile.cells_read, MeshFile.points_read))
+    if comm.rank == 0:
+        files_read, cells_read, points_read = (list(r) for r in zip(*reads))
+        say(f"read    files opened per rank {files_read}; cells read per rank {cells_read}, points {points_read}")
     start = time.perf_counter()
     with warnings.catch_warnings(action="ignore", category=OverlapWarning):
         operator = Transfer.assemble(parts["source"], parts["target"], args.method, comm=comm,

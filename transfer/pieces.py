@@ -30,8 +30,9 @@ def read_in_parts(path) -> bool:
     return str(path).lower().endswith((".pvtu", ".xdmf"))
 
 
-def _datasets(path) -> tuple[Path, str, str]:
-    """(HDF5 file, topology dataset, geometry dataset) of the grid ``mesh`` of the XDMF `path`."""
+def _datasets(path) -> tuple[Path, tuple[str, tuple[int, ...]], tuple[str, tuple[int, ...]]]:
+    """(HDF5 file, (topology dataset, its declared shape), (geometry dataset, its declared shape))
+    of the grid ``mesh`` of the XDMF `path`."""
     path = Path(path)
     try:
         found = layout(path)
@@ -44,7 +45,44 @@ def _datasets(path) -> tuple[Path, str, str]:
     items = [grid.find(f"{part}/DataItem") for part in ("Topology", "Geometry")]
     if any(item is None or ":" not in (item.text or "") for item in items):
         raise MeshFileError(f"{path}: grid {MESH!r}: topology and geometry must be HDF5 data items")
-    return (path.with_suffix(".h5"), *(item.text.strip().split(":", 1)[1] for item in items))
+    try:
+        shapes = [tuple(int(n) for n in item.get("Dimensions", "").split()) for item in items]
+    except ValueError:
+        shapes = []
+    if [len(s) for s in shapes] != [2, 2]:
+        raise MeshFileError(f"{path}: grid {MESH!r}: the topology and geometry DataItem Dimensions must be "
+                            f"two numbers each (rows columns)")
+    if shapes[0][0] != found.num_cells:
+        raise MeshFileError(f"{path}: grid {MESH!r}: Topology NumberOfElements is {found.num_cells} but its "
+                            f"DataItem Dimensions {shapes[0][0]} rows")
+    return (path.with_suffix(".h5"), *((item.text.strip().split(":", 1)[1], shape)
+                                       for item, shape in zip(items, shapes)))
+
+
+#: a gap of at most this many unused geometry rows between two used ones is read through
+#: (one hyperslab) rather than starting another
+GAP_ROWS = 16
+
+
+def hyperslabs(rows: np.ndarray, gap: int = GAP_ROWS) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, stops) of the runs of the sorted distinct `rows` that read them: consecutive
+    rows with at most `gap` unused rows between them make one run."""
+    if not len(rows):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    cut = np.flatnonzero(np.diff(rows) > gap + 1) + 1
+    return rows[np.r_[0, cut]], rows[np.r_[cut - 1, len(rows) - 1]] + 1
+
+
+def read_rows(dataset, rows: np.ndarray) -> tuple[np.ndarray, int]:
+    """(the sorted distinct `rows` of the HDF5 `dataset`, read by :func:`hyperslabs`; how many
+    rows were read)."""
+    starts, stops = hyperslabs(rows)
+    if not len(starts):
+        return np.zeros((0,) + dataset.shape[1:], dataset.dtype), 0
+    block = np.concatenate([dataset[a:b] for a, b in zip(starts, stops)])
+    offsets = np.cumsum(np.r_[0, stops - starts])[:-1]
+    run = np.searchsorted(starts, rows, side="right") - 1
+    return block[offsets[run] + rows - starts[run]], len(block)
 
 
 def sources(path) -> list[Path]:
@@ -68,6 +106,10 @@ def mine(count: int, rank: int, size: int) -> range:
     owner = np.arange(count) * size // count
     held = np.flatnonzero(owner == rank)
     return range(int(held[0]), int(held[-1]) + 1) if len(held) else range(0)
+
+
+def _shape(shape) -> str:
+    return " x ".join(map(str, shape)) or "a scalar"
 
 
 def _owner(points: np.ndarray, size: int) -> np.ndarray:
@@ -156,24 +198,43 @@ class Pieces:
     @classmethod
     def rows(cls, path, comm) -> "Pieces":
         """This rank's rows of an XDMF + HDF5 tet mesh in dolfinx's layout: topology rows
-        r n / P to (r + 1) n / P and the geometry rows they use; the global ids are the row
-        numbers, the file's own numbering (collective)."""
+        r n / P to (r + 1) n / P, one hyperslab, and the geometry rows they use
+        (:func:`read_rows`); the global ids are the row numbers, the file's own numbering
+        (collective)."""
         import h5py
         import meshio
 
-        h5, topology, geometry = _agreed(comm, lambda: _datasets(path))
+        h5, (topology, cells_shape), (geometry, points_shape) = _agreed(comm, lambda: _datasets(path))
 
         def read():
             try:
                 with h5py.File(h5, "r") as f:
-                    n, m = f[topology].shape[0], f[geometry].shape[0]
+                    top, geo = f[topology], f[geometry]
+                    for name, dataset, declared in ((topology, top, cells_shape), (geometry, geo, points_shape)):
+                        if dataset.shape != declared:
+                            raise MeshFileError(f"{path}: {h5.name}:{name} holds {_shape(dataset.shape)} but "
+                                                f"the XDMF's DataItem Dimensions say {_shape(declared)}")
+                    if top.ndim != 2 or top.shape[1] != 4 or geo.ndim != 2 or geo.shape[1] != 3:
+                        raise MeshFileError(f"{path}: {h5.name}: the topology must have 4 columns (tetrahedra) "
+                                            f"and the geometry 3 (x, y, z); found {_shape(top.shape)} and "
+                                            f"{_shape(geo.shape)}")
+                    n, m = top.shape[0], geo.shape[0]
                     lo, hi = comm.rank * n // comm.size, (comm.rank + 1) * n // comm.size
-                    cells = np.asarray(f[topology][lo:hi], np.int64)
+                    cells = np.asarray(top[lo:hi], np.int64)
                     used, local = np.unique(cells, return_inverse=True)
-                    points = np.asarray(f[geometry][used] if len(used) else np.zeros((0, 3)), np.float64)
-            except (OSError, KeyError) as exc:
+                    if len(used) and (used[0] < 0 or used[-1] >= m):
+                        bad = used[0] if used[0] < 0 else used[-1]
+                        raise MeshFileError(f"{path}: {h5.name}:{topology} refers to point {bad}; the geometry "
+                                            f"has {m} points")
+                    points, read_points = read_rows(geo, used)
+            except OSError as exc:
                 raise MeshFileError(f"{path}: cannot read {h5.name}: {exc}") from None
+            except KeyError as exc:
+                raise MeshFileError(f"{path}: {h5.name} has no dataset {exc}") from None
             MeshFile.reads += 1
+            MeshFile.cells_read += hi - lo
+            MeshFile.points_read += read_points
+            points = np.asarray(points, np.float64)
             local = local.reshape(cells.shape)
             mesh = (Mesh(points, local, "tetra", name=str(path), reorient=True) if len(cells) else
                     Mesh.empty("tetra", str(path)))
