@@ -1,6 +1,7 @@
 """A ``.pvtu`` file read in parts: the ranks of an MPI job each read their own pieces;
 an XDMF + HDF5 mesh in dolfinx's layout (``python -m solid_fenicsx.convert``) likewise, each
-rank its own rows (:meth:`Pieces.rows`).
+rank its own rows (:meth:`Pieces.rows`), whose cells then go to the ranks of a coordinate
+bisection (:func:`balanced`: a run of rows of dolfinx's cell order spans the whole mesh).
 
 The pieces a ``.pvtu`` names (``<Piece Source="..."/>``, paths relative to it) are shared
 out in order, a run of consecutive pieces per rank (rank 0 has the first). A piece is a
@@ -21,6 +22,7 @@ import numpy as np
 from .errors import MeshFileError, TransferError
 from .mesh import CELL_TYPES, Mesh
 from .meshfile import MeshFile, MeshFileField
+from .partition import bisect
 from .spaces import FAMILIES
 from .xdmf import MESH, layout
 
@@ -176,10 +178,38 @@ def _agreed(comm, work):
     return result
 
 
+def balanced(mesh: Mesh, point_ids: np.ndarray, cell_ids: np.ndarray, comm) -> tuple[Mesh, np.ndarray, np.ndarray]:
+    """The cells of this rank's `mesh` (`point_ids`, `cell_ids`: the global ids of its points
+    and cells) moved to the ranks :func:`transfer.partition.bisect` gives their centres, as
+    ``mpirun -n P varcouple transfer`` cuts a single file; the centres are cut on rank 0
+    (24 B a cell there), the cells travel with their points. (this rank's mesh, the global ids
+    of its points, of its cells in increasing order). Collective."""
+    centres = mesh.points[mesh.cells].mean(axis=1) if mesh.num_cells else np.zeros((0, 3))
+    every = comm.gather(centres)
+    owner = comm.scatter(np.split(bisect(np.concatenate(every), comm.size), np.cumsum([len(c) for c in every])[:-1])
+                         if comm.rank == 0 else None)
+    del every
+    sent = []
+    for q in range(comm.size):
+        mine = np.flatnonzero(owner == q)
+        used, local = np.unique(mesh.cells[mine], return_inverse=True)
+        sent.append((cell_ids[mine], point_ids[used], mesh.points[used], local.reshape(len(mine), -1)))
+    got = comm.alltoall(sent)
+    del sent
+    ids = np.concatenate([g[0] for g in got]).astype(np.int64)
+    order = np.argsort(ids)
+    cells = np.concatenate([g[1][g[3]] for g in got])[order]  # global point ids
+    points, first = np.unique(np.concatenate([g[1] for g in got]).astype(np.int64), return_index=True)
+    coordinates = np.concatenate([g[2] for g in got])[first]
+    return (Mesh.trusted(coordinates, np.searchsorted(points, cells), mesh.cell_type, mesh.name),
+            points, ids[order])
+
+
 @dataclass
 class Pieces:
     """This rank's pieces of a ``.pvtu`` (:class:`transfer.meshfile.MeshFile` each) and the
-    global ids of their points and cells (:func:`numbering`), joined in piece order."""
+    global ids of their points and cells (:func:`numbering`), joined in piece order; of an
+    ``.xdmf``, its part of the rows (:meth:`rows`)."""
 
     path: str
     held: list
@@ -199,8 +229,8 @@ class Pieces:
     def rows(cls, path, comm) -> "Pieces":
         """This rank's rows of an XDMF + HDF5 tet mesh in dolfinx's layout: topology rows
         r n / P to (r + 1) n / P, one hyperslab, and the geometry rows they use
-        (:func:`read_rows`); the global ids are the row numbers, the file's own numbering
-        (collective)."""
+        (:func:`read_rows`), then the cells of its part (:func:`balanced`); the global ids are
+        the row numbers, the file's own numbering (collective)."""
         import h5py
         import meshio
 
@@ -241,8 +271,9 @@ class Pieces:
             return MeshFile(str(path), meshio.Mesh(points, [("tetra", mesh.cells)]), mesh, [0]), used, lo, n, m
 
         held, used, lo, n, m = _agreed(comm, read)
-        return cls(str(path), [held] if held.mesh.num_cells else [], "tetra", used,
-                   lo + np.arange(held.mesh.num_cells, dtype=np.int64), m, n, comm)
+        mesh, point_ids, cell_ids = balanced(held.mesh, used, lo + np.arange(held.mesh.num_cells), comm)
+        held = MeshFile(str(path), meshio.Mesh(mesh.points, [("tetra", mesh.cells)]), mesh, [0])
+        return cls(str(path), [held] if mesh.num_cells else [], "tetra", point_ids, cell_ids, m, n, comm)
 
     @classmethod
     def read(cls, path, comm) -> "Pieces":
@@ -292,7 +323,7 @@ class Pieces:
 
     def whole(self, root: int = 0):
         """The whole mesh with the data every piece has, as a :class:`transfer.meshfile.MeshFile`
-        on `root` (points in the order of their global ids, cells in piece order); None elsewhere.
+        on `root` (points and cells in the order of their global ids: piece order, the file's rows); None elsewhere.
         Collective."""
         import meshio
 
@@ -306,19 +337,20 @@ class Pieces:
         point_data = {n: join([np.asarray(f.raw.point_data[n]) for f in held]) for n in point_names}
         cell_data = {n: join([np.concatenate([np.asarray(f.raw.cell_data[n][i]) for i in f.blocks])
                               for f in held]) for n in cell_names}
-        mine = (self.point_ids, points, self.point_ids[self._cells()], point_data, cell_data)
+        mine = (self.point_ids, points, self.point_ids[self._cells()], point_data, cell_data, self.cell_ids)
         every = comm.gather(mine, root=root)
         if comm.rank != root:
             return None
         every = [e for e in every if len(e[0])]
+        order = np.argsort(np.concatenate([e[5] for e in every]), kind="stable")  # the file's cell order
         out_points = np.empty((self.num_points, 3))
         out_point_data = {n: np.empty((self.num_points,) + every[0][3][n].shape[1:], every[0][3][n].dtype)
                           for n in point_names}
-        for ids, p, _, data, _ in every:
+        for ids, p, _, data, _, _ in every:
             out_points[ids] = p
             for n in point_names:
                 out_point_data[n][ids] = data[n]
-        cells = np.concatenate([e[2] for e in every])
-        out_cell_data = {n: [np.concatenate([e[4][n] for e in every])] for n in cell_names}
+        cells = np.concatenate([e[2] for e in every])[order]
+        out_cell_data = {n: [np.concatenate([e[4][n] for e in every])[order]] for n in cell_names}
         raw = meshio.Mesh(out_points, [(self.cell_type, cells)], point_data=out_point_data, cell_data=out_cell_data)
         return MeshFile(self.path, raw, Mesh.trusted(out_points, cells, self.cell_type, self.path), [0])
