@@ -239,8 +239,6 @@ def cli(repeat: int, size: str, output: Path) -> dict:
     # against the serial command (vtu_1) and against the same inputs on one rank
     result["speedup"] = {label: best["vtu_1"]["seconds"] / best[label]["seconds"] for label, *_ in CLI_RUNS[1:]}
     result["speedup_same_input"] = {label: best[_one_rank(label)]["seconds"] / best[label]["seconds"] for label in two}
-    result["cpu_speedup_same_input"] = {  # one rank's CPU over the busiest rank's: what free cores would allow
-        label: best[_one_rank(label)]["cpu_seconds"][0] / max(best[label]["cpu_seconds"]) for label in two}
     result["memory_ratio_per_rank"] = {label: [p / best["vtu_1"]["peak_rss_above_base_bytes"][0]
                                                for p in best[label]["peak_rss_above_base_bytes"]]
                                        for label, *_ in CLI_RUNS[1:]}
@@ -265,8 +263,7 @@ def cli(repeat: int, size: str, output: Path) -> dict:
     for label in two:
         ok, one = result["pass"][label], _one_rank(label)
         print(f"{label} against {one}: speed-up {result['speedup_same_input'][label]:.2f}x: "
-              f"{verdict(ok['speedup_same_input'])} (CPU of one rank / the busiest of two "
-              f"{result['cpu_speedup_same_input'][label]:.2f}x); peak memory per rank / one rank's "
+              f"{verdict(ok['speedup_same_input'])}; peak memory per rank / one rank's "
               f"{[round(r, 2) for r in result['memory_ratio_same_input'][label]]}: {verdict(ok['memory_same_input'])}")
     print(f"load average {result['load_average_at_end']} (2 cores)")
     output.parent.mkdir(parents=True, exist_ok=True)
