@@ -9,10 +9,12 @@ value is one line naming it; what the error is measured on is checked against ea
 (:mod:`coupler.run.compared`); the count and an estimate of the time are printed (the rule of
 :data:`RUN_SECONDS`, then scaled by the runs done). A run that fails is recorded with its status;
 the study goes on. ``study.json`` (rewritten atomically when a run starts and ends) holds the
-study's ``status`` and ``planned`` runs and one record per run started: ``values``, ``status``,
-``seconds`` (``total`` and per phase), ``cost`` (cells and vertices of every participant's mesh,
-from the run's summary) and ``error`` (:mod:`coupler.run.compared`). ``study.png`` draws error
-against wall time and against cost.
+study's ``status``, ``planned`` runs, the machine's ``load_average`` before and after and one
+record per run started: ``values``, ``status``, ``seconds`` (``total`` and per phase), ``cost``
+(cells and vertices of every participant's mesh, from the run's summary) and ``error``
+(:mod:`coupler.run.compared`). ``study.png`` draws error against wall time and against cost (of a
+figure, the figure too), with two or more --vary keys one linked series per value of the first:
+each model's accuracy-cost frontier (:func:`series_of`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -237,7 +240,8 @@ def run_study(case, varies: list[str], output=None, field: str | None = None, fi
              "status": "running", "planned": {"runs": len(runs), "estimated_seconds": planned},
              "vary": {key: _distinct([values[key] for _, values, _ in runs]) for key in runs[0][1]},
              "check": base.check["kind"] if getattr(base, "check", None) else None,
-             "compared": {"kind": compared.kind, "name": compared.name}, "runs": []}
+             "compared": {"kind": compared.kind, "name": compared.name},
+             "load_average": {"before": os.getloadavg()}, "runs": []}
     with lock:
         try:
             done = 0.0
@@ -266,6 +270,7 @@ def run_study(case, varies: list[str], output=None, field: str | None = None, fi
                     run["status"] = study["status"]
             raise
         finally:
+            study["load_average"]["after"] = os.getloadavg()  # the runs' seconds are as loaded as the machine
             write_summary(directory, study, STUDY)  # the status first: the runs are kept whatever follows
             _conclude(study, directory, compared)
     for run in study["runs"]:

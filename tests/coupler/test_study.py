@@ -289,6 +289,7 @@ def test_a_study_of_a_figure(tmp_path, capsys):
                      r"about 16.3 s by the rule 3 s \+ 1 ms per cell and step a run", out[:first]), out
     study = json.loads((tmp_path / "study" / "study.json").read_text())
     assert study["status"] == "completed" and study["planned"]["runs"] == 2
+    assert all(len(study["load_average"][when]) == 3 for when in ("before", "after"))
     assert study["compared"] == {"kind": "figure", "name": "max_displacement"}
     reference = study["error"]["reference"]
     assert study["error"]["figure"] == "max_displacement" and study["error"]["t"] == pytest.approx(
