@@ -17,6 +17,10 @@ participant (fluid_reynolds: the local cubic law in the fracture's plane, no 3D 
 * ``hm_fracture`` (``--hm``): cases/hm_fracture as shipped with the Chorin and the Reynolds fluid:
   e_h, e_m, Q per stress and the fluid's time, the Chorin fluid's time over the Reynolds fluid's
   (goal >= 100); and the Reynolds solve alone on a 256 x 256 rough aperture map (seconds per solve).
+* ``hm_fracture_map`` (``--map``): cases/hm_fracture_map, the Reynolds fluid coupled on a 256 x 256
+  aperture map (contact + flow): the time of a stress by phase (solid with its contact and platen
+  search, the coupler's transfers and rebuilds of the solid fractions, the Reynolds participant)
+  and the Reynolds solves' own seconds.
 
 * ``ranks`` (with ``--ranks 1 2``): the Chorin fluid on MPI ranks by grid slabs: the lid-driven
   cavity (Re 100; 64^2 and 128^2 cells, and a 3D cavity of 40^3) for a fixed number of
@@ -29,7 +33,7 @@ Goals (PASS/MISS): coupled small_fracture at least 2x faster end to end with the
 Reynolds fluid's time on hm_fracture at least 100x below the Chorin fluid's.
 
     .venv/bin/python bench/fluids.py [--cases small_fracture ...] [--across 4 8 16 32] [--ranks 1 2] [--hm]
-                                     [--quick] [-o FILE]
+                                     [--map [NX NY NZ]] [--quick] [-o FILE]
 
 ``--quick`` (smoke test): small_fracture only, plates at 4 and 8 across; output
 bench/results/fluids_quick.json unless ``-o`` is given.
