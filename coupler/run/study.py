@@ -164,7 +164,7 @@ def study_plot(path: Path, study: dict) -> None:
         for g, (group, members) in enumerate(groups):
             for k, (step, s) in enumerate(steps):
                 if quantity == "figure":
-                    y = lambda run, s=s: (run.get("figure") or [None] * (s + 1))[s]  # noqa: E731
+                    y = lambda run, s=s: _at(run.get("figure"), s)  # noqa: E731
                 else:
                     y = (lambda run, s=s: run["errors"][s]) if times else (lambda run: run["error"])
                 points = sorted((x(run), y(run)) for run in members if y(run))
@@ -177,7 +177,7 @@ def study_plot(path: Path, study: dict) -> None:
                 if quantity == "figure":
                     ax.set_xscale("log")
         for run in runs:
-            at = run["error"] if quantity == "error" else (run.get("figure") or [None])[-1]
+            at = run["error"] if quantity == "error" else _at(run.get("figure"), -1)
             if at:
                 ax.annotate(run["name"], (x(run), at), fontsize=7, xytext=(3, 3), textcoords="offset points",
                             color="k" if run["status"] == "completed" else "C3")
@@ -199,6 +199,11 @@ def study_plot(path: Path, study: dict) -> None:
                  + (f"\n{reference['name']}: {_short_values(reference)}" if reference else ""), fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
+
+
+def _at(values: list | None, step: int):
+    """The value of a run's `step` (None where the run has none: it stopped earlier)."""
+    return values[step] if values and -len(values) <= step < len(values) else None
 
 
 def _legend(ax, groups, steps) -> list:

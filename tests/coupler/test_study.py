@@ -428,3 +428,15 @@ def test_one_key_draws_points_unlinked(monkeypatch, tmp_path):
     _, error, _ = _drawn(monkeypatch, tmp_path, study).axes
     drawn = [line for line in error.get_lines() if line.get_marker() == "o"]
     assert len(drawn) == 2 and all(line.get_linestyle() == "None" for line in drawn)
+
+
+def test_a_run_with_fewer_steps_is_drawn_where_it_has_them(monkeypatch, tmp_path):
+    """A run that recorded the first step only (its figure one value, its second error None)."""
+    study = _frontier_study()
+    short = study["runs"][0]
+    short["figure"], short["errors"] = short["figure"][:1], [short["errors"][0], None]
+    figure, error, _ = _drawn(monkeypatch, tmp_path, study).axes
+    for ax in (figure, error):
+        first = [line for line in ax.get_lines() if line.get_label().endswith("reynolds, step 0 (t = 1)")][0]
+        second = [line for line in ax.get_lines() if line.get_label().endswith("reynolds, step 1 (t = 2)")][0]
+        assert len(first.get_xdata()) == 3 and len(second.get_xdata()) == 2
