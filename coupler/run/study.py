@@ -167,7 +167,9 @@ def study_plot(path: Path, study: dict) -> None:
                     y = lambda run, s=s: _at(run.get("figure"), s)  # noqa: E731
                 else:
                     y = (lambda run, s=s: run["errors"][s]) if times else (lambda run: run["error"])
-                points = sorted((x(run), y(run)) for run in members if y(run))
+                # a figure may be 0 (no flow); an error of 0 (the reference) is not on log axes
+                points = sorted((x(run), y(run)) for run in members
+                                if y(run) is not None and (quantity == "figure" or y(run) > 0))
                 if not points:
                     continue
                 colour, marker = (f"C{g}", "os^vD<>"[k % 7]) if grouped else (f"C{k}", "o")

@@ -440,3 +440,13 @@ def test_a_run_with_fewer_steps_is_drawn_where_it_has_them(monkeypatch, tmp_path
         first = [line for line in ax.get_lines() if line.get_label().endswith("reynolds, step 0 (t = 1)")][0]
         second = [line for line in ax.get_lines() if line.get_label().endswith("reynolds, step 1 (t = 2)")][0]
         assert len(first.get_xdata()) == 3 and len(second.get_xdata()) == 2
+
+
+def test_a_figure_of_zero_is_drawn_on_the_figure_panel(monkeypatch, tmp_path):
+    """e_h = 0 (a fracture closed to the flow) is a value of the figure, drawn; its error is not 0."""
+    study = _frontier_study()
+    study["runs"][0]["figure"][0] = 0.0
+    study["runs"][0]["errors"][0] = 1.0
+    figure, _, _ = _drawn(monkeypatch, tmp_path, study).axes
+    first = [line for line in figure.get_lines() if line.get_label().endswith("reynolds, step 0 (t = 1)")][0]
+    assert 0.0 in list(first.get_ydata()) and len(first.get_xdata()) == 3
