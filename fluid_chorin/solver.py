@@ -5,7 +5,8 @@ kinematic form (``p`` is pressure / rho):
 
 ``D`` the penalization drag (:mod:`transfer.penalization`, from the exact solid fractions)
 per cell (with penalization ``"lubrication"`` the faces in the gap's plane get their own, from
-the larger of their two cells' fractions: :func:`transfer.penalization.face_fraction`), else
+the larger of their two cells' fractions, each column's gap made plates first:
+:func:`transfer.penalization.face_fraction`, :func:`~transfer.penalization.plates_fraction`), else
 on a face from the mean of the two cells' conductances ``1 / (r + D)``, ``r`` the
 viscous rate of a cell (plus ``1/dt`` when transient): a face between two cells of one drag
 keeps it, a face between a fluid cell and a solid-centred one gets about ``r`` (its flow is
@@ -62,7 +63,7 @@ from coupler.protocol.fluid_faces import closed_faces, dropped_velocity
 from coupler.protocol.wire import SolveReport
 from transfer.bodies import rigid_bodies, rigid_velocity
 from transfer.grid import across_axis
-from transfer.penalization import LINES, REACH, drag_fraction, face_fraction
+from transfer.penalization import LINES, REACH, drag_fraction, face_fraction, plates_fraction
 
 from .poisson import PoissonReport, PressurePoisson
 from .slabs import Slabs
@@ -170,8 +171,10 @@ class ChorinSolver:
         rate = self.viscous_rate() + (spec.substeps / spec.dt if spec.transient else 0.0)
         self.drag = [1.0 / to_faces(1.0 / (rate + drag), c) - rate for c in range(3)]
         if spec.penalization in LINES:  # each in-plane face column: the cubic law of its own opening
+            plates = plates_fraction(f.reshape(slabs.input_shape[::-1]), 2 - self.across)
+            plates = slabs.from_inputs(plates.ravel())
             for c in (c for c in range(3) if c != self.across):
-                F = face_fraction(self.fraction, AXIS[c])
+                F = face_fraction(plates, AXIS[c])
                 self.drag[c] = self.d_max * drag_fraction(F.ravel(), F.shape[::-1], spec.grid.spacing, spec.nu,
                                                           self.d_max, spec.penalization, None,
                                                           self.across).reshape(F.shape)

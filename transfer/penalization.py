@@ -29,18 +29,19 @@ scene gives it. The OpenFOAM fluid writes ``T`` as its ``solid`` field under the
     axis this is second order (measured in cases/parallel_plates); for oblique walls it is a
     per-axis approximation. A solid sliver with no solid-centred cell is not seen.
 ``"lubrication"``
-    The ``"wall"`` drag, except along the axis across a gap (:func:`transfer.grid.across_axis`)
-    in each run of fluid-centred cells with a solid-centred cell at both ends: there the two cut
-    cells (the run's end cells) get the drag that gives the column the lubrication conductance
-    of its local opening (paper eq. 9's cubic law: ``e^3 / (12 nu)``, ``e`` the column's open
-    length, the sum of ``(1 - f) h`` over the run and its two solid-centred ends), exact for
-    plates at any resolution and wall offset (:func:`cut_cell_drag`). The wall mode's
-    conductance errs by ``O(h^2 / e^2)``: +5.8 % at 4 cells across plates, +26 % at 3 cells
-    across with walls 0.37 cells from the cut cells' centres, and it is the throats of a rough
-    gap, a few cells across, that set its flow. Calibrated for pressure-driven flow along the gap
-    (a shear-driven one or an immersed body's wall keeps ``"wall"``, the default). The drag can
-    be slightly negative (to -nu / (2 h^2), where both walls lie near the centres of the solid
-    cells); the OpenFOAM fluid's table clips it at zero.
+    For pressure-driven flow along a gap (a fracture): each column's gap across it
+    (:func:`transfer.grid.across_axis`) made plates at the column's mean walls
+    (:func:`plates_fraction`), then the ``"wall"`` drag, except that the two cut cells of each
+    gap (the end cells of its run of fluid-centred cells) get the drag that gives the column the
+    lubrication conductance of its local opening, ``e^3 / (12 nu)`` (the cubic law, paper
+    section 4.2's ``e_h``; ``e`` the column's open length): exact for plates at any resolution
+    and wall offset (:func:`cut_cell_drag`), where the wall mode's conductance errs by
+    ``O(h^2 / e^2)``, and it is the throats of a rough gap, a few cells across, that set its flow.
+    The Chorin fluid also gives the faces in the gap's plane their own columns' drag
+    (:func:`face_fraction`). A shear-driven flow or an immersed body's wall keeps ``"wall"`` (the
+    default): the calibration is for a uniform pressure gradient along the gap. The drag can be
+    slightly negative (to ``-nu / (2 h^2)``, where both walls lie near the centres of solid
+    cells); the OpenFOAM fluid's table clips it at zero there.
 """
 
 from __future__ import annotations
@@ -84,6 +85,8 @@ def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str,
     F = f.reshape(nz, ny, nx)  # [k, j, i]
     spacing = np.asarray(spacing, dtype=float)
     gap = None if mode == "wall" else 2 - (across_axis(shape, spacing) if across is None else int(across))
+    if gap is not None:
+        F = plates_fraction(F, gap)
     D = np.zeros_like(F)
     for axis, h in zip((2, 1, 0), spacing):  # x, y, z
         if F.shape[axis] > 1:
@@ -91,6 +94,51 @@ def drag_fraction(fraction, shape, spacing, nu: float, d_max: float, mode: str,
             D += wall if axis != gap else cut_cell_drag(F, axis, h, nu, wall)
     T = np.where(F >= 0.5, 1.0, np.minimum(D / d_max, 1.0))
     return T.reshape(-1)
+
+
+def runs(lines):
+    """The runs of fluid-centred cells (fraction < 1/2) in the rows of ``lines``: their row, first
+    and last cell, in order (row by row, along each row)."""
+    fluid = lines < 0.5
+    solid_before = np.pad(~fluid[:, :-1], ((0, 0), (1, 0)), constant_values=True)
+    solid_after = np.pad(~fluid[:, 1:], ((0, 0), (0, 1)), constant_values=True)
+    line, lo = np.nonzero(fluid & solid_before)
+    return line, lo, np.nonzero(fluid & solid_after)[1]
+
+
+def plates_fraction(F, axis: int) -> np.ndarray:
+    """The fractions ``F`` (``[k, j, i]``) with each gap across ``axis`` made two flat walls: a run of
+    fluid-centred cells between two solid-centred ones, with the solid on each side of it up to the
+    middle of the solid before the next run (or the line's end), gets the exact fractions of the
+    plates whose walls hold as much solid on each side of the run's middle. The open length and
+    its mean position are kept; a wall spread over many cells (a face sloped within its column,
+    cells partly solid deep into the gap) becomes the column's mean wall, whose cut cells
+    :func:`cut_cell_drag` calibrates. Plates are left as they are; other lines too."""
+    n = F.shape[axis]
+    lines = np.moveaxis(F, axis, -1).reshape(-1, n)
+    line, lo, hi = runs(lines)
+    if not len(line):
+        return F
+    same = line[1:] == line[:-1]
+    start = np.zeros(len(line), np.int64)
+    start[1:] = np.where(same, (hi[:-1] + 1 + lo[1:]) // 2, 0)  # the solid between two runs split in the middle
+    end = np.full(len(line), n, np.int64)
+    end[:-1] = np.where(same, start[1:], n)
+    mid = (lo + hi + 1) // 2
+    solid = np.pad(np.cumsum(lines, axis=1), ((0, 0), (1, 0)))
+    z_lo = start + solid[line, mid] - solid[line, start]  # the walls [cells from the line's start]
+    z_hi = end - (solid[line, end] - solid[line, mid])
+    first = np.zeros(lines.size, np.int64)  # each cell's run (+1), 0 on lines without one
+    first[line * n + start] = np.arange(1, len(line) + 1)
+    seg = np.maximum.accumulate(first).reshape(lines.shape) - 1
+    seg[~np.isin(np.arange(len(lines)), line)] = -1
+    bounded = (lo > 0) & (hi < n - 1)
+    at = (seg >= 0) & bounded[np.maximum(seg, 0)]
+    k = np.broadcast_to(np.arange(n, dtype=float), lines.shape)[at]
+    r = seg[at]
+    out = lines.copy()
+    out[at] = 1.0 - np.clip(np.minimum(k + 1.0, z_hi[r]) - np.maximum(k, z_lo[r]), 0.0, 1.0)
+    return np.moveaxis(out.reshape(np.moveaxis(F, axis, -1).shape), -1, axis)
 
 
 def wall_drag(F, axis: int, h: float, nu: float) -> np.ndarray:
@@ -130,11 +178,7 @@ def cut_cell_drag(F, axis: int, h: float, nu: float, wall) -> np.ndarray:
     n = F.shape[axis]
     lines = np.moveaxis(F, axis, -1).reshape(-1, n)
     D = np.moveaxis(wall, axis, -1).reshape(-1, n).copy()
-    fluid = lines < 0.5
-    solid_before = np.pad(~fluid[:, :-1], ((0, 0), (1, 0)), constant_values=True)
-    solid_after = np.pad(~fluid[:, 1:], ((0, 0), (0, 1)), constant_values=True)
-    line, lo = np.nonzero(fluid & solid_before)  # each run's first cell, in order
-    _, hi = np.nonzero(fluid & solid_after)  # and its last
+    line, lo, hi = runs(lines)
     inside = (lo > 0) & (hi < n - 1)
     line, lo, hi = line[inside], lo[inside], hi[inside]
     m = (hi - lo + 1).astype(float)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from transfer.penalization import (LINES, PENALIZATIONS, REACH, drag_fraction, drag_fraction_of, face_fraction,
-                                   reach)
+                                   plates_fraction, reach)
 
 
 def test_wall_drag_in_one_dimension():
@@ -76,7 +76,7 @@ def conductance_error(f, mode: str, nu: float = 1e-3, h: float = 0.5) -> float:
     u[k] = -1`` (the in-plane velocity of the MAC grid's faces and OpenFOAM's cells) with u = 0 in
     the solid-centred cells, its flux ``h sum(u)``."""
     T = drag_fraction(f, (1, 1, len(f)), (1.0, 1.0, h), nu, 1.0, mode)
-    fluid = np.flatnonzero(f < 0.5)
+    fluid = np.flatnonzero(T < 1.0)  # the others stopped (at the drag D_max)
     m = len(fluid)
     A = nu / h ** 2 * (np.diag(np.ones(m - 1), 1) + np.diag(np.ones(m - 1), -1) - 2.0 * np.eye(m)) - np.diag(T[fluid])
     u = np.linalg.solve(A, -np.ones(m))
@@ -131,3 +131,27 @@ def test_a_face_between_two_columns_is_open_over_the_overlap_of_their_openings()
     np.testing.assert_allclose(faces[:, 0, 1], overlap, atol=1e-15)
     assert conductance_error(faces[:, 0, 1], "lubrication") == pytest.approx(0.0, abs=1e-12)
     np.testing.assert_array_equal(face_fraction(F, 0)[[0, -1]], F[[0, -1]])
+
+
+def sloped(low: tuple, high: tuple, cells: int = 24) -> np.ndarray:
+    """Solid fractions of a line of cells across a gap whose walls are sloped within the column:
+    the lower wall rising linearly from low[0] to low[1] cells across the column's width, the
+    upper from high[0] to high[1] (the column-mean of each cell's solid: exact)."""
+    k = np.arange(cells, dtype=float)[:, None]
+    s = np.linspace(0.0, 1.0, 2001)[None, :]  # across the column's width
+    lower, upper = low[0] + (low[1] - low[0]) * s, high[0] + (high[1] - high[0]) * s
+    open_ = np.clip(np.minimum(k + 1, upper) - np.maximum(k, lower), 0.0, 1.0)
+    return 1.0 - np.trapz(open_, s, axis=1)
+
+
+@pytest.mark.parametrize("low,high", [((2.0, 4.0), (9.0, 8.3)), ((2.2, 8.0), (14.0, 19.5)), ((2.6, 3.4), (5.3, 4.5))])
+def test_lubrication_drag_gives_a_sloped_column_the_cubic_law_of_its_mean_opening(low, high):
+    """Walls sloped within a column spread their solid over several cells (partly solid cells deep
+    in the gap): penalization "lubrication" gives the column the cubic law of its open length, the
+    gap made plates at the column's mean walls (plates_fraction, which keeps plates as they are)."""
+    f = sloped(low, high)
+    assert ((f > 0.01) & (f < 0.49)).any()  # partly solid cells in the run
+    assert conductance_error(f, "lubrication") == pytest.approx(0.0, abs=1e-12)
+    assert abs(conductance_error(f, "wall")) > 0.01
+    flat = plates(6.0, 2.3)[:, None, None]
+    np.testing.assert_allclose(plates_fraction(flat, 0), flat, atol=1e-15)
