@@ -149,6 +149,27 @@ def test_lubrication_penalization_gives_plates_the_cubic_law_at_any_resolution(n
     assert abs(error["wall"]) > 0.01
 
 
+class TwoRanks:
+    """The size and rank a slab decomposition reads first (nothing is sent before the refusal)."""
+
+    def Get_size(self):
+        return 2
+
+    def Get_rank(self):
+        return 0
+
+
+def test_lubrication_penalization_refuses_slabs_that_cut_the_lines_across_the_gap():
+    """The drag of penalization "lubrication" reads whole lines across the gap (y for the plates):
+    slabs along y on two ranks are refused, naming the mode, the axis and the setting to change."""
+    p = parameters("plates", {"aperture": 1e-3, "length": 2e-3, "cells_across": 8, "offset": 0.3})
+    config = {"grid": GENERATORS["plates"].grid(p), "inlet": {"pressure": 1e-2}, "outlet": {"pressure": 0.0},
+              "rho": 1000.0, "mu": 1e-3, "boundaries": {"zmin": "empty", "zmax": "empty"},
+              "penalization": "lubrication", "slab_axis": "y"}
+    with pytest.raises(ValueError, match=r"penalization 'lubrication' .* along y .* set slab_axis"):
+        ChorinSolver(ChorinSpec.from_config(config), TwoRanks())
+
+
 def couette(n: int, omega: float):
     """A cylinder of radius R1 = 0.3 rotating at ``omega`` inside a fixed ring r > R2 = 0.8, both
     immersed in a 2D grid of n x n cells over [-1, 1]^2 (slip box faces), nu = 0.1; fractions and
