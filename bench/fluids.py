@@ -17,6 +17,10 @@ participant (fluid_reynolds: the local cubic law in the fracture's plane, no 3D 
 * ``hm_fracture`` (``--hm``): cases/hm_fracture as shipped with the Chorin and the Reynolds fluid:
   e_h, e_m, Q per stress and the fluid's time, the Chorin fluid's time over the Reynolds fluid's
   (goal >= 100); and the Reynolds solve alone on a 256 x 256 rough aperture map (seconds per solve).
+* ``hm_fracture_map`` (``--map``): cases/hm_fracture_map, the Reynolds fluid coupled on a 256 x 256
+  aperture map (contact + flow): the time of a stress by phase (solid with its contact and platen
+  search, the coupler's transfers and rebuilds of the solid fractions, the Reynolds participant)
+  and the Reynolds solves' own seconds.
 
 * ``ranks`` (with ``--ranks 1 2``): the Chorin fluid on MPI ranks by grid slabs: the lid-driven
   cavity (Re 100; 64^2 and 128^2 cells, and a 3D cavity of 40^3) for a fixed number of
@@ -29,7 +33,7 @@ Goals (PASS/MISS): coupled small_fracture at least 2x faster end to end with the
 Reynolds fluid's time on hm_fracture at least 100x below the Chorin fluid's.
 
     .venv/bin/python bench/fluids.py [--cases small_fracture ...] [--across 4 8 16 32] [--ranks 1 2] [--hm]
-                                     [--quick] [-o FILE]
+                                     [--map [NX NY NZ]] [--quick] [-o FILE]
 
 ``--quick`` (smoke test): small_fracture only, plates at 4 and 8 across; output
 bench/results/fluids_quick.json unless ``-o`` is given.
@@ -41,6 +45,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import shutil
 import sys
 import tempfile
@@ -84,7 +89,7 @@ def run_case(case: str, fluid: str, replace: dict | None = None) -> dict:
         copy = Path(tmp) / case
         shutil.copytree(ROOT / "cases" / case, copy, ignore=shutil.ignore_patterns("results"))
         scene = (copy / "scene.toml").read_text()
-        line = next((f'participant = "{f}"' for f in ("openfoam", "chorin") if f'participant = "{f}"' in scene), None)
+        line = next((f'participant = "{f}"' for f in FLUIDS if f'participant = "{f}"' in scene), None)
         if line is None:
             raise SystemExit(f"cases/{case}/scene.toml: no fluid 'participant = ...' line to swap")
         scene = scene.replace(line, f'participant = "{fluid}"')
@@ -102,6 +107,9 @@ def run_case(case: str, fluid: str, replace: dict | None = None) -> dict:
         phases = summary.get("phases_seconds", {})
         iterations = sum(s.get("iterations", 0) for s in steps)
         fluid_seconds = phases.get("fluid", 0.0)
+        fluid_log = out / "logs" / "fluid.log"
+        solves = re.findall(r"Reynolds flow rate .*, ([0-9.]+) s$", fluid_log.read_text(), re.M) \
+            if fluid_log.exists() else []
         return {"fluid": fluid, "exit_code": code, "status": summary.get("status"), "error": summary.get("error"),
                 "wall_seconds": wall, "fluid_seconds": fluid_seconds,
                 "fluid_share": fluid_seconds / wall if wall else None,
@@ -114,7 +122,9 @@ def run_case(case: str, fluid: str, replace: dict | None = None) -> dict:
                 "fluid_setup_seconds": phases.get("fluid setup", 0.0), "check": summary.get("check"),
                 "fracture": [s["fracture"] for s in steps if "fracture" in s],
                 "fluid_cells": summary.get("sizes", {}).get("fluid", {}).get("cells"),
-                "fluid_solves": steps[-1]["solves"].get("fluid", []) if steps else []}
+                "fluid_solves": steps[-1]["solves"].get("fluid", []) if steps else [],
+                "phases_seconds": phases, "geometry_update": summary.get("geometry_update"),
+                "reynolds_solve_seconds": [float(t) for t in solves]}
 
 
 def compare(runs: dict, chorin: str = "chorin") -> dict:
@@ -181,6 +191,31 @@ def hm_side_by_side() -> dict:
           f"Reynolds against Chorin per stress: "
           + ", ".join(f"{d:+.1%}" for d in out["hydraulic_aperture_reynolds_over_chorin"])
           + f"; a 256 x 256 map: {min(seconds):.3f} s per solve")
+    return out
+
+
+def map_per_stress(shape=None) -> dict:
+    """cases/hm_fracture_map (the Reynolds fluid on a 256 x 256 aperture map; ``shape`` another
+    [geometry.fluid] shape): where the time of a stress goes, each phase of the run (solid with its
+    contact and platen search, the coupler's transfers and its rebuilds of the solid fractions of
+    the fluid grid, the Reynolds participant) per stress and per coupling iteration, and the
+    Reynolds solves' own seconds (its log)."""
+    replace = {"shape = [256, 256, 24]": f"shape = {list(shape)}"} if shape else {}
+    out = {"load_average_before": os.getloadavg()}
+    r = run_case("hm_fracture_map", "reynolds", replace)
+    steps, iterations = len(r["iterations_per_step"]), r["coupling_iterations"]
+    out.update({k: r[k] for k in ("status", "wall_seconds", "fluid_seconds", "iterations_per_step", "fracture",
+                                  "fluid_cells", "phases_seconds", "geometry_update", "reynolds_solve_seconds")})
+    out["per_stress"] = {phase: seconds / steps for phase, seconds in r["phases_seconds"].items()}
+    out["per_stress"]["wall"] = r["wall_seconds"] / steps
+    out["per_coupling_iteration"] = {phase: seconds / iterations for phase, seconds in r["phases_seconds"].items()}
+    out["load_average_after"] = os.getloadavg()
+    print(f"  {r['status']}: {r['fluid_cells']:,} fluid cells, wall {r['wall_seconds']:.1f} s, {steps} stresses, "
+          f"coupling iterations {r['iterations_per_step']}")
+    print("  per stress: " + ", ".join(f"{phase} {seconds:.2f} s" for phase, seconds in out["per_stress"].items()))
+    if r["reynolds_solve_seconds"]:
+        print(f"  the Reynolds solve itself: {min(r['reynolds_solve_seconds']):.3f} to "
+              f"{max(r['reynolds_solve_seconds']):.3f} s per coupling iteration")
     return out
 
 
@@ -266,6 +301,9 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="small_fracture and plates at 4, 8 across only")
     ap.add_argument("--ranks", nargs="+", type=int, help="also the Chorin fluid on these MPI rank counts")
     ap.add_argument("--hm", action="store_true", help="also hm_fracture with the Chorin and the Reynolds fluid")
+    ap.add_argument("--map", nargs="*", type=int, metavar="N",
+                    help="also cases/hm_fracture_map (the Reynolds fluid on a 256 x 256 aperture map; N: the "
+                         "[geometry.fluid] shape instead, three integers): the time of a stress by phase")
     ap.add_argument("--cavity", nargs=5, metavar=("NX", "NY", "NZ", "STEPS", "POISSON"),
                     help="(run under mpirun by --ranks) time the cavity's steps, print JSON")
     ap.add_argument("-o", "--output", type=Path)
@@ -326,6 +364,9 @@ def main(argv=None):
         result["goals"]["hm_fracture_reynolds_fluid_time"] = {  # a run that failed early is fast: no PASS
             "value": speedup, "goal": f">= {GOAL_REYNOLDS:g}, both runs completed",
             "status": "PASS" if done and speedup >= GOAL_REYNOLDS else "MISS"}
+    if args.map is not None:
+        print("\nhm_fracture_map: the Reynolds fluid on a full aperture map")
+        result["hm_fracture_map"] = map_per_stress(args.map or None)
     if args.ranks:
         print("\nthe Chorin fluid on MPI ranks by grid slabs")
         result["ranks"] = ranks_side_by_side(args.ranks)

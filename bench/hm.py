@@ -15,11 +15,20 @@ costs and how accurate it is.
   ratio, the growth per doubling across, and the largest relative difference of e_h between the
   two (they solve the same steady equations).
 
+* ``converged`` (``--converged``): e_h converged across the gap (issue 27 item 2): the scene as
+  shipped (its penalization, Newton's steady solve) on its 16 x 16 columns at 4, 8, 16 and 32
+  cells across the mean initial aperture, Richardson's extrapolation from the two finest at the
+  order observed on the three finest (:func:`richardson`), and each grid's error of e_h against it.
+
 Goals (PASS/MISS): at most 8 coupling iterations per stress with IQN-ILS; with ``--steady``
 (issue 27): Newton's fluid time on the shipped grid at least 5 times below the march's, and its
-growth per doubling across at most 2.5.
+growth per doubling across at most 2.5; with ``--converged`` (issue 27 item 2): e_h within 5 % of
+the extrapolated value at 8 cells across and within 10 % at 4 across, at every stress.
 
-    .venv/bin/python bench/hm.py [--quick] [--steady] [--across 4 8 16] [-o FILE]
+    .venv/bin/python bench/hm.py [--quick] [--steady] [--converged] [--across 4 8 16] [-o FILE]
+
+``--converged`` runs only that part (``--across`` default 4 8 16 32); output
+bench/results/hm_converged.json unless ``-o`` is given.
 
 ``--quick`` (smoke test): one stress (1 MPa), 8 x 8 columns, 4 and 8 cells across; output
 bench/results/hm_quick.json unless ``-o`` is given. The machine is shared: the load average
@@ -41,10 +50,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.case_runs import run_edited  # noqa: E402
+from bench.output import finish  # noqa: E402
 
 CASE = ROOT / "cases" / "hm_fracture"
 GOAL_ITERATIONS = 8
 GOAL_SPEEDUP, GOAL_GROWTH = 5.0, 2.5  # issue 27: the steady solve against the march
+GOAL_CONVERGED = {8: 0.05, 4: 0.10}  # issue 27 item 2: e_h's error at so many cells across
+SAFETY = 1.25  # the grid convergence index's safety factor with an observed order
 STEADY = ("march", "newton")
 APERTURE = 1.0e-4  # the scene's mean initial aperture [m] ([geometry.solid.parameters] aperture)
 Z_LOWER, Z_UPPER = -0.00022, 0.00031  # the scene's grid across the gap [m]
@@ -120,6 +132,35 @@ def refinement(across: list[int], columns: int, load: dict) -> list[dict]:
     return rows
 
 
+def richardson(coarse: float, fine: float, finest: float) -> dict:
+    """Richardson's extrapolation from three grids each refined twice across: the observed order
+    ``p = log2((fine - coarse) / (finest - fine))`` (2, the plates' order, when the differences
+    change sign or p falls outside [0.5, 4]), the extrapolated value ``finest + (finest - fine) /
+    (2^p - 1)`` and its uncertainty, the grid convergence index of the finest grid
+    ``SAFETY |finest - fine| / (2^p - 1)`` (the same unit as the values)."""
+    ratio = (fine - coarse) / (finest - fine) if finest != fine else math.nan
+    order = math.log2(ratio) if ratio > 0 else math.nan
+    observed = 0.5 <= order <= 4.0
+    p = order if observed else 2.0
+    return {"order": p, "observed": observed, "value": finest + (finest - fine) / (2.0 ** p - 1.0),
+            "uncertainty": SAFETY * abs(finest - fine) / (2.0 ** p - 1.0)}
+
+
+def converged(across: list[int], columns: int) -> dict:
+    """The shipped scene with Newton's steady solve on `columns` x `columns` columns at each number
+    of cells across; per stress Richardson's e_h from the three finest and each grid's error."""
+    rows = [{"cells_across_initial_aperture": n, **run_scene({**grid(columns, n), **method("newton")})}
+            for n in across]
+    done = all(r["status"] == "completed" for r in rows)
+    stresses_ = len(rows[-1]["fracture"])
+    extrapolated = [richardson(*(r["fracture"][k]["hydraulic_aperture"] for r in rows[-3:])) if done else None
+                    for k in range(stresses_)]
+    for r in rows:
+        r["error_hydraulic_aperture"] = [f["hydraulic_aperture"] / x["value"] - 1 if x else None
+                                         for f, x in zip(r["fracture"], extrapolated)]
+    return {"completed": done, "rows": rows, "extrapolated": extrapolated}
+
+
 def plot(path: Path, rows: list[dict]) -> None:
     """Error of e_h against the finest grid, against the cells across and against the fluid's
     seconds (the runs' wall times are dominated by start-up at the coarse grids)."""
@@ -155,17 +196,21 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="one stress, 8 x 8 columns, 4 and 8 across (smoke test)")
     ap.add_argument("--steady", action="store_true", help="the Chorin fluid's steady solvers side by side")
-    ap.add_argument("--across", nargs="+", type=int, default=[4, 8, 16])
+    ap.add_argument("--across", nargs="+", type=int, help="cells across the mean initial aperture (default 4 8 16; "
+                    "--converged: 4 8 16 32; --quick: 4 8)")
     ap.add_argument("-o", "--output", type=Path, help="JSON output (default bench/results/hm.json)")
+    ap.add_argument("--converged", action="store_true", help="e_h converged across the gap (issue 27 item 2) only")
     args = ap.parse_args(argv)
-    if args.quick:
-        args.across = [4, 8]
-    output = args.output or ROOT / "bench" / "results" / ("hm_quick.json" if args.quick else "hm.json")
+    args.across = args.across or ([4, 8] if args.quick else [4, 8, 16, 32] if args.converged else [4, 8, 16])
+    name = "hm_quick.json" if args.quick else "hm_converged.json" if args.converged else "hm.json"
+    output = args.output or ROOT / "bench" / "results" / name
     os.environ["VARCOUPLE_PICTURES"] = "0"  # time the coupling, not the renderings
     load = stresses([1.0e6]) if args.quick else {}
     result = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(), "cpu_count": os.cpu_count(),
               "load_average_before": os.getloadavg(), "quick": args.quick,
               "note": "machine shared with other engineers: times are indicative"}
+    if args.converged:
+        return converged_report(result, args.across, output)
 
     shipped = run_scene({**({"shape = [16, 16, 53]": "shape = [8, 8, 53]"} if args.quick else {}), **load})
     result["iterations"] = shipped
@@ -226,6 +271,36 @@ def main(argv=None) -> dict:
     plot(output.with_suffix(".png"), rows)
     print(f"written {output} and {output.with_suffix('.png').name}")
     return result
+
+
+def converged_report(result: dict, across: list[int], output: Path) -> dict:
+    """Run :func:`converged` on the shipped 16 x 16 columns, print it with the goals of issue 27
+    item 2 and save `result` with it to `output`."""
+    c = result["converged"] = converged(across, 16)
+    print("e_h converged across the gap (16 x 16 columns, Newton's steady solve, penalization as shipped):")
+    print(f"  {'across':>6s} {'cells':>7s} {'wall s':>7s} {'fluid s':>8s} " + " ".join(
+        f"{'e_h um':>8s} {'error':>7s}" for _ in c["rows"][-1]["fracture"]) + "   status")
+    for r in c["rows"]:
+        print(f"  {r['cells_across_initial_aperture']:6d} {r['fluid_cells'] or 0:7d} {r['wall_seconds']:7.1f} "
+              f"{r['phases_seconds']['fluid']:8.1f} " + " ".join(
+                  f"{1e6 * f['hydraulic_aperture']:8.2f} " + (f"{e:+7.2%}" if e is not None else f"{'-':>7s}")
+                  for f, e in zip(r["fracture"], r["error_hydraulic_aperture"])) + f"   {r['status']}")
+    goals = result["goals"] = {}
+    if c["completed"]:
+        print("  extrapolated: " + ", ".join(f"{1e6 * x['value']:.2f} +- {1e6 * x['uncertainty']:.2f} um (order "
+                                           f"{x['order']:.2f}{'' if x['observed'] else ', assumed'})"
+                                           for x in c["extrapolated"]))
+    for n, goal in GOAL_CONVERGED.items():
+        row = next((r for r in c["rows"] if r["cells_across_initial_aperture"] == n), None)
+        worst = max((abs(e) for e in row["error_hydraulic_aperture"]), default=math.nan) if row and c["completed"] \
+            else math.nan
+        goals[f"hydraulic_aperture_error_{n}_across"] = {
+            "value": worst, "goal": f"<= {goal:.0%} at every stress, every run completed",
+            "status": "PASS" if worst <= goal else "MISS"}
+    result["load_average_after"] = os.getloadavg()
+    return finish(result, [f"goal {name}: {g['value']:.4f} ({g['goal']}) {g['status']}" for name, g in goals.items()]
+                  + [f"load average before {result['load_average_before']}, after {result['load_average_after']}"],
+                  output)
 
 
 if __name__ == "__main__":

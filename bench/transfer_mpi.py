@@ -9,12 +9,14 @@ travels (cells and bytes per rank) and the memory per element, for docs/scaling.
     .venv/bin/python bench/transfer_mpi.py --cli           # `varcouple transfer` end to end, 94k x 118k tets
 
 With --cli: the command as a user runs it, on one rank and under ``mpirun -n 2``, the files
-written first (a P1 field on the source), as .vtu (rank 0 reads them and sends the parts)
-and as .pvtu of 2 pieces (each rank reads its own): the wall time from start to exit and
-each rank's peak resident memory (/usr/bin/time) above the same command's on a 750 x 1,296
-tet pair (the interpreter, MPI and PETSc: what the process costs whatever the mesh), as
-ratios against the one-rank .vtu run of the same benchmark, and the output files compared
-with its (equal to 1e-12).
+written first (a P1 field on the source), as .vtu (rank 0 reads them and sends the parts),
+as .pvtu of 2 pieces (each rank reads its own), and the target as the .xdmf of
+``solid_fenicsx.convert`` (each rank reads its rows, then the cells go to the bisection's
+ranks; the source as .pvtu): the wall time from start to exit, each rank's CPU time and peak
+resident memory (/usr/bin/time) above the same command's on a 750 x 1,296 tet pair (the
+interpreter, MPI and PETSc: what the process costs whatever the mesh) and the cells it read,
+as ratios against the one-rank .vtu run of the same benchmark and against the same inputs on
+one rank, and the output files compared with the one-rank .vtu run's (equal to 1e-12).
 
 Both codes cut both meshes by the same coordinate bisection (bench/supermesh_parallel.py
 writes the same parts for libsupermesh). Times are the slowest rank's, the minimum over
@@ -128,11 +130,13 @@ def _efficiency(seconds: dict) -> float | None:
 
 
 def _command(src: Path, dst: Path, out: Path, ranks: int, files: Path) -> dict:
-    """`varcouple transfer` on `ranks` (1: without mpirun): wall seconds to exit, peak RSS of each rank."""
+    """`varcouple transfer` on `ranks` (1: without mpirun): wall seconds to exit, peak RSS and CPU
+    seconds (user + system) of each rank, the cells and points each rank read (the command's
+    ``read`` line)."""
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
     for old in files.glob("rss_*"):
         old.unlink()
-    timed = f'exec /usr/bin/time -f %M -o {files}/rss_${{OMPI_COMM_WORLD_RANK:-0}} "$@"'
+    timed = f'exec /usr/bin/time -f "%M %U %S" -o {files}/rss_${{OMPI_COMM_WORLD_RANK:-0}} "$@"'
     cmd = ["sh", "-c", timed, "sh", sys.executable, "-m", "coupler.cli", "transfer", str(src), str(dst),
            "--field", "u", "-o", str(out)]
     if ranks > 1:
@@ -142,13 +146,21 @@ def _command(src: Path, dst: Path, out: Path, ranks: int, files: Path) -> dict:
     seconds = time.perf_counter() - start
     if proc.returncode:
         raise RuntimeError(f"{' '.join(cmd)} failed: {proc.stderr[-2000:]}")
-    peaks = [1024 * int((files / f"rss_{r}").read_text().split()[-1]) for r in range(ranks)]  # KB, rank by rank
-    return {"seconds": seconds, "peak_rss_bytes": peaks, "load_average": list(os.getloadavg())}
+    timings = [(files / f"rss_{r}").read_text().split()[-3:] for r in range(ranks)]  # KB, user s, system s
+    run = {"seconds": seconds, "peak_rss_bytes": [1024 * int(t[0]) for t in timings],
+           "cpu_seconds": [float(t[1]) + float(t[2]) for t in timings], "load_average": list(os.getloadavg())}
+    read = next((line for line in proc.stdout.splitlines() if line.startswith("read ")), None)
+    if read is not None:  # read    files opened per rank [..]; cells read per rank [..], points [..]
+        run["cells_read"] = json.loads(read.split("cells read per rank ")[1].split("]")[0] + "]")
+        run["points_read"] = json.loads(read.rsplit("points ", 1)[1])
+    return run
 
 
 def _write_inputs(size: str, files: Path) -> tuple[int, int]:
     """The source (with the P1 field u) and the target of `size` as .vtu and as .pvtu of 2 pieces
-    (bisection, as a coupler on 2 ranks writes them) in `files`; their numbers of tets."""
+    (bisection, as a coupler on 2 ranks writes them) in `files`, and the target as the XDMF +
+    HDF5 of ``python -m solid_fenicsx.convert`` (dolfinx's cell order, on one rank); their
+    numbers of tets."""
     import meshio
 
     from coupler.output.results import write_pieces
@@ -162,16 +174,25 @@ def _write_inputs(size: str, files: Path) -> tuple[int, int]:
         whole = meshio.Mesh(mesh.points, [("tetra", mesh.cells)], point_data=data)
         meshio.write(files / f"{name}.vtu", whole)
         write_pieces(whole, files / f"{name}.pvtu", bisection(Mesh.from_meshio(whole), 2))
+    subprocess.run([sys.executable, "-m", "solid_fenicsx.convert", str(files / "dst.vtu"), str(files / "dst.xdmf")],
+                   check=True, capture_output=True, cwd=ROOT, timeout=600)
     return src.num_cells, dst.num_cells
 
 
-#: (label, ranks, input format) of the --cli runs; the first is the baseline
-CLI_RUNS = (("vtu_1", 1, "vtu"), ("vtu_2", 2, "vtu"), ("pvtu_1", 1, "pvtu"), ("pvtu_2", 2, "pvtu"))
+#: (label, ranks, source format, target format) of the --cli runs; the first is the baseline, the
+#: serial command on single files
+CLI_RUNS = (("vtu_1", 1, "vtu", "vtu"), ("vtu_2", 2, "vtu", "vtu"), ("pvtu_1", 1, "pvtu", "pvtu"),
+            ("pvtu_2", 2, "pvtu", "pvtu"), ("xdmf_1", 1, "pvtu", "xdmf"), ("xdmf_2", 2, "pvtu", "xdmf"))
 
 
 def _by_coordinates(mesh) -> np.ndarray:
     """The output field in the lexicographic order of the points (a .pvtu's output numbers them otherwise)."""
     return mesh.point_data["u"][np.lexsort(mesh.points.T[::-1])]
+
+
+def _one_rank(label: str) -> str:
+    """The one-rank run of the inputs of `label`."""
+    return label.rsplit("_", 1)[0] + "_1"
 
 
 def cli(repeat: int, size: str, output: Path) -> dict:
@@ -189,46 +210,61 @@ def cli(repeat: int, size: str, output: Path) -> dict:
         result = {"benchmark": "transfer_cli_mpi", "size": size, "source_tets": ns, "target_tets": nt,
                   "load_average_at_start": list(os.getloadavg()), "goal_speedup": GOAL_CLI_SPEEDUP,
                   "goal_memory_ratio": GOAL_CLI_MEMORY, "runs": {}, "base": {}}
-        for label, ranks, ext in CLI_RUNS:
+        for label, ranks, src, dst in CLI_RUNS:
             # the same command on the 750 x 1,296-tet pair: what the process costs whatever the mesh
-            result["base"][label] = _command(base / f"src.{ext}", base / f"dst.{ext}", base / "out.vtu", ranks, base)
+            result["base"][label] = _command(base / f"src.{src}", base / f"dst.{dst}", base / "out.vtu", ranks, base)
             runs = []
             for _ in range(max(1, repeat)):
-                runs.append(_command(files / f"src.{ext}", files / f"dst.{ext}", files / f"out_{label}.vtu", ranks,
+                runs.append(_command(files / f"src.{src}", files / f"dst.{dst}", files / f"out_{label}.vtu", ranks,
                                      files))
-                print(f"  {label}: {runs[-1]['seconds']:.2f} s, peak memory of rank 0, 1.. "
+                print(f"  {label} ({src} -> {dst}): {runs[-1]['seconds']:.2f} s, CPU per rank "
+                      f"{[round(c, 2) for c in runs[-1]['cpu_seconds']]} s, peak memory per rank "
                       f"{[round(b / 1e6) for b in runs[-1]['peak_rss_bytes']]} MB (tiny pair: "
-                      f"{[round(b / 1e6) for b in result['base'][label]['peak_rss_bytes']]} MB); load average "
-                      f"{runs[-1]['load_average']}", flush=True)
+                      f"{[round(b / 1e6) for b in result['base'][label]['peak_rss_bytes']]} MB), cells read per "
+                      f"rank {runs[-1].get('cells_read', 'not said')}; load average {runs[-1]['load_average']}",
+                      flush=True)
             best = min(runs, key=lambda r: r["seconds"])
             best["peak_rss_above_base_bytes"] = [p - b for p, b in zip(best["peak_rss_bytes"],
                                                                        result["base"][label]["peak_rss_bytes"])]
-            result["runs"][label] = {"ranks": ranks, "input": ext, "best": best, "all": runs}
-        out = {label: meshio.read(files / f"out_{label}.vtu") for label, _, _ in CLI_RUNS}
+            result["runs"][label] = {"ranks": ranks, "input": [src, dst], "best": best, "all": runs}
+        out = {label: meshio.read(files / f"out_{label}.vtu") for label, *_ in CLI_RUNS}
         result["max_relative_difference"], result["same_uncovered"] = {}, {}
         a = _by_coordinates(out["vtu_1"])
-        for label, _, _ in CLI_RUNS[1:]:
+        for label, *_ in CLI_RUNS[1:]:
             b = _by_coordinates(out[label])
             result["max_relative_difference"][label] = float(np.nanmax(np.abs(a - b)) / np.nanmax(np.abs(a)))
             result["same_uncovered"][label] = bool(np.array_equal(np.isnan(a), np.isnan(b)))
-    one = result["runs"]["vtu_1"]["best"]
-    result["speedup"] = {label: one["seconds"] / result["runs"][label]["best"]["seconds"] for label, _, _ in CLI_RUNS[1:]}
-    result["memory_ratio_per_rank"] = {label: [p / one["peak_rss_above_base_bytes"][0]
-                                               for p in result["runs"][label]["best"]["peak_rss_above_base_bytes"]]
-                                       for label, _, _ in CLI_RUNS[1:]}
+    best = {label: run["best"] for label, run in result["runs"].items()}
+    two = [label for label, ranks, *_ in CLI_RUNS if ranks == 2]
+    # against the serial command (vtu_1) and against the same inputs on one rank
+    result["speedup"] = {label: best["vtu_1"]["seconds"] / best[label]["seconds"] for label, *_ in CLI_RUNS[1:]}
+    result["speedup_same_input"] = {label: best[_one_rank(label)]["seconds"] / best[label]["seconds"] for label in two}
+    result["memory_ratio_per_rank"] = {label: [p / best["vtu_1"]["peak_rss_above_base_bytes"][0]
+                                               for p in best[label]["peak_rss_above_base_bytes"]]
+                                       for label, *_ in CLI_RUNS[1:]}
+    result["memory_ratio_same_input"] = {label: [p / best[_one_rank(label)]["peak_rss_above_base_bytes"][0]
+                                                 for p in best[label]["peak_rss_above_base_bytes"]] for label in two}
     result["load_average_at_end"] = list(os.getloadavg())
     result["pass"] = {label: {"speedup": result["speedup"][label] >= GOAL_CLI_SPEEDUP,
                               "memory": max(result["memory_ratio_per_rank"][label]) <= GOAL_CLI_MEMORY,
                               "equal": result["max_relative_difference"][label] <= 1e-12
-                              and result["same_uncovered"][label]} for label, _, _ in CLI_RUNS[1:]}
+                              and result["same_uncovered"][label]} for label, *_ in CLI_RUNS[1:]}
+    for label in two:
+        result["pass"][label]["speedup_same_input"] = result["speedup_same_input"][label] >= GOAL_CLI_SPEEDUP
+        result["pass"][label]["memory_same_input"] = max(result["memory_ratio_same_input"][label]) <= GOAL_CLI_MEMORY
     verdict = lambda ok: "PASS" if ok else "MISS"  # noqa: E731
-    for label, _, _ in CLI_RUNS[1:]:
+    for label, *_ in CLI_RUNS[1:]:
         ok = result["pass"][label]
         print(f"{label} against vtu_1: speed-up {result['speedup'][label]:.2f}x (goal {GOAL_CLI_SPEEDUP}x on a quiet "
               f"machine): {verdict(ok['speedup'])}; peak memory above the tiny pair's, per rank / one rank's "
               f"{[round(r, 2) for r in result['memory_ratio_per_rank'][label]]} (goal <= {GOAL_CLI_MEMORY}): "
               f"{verdict(ok['memory'])}; output differs by {result['max_relative_difference'][label]:.1e} "
               f"relative: {verdict(ok['equal'])}")
+    for label in two:
+        ok, one = result["pass"][label], _one_rank(label)
+        print(f"{label} against {one}: speed-up {result['speedup_same_input'][label]:.2f}x: "
+              f"{verdict(ok['speedup_same_input'])}; peak memory per rank / one rank's "
+              f"{[round(r, 2) for r in result['memory_ratio_same_input'][label]]}: {verdict(ok['memory_same_input'])}")
     print(f"load average {result['load_average_at_end']} (2 cores)")
     output.parent.mkdir(parents=True, exist_ok=True)
     output.write_text(json.dumps(result, indent=2) + "\n")

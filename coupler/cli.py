@@ -127,7 +127,7 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
     from transfer.quadrature import check_degree
 
     from coupler.errors import CouplerError
-    from transfer.meshfile import check_writable
+    from transfer.meshfile import MeshFile, check_writable
 
     say = print if rank == 0 else (lambda *a, **k: None)
     if args.quadrature_degree is not None:
@@ -144,6 +144,7 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
         from coupler.run.projection import project
 
         source, target, field = _read(args, say)
+        _say_reads([(MeshFile.reads, MeshFile.cells_read, MeshFile.points_read)], say)
         p = project(field, source.space(field.kind), target.space(field.kind), args.method,
                     quadrature_degree=args.quadrature_degree, threads=args.threads)
     stats = p.operator.stats
@@ -163,6 +164,13 @@ def _transfer(args: argparse.Namespace, rank: int, ranks: int) -> int:
                                "covered": (field.kind, p.covered.astype(np.uint8))})
     print(f"wrote   {args.output}: {field.kind} data {field.name!r}, 'covered'")
     return 0
+
+
+def _say_reads(reads, say) -> None:
+    """What each rank read: `reads` holds (files, cells, points) per rank (None off rank 0)."""
+    if reads is not None:
+        files, cells, points = (list(r) for r in zip(*reads))
+        say(f"read    files opened per rank {files}; cells read per rank {cells}, points {points}")
 
 
 def _on_root(comm, work):
@@ -235,8 +243,7 @@ def _project_distributed(args, say):
             u = values if key == "source" else u
     source = files["source"] = None  # rank 0 keeps a target file alone: the output is that mesh with the field
     field = field and MeshFileField(field.name, kind, field.values[:0])
-    reads = comm.gather(MeshFile.reads)
-    say(f"read    files opened per rank {reads}")
+    _say_reads(comm.gather((MeshFile.reads, MeshFile.cells_read, MeshFile.points_read)), say)
     start = time.perf_counter()
     with warnings.catch_warnings(action="ignore", category=OverlapWarning):
         operator = Transfer.assemble(parts["source"], parts["target"], args.method, comm=comm,

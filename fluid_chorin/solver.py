@@ -4,7 +4,10 @@ kinematic form (``p`` is pressure / rho):
     du/dt + div(u u) = nu lap u - grad p - D (u - u_s),      div u = s
 
 ``D`` the penalization drag (:mod:`transfer.penalization`, from the exact solid fractions)
-per cell, on a face from the mean of the two cells' conductances ``1 / (r + D)``, ``r`` the
+per cell (with penalization ``"lubrication"`` the faces in the gap's plane get their own, from
+the larger of their two cells' fractions, each column's gap made plates first:
+:func:`transfer.penalization.face_fraction`, :func:`~transfer.penalization.plates_fraction`), else
+on a face from the mean of the two cells' conductances ``1 / (r + D)``, ``r`` the
 viscous rate of a cell (plus ``1/dt`` when transient): a face between two cells of one drag
 keeps it, a face between a fluid cell and a solid-centred one gets about ``r`` (its flow is
 set by the solid cell's continuity), as the face conductance of a collocated scheme
@@ -59,7 +62,8 @@ import numpy as np
 from coupler.protocol.fluid_faces import closed_faces, dropped_velocity
 from coupler.protocol.wire import SolveReport
 from transfer.bodies import rigid_bodies, rigid_velocity
-from transfer.penalization import REACH, drag_fraction
+from transfer.grid import across_axis
+from transfer.penalization import LINES, REACH, drag_fraction, face_fraction, plates_fraction
 
 from .poisson import PoissonReport, PressurePoisson
 from .slabs import Slabs
@@ -103,6 +107,12 @@ class ChorinSolver:
         # the inputs of a rank: its cells, the ghost layer (which also holds the face neighbours a
         # rigid body's interface layer reads) and the cells the drag of a ghost reads
         self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis, 1 + REACH[spec.penalization])
+        #: the axis across the gap (the drag of penalization "lubrication" reads whole lines along it)
+        self.across = across_axis(spec.grid.shape, spec.grid.spacing)
+        if spec.penalization in LINES and self.slabs.size > 1 and self.slabs.d == self.across:
+            raise ValueError(f"penalization {spec.penalization!r} reads whole lines of cells along "
+                             f"{'xyz'[self.across]} (across the gap), the slabs of {self.slabs.size} ranks cut "
+                             f"them: set slab_axis to an axis in the gap's plane")
         #: this rank's part of the grid, ghosts included (the whole grid on one rank)
         self.grid = Staggered(self.slabs.local_shape, spec.grid.spacing, self.slabs.faces)
         self.state = State(self.grid.zeros(), np.zeros(self.grid.cells))
@@ -153,13 +163,21 @@ class ChorinSolver:
                 self.warned_faces.add(face)
             velocity = rigid_velocity(bodies, ids)  # at the slab's own cells
         T = drag_fraction(f, slabs.input_shape, spec.grid.spacing, spec.nu, self.d_max, spec.penalization,
-                          spec.penalization_exponent)
+                          spec.penalization_exponent, self.across)
         drag = slabs.from_inputs(T * self.d_max)
         self.solid_fraction = f
         self.fraction = slabs.from_inputs(f)
         g.set_mask(1.0 - self.fraction)
         rate = self.viscous_rate() + (spec.substeps / spec.dt if spec.transient else 0.0)
         self.drag = [1.0 / to_faces(1.0 / (rate + drag), c) - rate for c in range(3)]
+        if spec.penalization in LINES:  # each in-plane face column: the cubic law of its own opening
+            plates = plates_fraction(f.reshape(slabs.input_shape[::-1]), 2 - self.across)
+            plates = slabs.from_inputs(plates.ravel())
+            for c in (c for c in range(3) if c != self.across):
+                F = face_fraction(plates, AXIS[c])
+                self.drag[c] = self.d_max * drag_fraction(F.ravel(), F.shape[::-1], spec.grid.spacing, spec.nu,
+                                                          self.d_max, spec.penalization, None,
+                                                          self.across).reshape(F.shape)
         if velocity is None:
             self.target = g.zeros()
             self.source = np.zeros(g.cells)

@@ -1,5 +1,5 @@
 """The fluid grid seen from the fracture's mean plane: its columns across the fracture (along the
-grid's thinner extent of y and z, :func:`across_axis`; a 2D grid's single cell is in the plane),
+grid's thinner extent of y and z, :func:`transfer.grid.across_axis`; a 2D grid's single cell is in the plane),
 the local
 aperture of each column and the plane grid the Reynolds equation is solved on.
 
@@ -14,14 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from transfer import FunctionSpace, StructuredGrid, Transfer
-
-
-def across_axis(grid: StructuredGrid) -> int:
-    """The axis across the fracture: of y and z (x, from the inlet to the outlet, is in the
-    plane) the one of the thinner extent, leaving out one of a single cell (a 2D grid)."""
-    extents = np.asarray(grid.spacing) * np.asarray(grid.shape)
-    axes = [a for a in (1, 2) if grid.shape[a] > 1] or [1, 2]
-    return min(axes, key=lambda a: extents[a])
+from transfer.grid import across_axis
 
 
 class Columns:
@@ -30,7 +23,7 @@ class Columns:
 
     def __init__(self, grid: StructuredGrid, resolution=None):
         self.grid = grid
-        self.across = across_axis(grid)
+        self.across = across_axis(grid.shape, grid.spacing)
         self.side = 3 - self.across  # the in-plane axis besides x
         shape, spacing = np.asarray(grid.shape), np.asarray(grid.spacing, float)
         self.height = float(spacing[self.across] * shape[self.across])

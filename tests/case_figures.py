@@ -1,7 +1,7 @@
-"""The figures of a finished case that must not change when the code is reorganised: for
+"""The figures of a finished case that must not change unless a change means them to: for
 every VTU file a run wrote, the minimum, maximum and L2 norm of each field, and the
 coupling iterations per step. They are compared with ``tests/data/case_figures.json``
-(recorded before a move) by ``tests/test_shipped_cases.py``.
+by ``tests/cases/test_shipped_cases.py``.
 
 Record them again (after a change that is meant to change results, say why in the commit)::
 

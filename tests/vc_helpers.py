@@ -269,6 +269,28 @@ def hertz_mesh_file(path, **params) -> None:
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
 
 
+def write_xdmf(path, points, cells, topology_rows=None, elements=None) -> None:
+    """A tet mesh as XDMF + HDF5 in dolfinx's layout (what ``solid_fenicsx.convert`` writes),
+    its points and cells in the order given; `topology_rows` / `elements` declare another row
+    count or NumberOfElements in the XML (bad input)."""
+    import h5py
+
+    path = Path(path)
+    with h5py.File(path.with_suffix(".h5"), "w") as f:
+        f["/Mesh/mesh/topology"] = np.asarray(cells, np.int64)
+        f["/Mesh/mesh/geometry"] = np.asarray(points, np.float64)
+    n, m = len(cells), len(points)
+    h5 = f"{path.stem}.h5:/Mesh/mesh"
+    path.write_text(f"""<?xml version="1.0"?>
+<Xdmf Version="3.0"><Domain><Grid Name="mesh" GridType="Uniform">
+<Topology TopologyType="Tetrahedron" NumberOfElements="{elements or n}" NodesPerElement="4">
+<DataItem Dimensions="{topology_rows or n} 4" NumberType="Int" Format="HDF">{h5}/topology</DataItem>
+</Topology><Geometry GeometryType="XYZ">
+<DataItem Dimensions="{m} 3" Format="HDF">{h5}/geometry</DataItem>
+</Geometry></Grid></Domain></Xdmf>
+""")
+
+
 def run_mpi(script, ranks: int, *args, timeout: float = 300):
     """``mpirun -n ranks python script args`` from the project root (Open MPI allowed to run as
     root, one thread per rank); its stdout's last line parsed as JSON. A failed run fails the test

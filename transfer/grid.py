@@ -112,6 +112,15 @@ class StructuredGrid:
                 f"shape={list(self.shape)})")
 
 
+def across_axis(shape, spacing) -> int:
+    """The axis across a fracture or gap in a grid of ``shape`` and ``spacing``: of y and z (x,
+    from the inlet to the outlet, is in the plane) the one of the thinner extent, leaving out one
+    of a single cell (a 2D grid)."""
+    extents = np.asarray(spacing, float) * np.asarray(shape)
+    axes = [a for a in (1, 2) if int(shape[a]) > 1] or [1, 2]
+    return min(axes, key=lambda a: extents[a])
+
+
 def wall_distance(f_c, f_s, h: float):
     """Distance from the centre of a fluid-centred cell (fraction ``f_c``) to the wall in the
     direction of its solid-centred neighbour (``f_s``), spacing ``h``: ``h (3/2 - f_c - f_s)``

@@ -228,8 +228,9 @@ class MeshFile:
     blocks: list[int]
     ignored: dict[str, int] = field(default_factory=dict)  # lower-dimensional cell type -> count
 
-    #: files this process has read (``mpirun varcouple transfer`` says that only rank 0 read)
-    reads = 0
+    #: files this process has read, the cells and points it read of them (``mpirun varcouple
+    #: transfer`` says what each rank read)
+    reads = cells_read = points_read = 0
 
     @classmethod
     def read(cls, path) -> "MeshFile":
@@ -254,6 +255,8 @@ class MeshFile:
             raise MeshFileError(f"{name}: unsupported cell type(s) {unsupported}; varcouple transfers between "
                                f"{', '.join(CELL_TYPES)} cells")
         mesh = Mesh.from_meshio(raw, name=name)  # MeshError (a TransferError) names the file
+        MeshFile.cells_read += sum(len(b.data) for b in raw.cells)
+        MeshFile.points_read += len(raw.points)
         blocks = [i for i, b in enumerate(raw.cells) if b.type == mesh.cell_type]
         ignored: dict[str, int] = {}
         for b in raw.cells:

@@ -1,5 +1,6 @@
 """Partitions of cells among ranks, for meshes that every rank holds whole (files the CLI
-reads, tests): slabs along an axis and recursive coordinate bisection of the cell centres.
+reads, tests) or whose centres one rank gathers (:func:`transfer.pieces.balanced`): slabs along
+an axis and recursive coordinate bisection of the cell centres.
 Each gives the owner rank of every cell; :meth:`transfer.distributed.Part.of_cells` makes a
 rank's part of them, :func:`part_rows` its cells and the vertices it owns (a participant's part)."""
 
@@ -25,24 +26,28 @@ def slabs(mesh, parts: int, axis: int) -> np.ndarray:
 
 
 def bisection(mesh, parts: int) -> np.ndarray:
-    """Owner of every cell by recursive coordinate bisection of the cell centres: the cells
-    are cut across their longest extent, in counts proportional to the ranks on each side."""
-    owner = np.zeros(mesh.num_cells, dtype=np.int64)
+    """Owner of every cell by recursive coordinate bisection of the cell centres (:func:`bisect`)."""
+    return bisect(_centres(mesh), parts)
 
-    def cut(cells, first, count):
-        if count == 1 or len(cells) == 0:
-            owner[cells] = first
+
+def bisect(centres: np.ndarray, parts: int) -> np.ndarray:
+    """Owner of every point of `centres` (n, 3) by recursive coordinate bisection: the points
+    are cut across their longest extent, in counts proportional to the ranks on each side."""
+    owner = np.zeros(len(centres), dtype=np.int64)
+
+    def cut(items, first, count):
+        if count == 1 or len(items) == 0:
+            owner[items] = first
             return
-        x = centres[cells]
+        x = centres[items]
         axis = int(np.argmax(x.max(axis=0) - x.min(axis=0)))
-        order = cells[np.argsort(x[:, axis], kind="stable")]
+        order = items[np.argsort(x[:, axis], kind="stable")]
         left = count // 2
         k = len(order) * left // count
         cut(order[:k], first, left)
         cut(order[k:], first + left, count - left)
 
-    centres = _centres(mesh)
-    cut(np.arange(mesh.num_cells), 0, parts)
+    cut(np.arange(len(centres)), 0, parts)
     return owner
 
 

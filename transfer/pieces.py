@@ -1,6 +1,7 @@
 """A ``.pvtu`` file read in parts: the ranks of an MPI job each read their own pieces;
 an XDMF + HDF5 mesh in dolfinx's layout (``python -m solid_fenicsx.convert``) likewise, each
-rank its own rows (:meth:`Pieces.rows`).
+rank its own rows (:meth:`Pieces.rows`), whose cells then go to the ranks of a coordinate
+bisection (:func:`balanced`: a run of rows of dolfinx's cell order spans the whole mesh).
 
 The pieces a ``.pvtu`` names (``<Piece Source="..."/>``, paths relative to it) are shared
 out in order, a run of consecutive pieces per rank (rank 0 has the first). A piece is a
@@ -21,6 +22,7 @@ import numpy as np
 from .errors import MeshFileError, TransferError
 from .mesh import CELL_TYPES, Mesh
 from .meshfile import MeshFile, MeshFileField
+from .partition import bisect
 from .spaces import FAMILIES
 from .xdmf import MESH, layout
 
@@ -30,8 +32,9 @@ def read_in_parts(path) -> bool:
     return str(path).lower().endswith((".pvtu", ".xdmf"))
 
 
-def _datasets(path) -> tuple[Path, str, str]:
-    """(HDF5 file, topology dataset, geometry dataset) of the grid ``mesh`` of the XDMF `path`."""
+def _datasets(path) -> tuple[Path, tuple[str, tuple[int, ...]], tuple[str, tuple[int, ...]]]:
+    """(HDF5 file, (topology dataset, its declared shape), (geometry dataset, its declared shape))
+    of the grid ``mesh`` of the XDMF `path`."""
     path = Path(path)
     try:
         found = layout(path)
@@ -44,7 +47,44 @@ def _datasets(path) -> tuple[Path, str, str]:
     items = [grid.find(f"{part}/DataItem") for part in ("Topology", "Geometry")]
     if any(item is None or ":" not in (item.text or "") for item in items):
         raise MeshFileError(f"{path}: grid {MESH!r}: topology and geometry must be HDF5 data items")
-    return (path.with_suffix(".h5"), *(item.text.strip().split(":", 1)[1] for item in items))
+    try:
+        shapes = [tuple(int(n) for n in item.get("Dimensions", "").split()) for item in items]
+    except ValueError:
+        shapes = []
+    if [len(s) for s in shapes] != [2, 2]:
+        raise MeshFileError(f"{path}: grid {MESH!r}: the topology and geometry DataItem Dimensions must be "
+                            f"two numbers each (rows columns)")
+    if shapes[0][0] != found.num_cells:
+        raise MeshFileError(f"{path}: grid {MESH!r}: Topology NumberOfElements is {found.num_cells} but its "
+                            f"DataItem Dimensions {shapes[0][0]} rows")
+    return (path.with_suffix(".h5"), *((item.text.strip().split(":", 1)[1], shape)
+                                       for item, shape in zip(items, shapes)))
+
+
+#: a gap of at most this many unused geometry rows between two used ones is read through
+#: (one hyperslab) rather than starting another
+GAP_ROWS = 16
+
+
+def hyperslabs(rows: np.ndarray, gap: int = GAP_ROWS) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, stops) of the runs of the sorted distinct `rows` that read them: consecutive
+    rows with at most `gap` unused rows between them make one run."""
+    if not len(rows):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    cut = np.flatnonzero(np.diff(rows) > gap + 1) + 1
+    return rows[np.r_[0, cut]], rows[np.r_[cut - 1, len(rows) - 1]] + 1
+
+
+def read_rows(dataset, rows: np.ndarray) -> tuple[np.ndarray, int]:
+    """(the sorted distinct `rows` of the HDF5 `dataset`, read by :func:`hyperslabs`; how many
+    rows were read)."""
+    starts, stops = hyperslabs(rows)
+    if not len(starts):
+        return np.zeros((0,) + dataset.shape[1:], dataset.dtype), 0
+    block = np.concatenate([dataset[a:b] for a, b in zip(starts, stops)])
+    offsets = np.cumsum(np.r_[0, stops - starts])[:-1]
+    run = np.searchsorted(starts, rows, side="right") - 1
+    return block[offsets[run] + rows - starts[run]], len(block)
 
 
 def sources(path) -> list[Path]:
@@ -68,6 +108,10 @@ def mine(count: int, rank: int, size: int) -> range:
     owner = np.arange(count) * size // count
     held = np.flatnonzero(owner == rank)
     return range(int(held[0]), int(held[-1]) + 1) if len(held) else range(0)
+
+
+def _shape(shape) -> str:
+    return " x ".join(map(str, shape)) or "a scalar"
 
 
 def _owner(points: np.ndarray, size: int) -> np.ndarray:
@@ -134,10 +178,38 @@ def _agreed(comm, work):
     return result
 
 
+def balanced(mesh: Mesh, point_ids: np.ndarray, cell_ids: np.ndarray, comm) -> tuple[Mesh, np.ndarray, np.ndarray]:
+    """The cells of this rank's `mesh` (`point_ids`, `cell_ids`: the global ids of its points
+    and cells) moved to the ranks :func:`transfer.partition.bisect` gives their centres, as
+    ``mpirun -n P varcouple transfer`` cuts a single file; the centres are cut on rank 0
+    (24 B a cell there), the cells travel with their points. (this rank's mesh, the global ids
+    of its points, of its cells in increasing order). Collective."""
+    centres = mesh.points[mesh.cells].mean(axis=1) if mesh.num_cells else np.zeros((0, 3))
+    every = comm.gather(centres)
+    owner = comm.scatter(np.split(bisect(np.concatenate(every), comm.size), np.cumsum([len(c) for c in every])[:-1])
+                         if comm.rank == 0 else None)
+    del every
+    sent = []
+    for q in range(comm.size):
+        mine = np.flatnonzero(owner == q)
+        used, local = np.unique(mesh.cells[mine], return_inverse=True)
+        sent.append((cell_ids[mine], point_ids[used], mesh.points[used], local.reshape(len(mine), -1)))
+    got = comm.alltoall(sent)
+    del sent
+    ids = np.concatenate([g[0] for g in got]).astype(np.int64)
+    order = np.argsort(ids)
+    cells = np.concatenate([g[1][g[3]] for g in got])[order]  # global point ids
+    points, first = np.unique(np.concatenate([g[1] for g in got]).astype(np.int64), return_index=True)
+    coordinates = np.concatenate([g[2] for g in got])[first]
+    return (Mesh.trusted(coordinates, np.searchsorted(points, cells), mesh.cell_type, mesh.name),
+            points, ids[order])
+
+
 @dataclass
 class Pieces:
     """This rank's pieces of a ``.pvtu`` (:class:`transfer.meshfile.MeshFile` each) and the
-    global ids of their points and cells (:func:`numbering`), joined in piece order."""
+    global ids of their points and cells (:func:`numbering`), joined in piece order; of an
+    ``.xdmf``, its part of the rows (:meth:`rows`)."""
 
     path: str
     held: list
@@ -156,32 +228,52 @@ class Pieces:
     @classmethod
     def rows(cls, path, comm) -> "Pieces":
         """This rank's rows of an XDMF + HDF5 tet mesh in dolfinx's layout: topology rows
-        r n / P to (r + 1) n / P and the geometry rows they use; the global ids are the row
-        numbers, the file's own numbering (collective)."""
+        r n / P to (r + 1) n / P, one hyperslab, and the geometry rows they use
+        (:func:`read_rows`), then the cells of its part (:func:`balanced`); the global ids are
+        the row numbers, the file's own numbering (collective)."""
         import h5py
         import meshio
 
-        h5, topology, geometry = _agreed(comm, lambda: _datasets(path))
+        h5, (topology, cells_shape), (geometry, points_shape) = _agreed(comm, lambda: _datasets(path))
 
         def read():
             try:
                 with h5py.File(h5, "r") as f:
-                    n, m = f[topology].shape[0], f[geometry].shape[0]
+                    top, geo = f[topology], f[geometry]
+                    for name, dataset, declared in ((topology, top, cells_shape), (geometry, geo, points_shape)):
+                        if dataset.shape != declared:
+                            raise MeshFileError(f"{path}: {h5.name}:{name} holds {_shape(dataset.shape)} but "
+                                                f"the XDMF's DataItem Dimensions say {_shape(declared)}")
+                    if top.ndim != 2 or top.shape[1] != 4 or geo.ndim != 2 or geo.shape[1] != 3:
+                        raise MeshFileError(f"{path}: {h5.name}: the topology must have 4 columns (tetrahedra) "
+                                            f"and the geometry 3 (x, y, z); found {_shape(top.shape)} and "
+                                            f"{_shape(geo.shape)}")
+                    n, m = top.shape[0], geo.shape[0]
                     lo, hi = comm.rank * n // comm.size, (comm.rank + 1) * n // comm.size
-                    cells = np.asarray(f[topology][lo:hi], np.int64)
+                    cells = np.asarray(top[lo:hi], np.int64)
                     used, local = np.unique(cells, return_inverse=True)
-                    points = np.asarray(f[geometry][used] if len(used) else np.zeros((0, 3)), np.float64)
-            except (OSError, KeyError) as exc:
+                    if len(used) and (used[0] < 0 or used[-1] >= m):
+                        bad = used[0] if used[0] < 0 else used[-1]
+                        raise MeshFileError(f"{path}: {h5.name}:{topology} refers to point {bad}; the geometry "
+                                            f"has {m} points")
+                    points, read_points = read_rows(geo, used)
+            except OSError as exc:
                 raise MeshFileError(f"{path}: cannot read {h5.name}: {exc}") from None
+            except KeyError as exc:
+                raise MeshFileError(f"{path}: {h5.name} has no dataset {exc}") from None
             MeshFile.reads += 1
+            MeshFile.cells_read += hi - lo
+            MeshFile.points_read += read_points
+            points = np.asarray(points, np.float64)
             local = local.reshape(cells.shape)
             mesh = (Mesh(points, local, "tetra", name=str(path), reorient=True) if len(cells) else
                     Mesh.empty("tetra", str(path)))
             return MeshFile(str(path), meshio.Mesh(points, [("tetra", mesh.cells)]), mesh, [0]), used, lo, n, m
 
         held, used, lo, n, m = _agreed(comm, read)
-        return cls(str(path), [held] if held.mesh.num_cells else [], "tetra", used,
-                   lo + np.arange(held.mesh.num_cells, dtype=np.int64), m, n, comm)
+        mesh, point_ids, cell_ids = balanced(held.mesh, used, lo + np.arange(held.mesh.num_cells), comm)
+        held = MeshFile(str(path), meshio.Mesh(mesh.points, [("tetra", mesh.cells)]), mesh, [0])
+        return cls(str(path), [held] if mesh.num_cells else [], "tetra", point_ids, cell_ids, m, n, comm)
 
     @classmethod
     def read(cls, path, comm) -> "Pieces":
@@ -231,7 +323,7 @@ class Pieces:
 
     def whole(self, root: int = 0):
         """The whole mesh with the data every piece has, as a :class:`transfer.meshfile.MeshFile`
-        on `root` (points in the order of their global ids, cells in piece order); None elsewhere.
+        on `root` (points and cells in the order of their global ids: piece order, the file's rows); None elsewhere.
         Collective."""
         import meshio
 
@@ -245,19 +337,20 @@ class Pieces:
         point_data = {n: join([np.asarray(f.raw.point_data[n]) for f in held]) for n in point_names}
         cell_data = {n: join([np.concatenate([np.asarray(f.raw.cell_data[n][i]) for i in f.blocks])
                               for f in held]) for n in cell_names}
-        mine = (self.point_ids, points, self.point_ids[self._cells()], point_data, cell_data)
+        mine = (self.point_ids, points, self.point_ids[self._cells()], point_data, cell_data, self.cell_ids)
         every = comm.gather(mine, root=root)
         if comm.rank != root:
             return None
         every = [e for e in every if len(e[0])]
+        order = np.argsort(np.concatenate([e[5] for e in every]), kind="stable")  # the file's cell order
         out_points = np.empty((self.num_points, 3))
         out_point_data = {n: np.empty((self.num_points,) + every[0][3][n].shape[1:], every[0][3][n].dtype)
                           for n in point_names}
-        for ids, p, _, data, _ in every:
+        for ids, p, _, data, _, _ in every:
             out_points[ids] = p
             for n in point_names:
                 out_point_data[n][ids] = data[n]
-        cells = np.concatenate([e[2] for e in every])
-        out_cell_data = {n: [np.concatenate([e[4][n] for e in every])] for n in cell_names}
+        cells = np.concatenate([e[2] for e in every])[order]
+        out_cell_data = {n: [np.concatenate([e[4][n] for e in every])[order]] for n in cell_names}
         raw = meshio.Mesh(out_points, [(self.cell_type, cells)], point_data=out_point_data, cell_data=out_cell_data)
         return MeshFile(self.path, raw, Mesh.trusted(out_points, cells, self.cell_type, self.path), [0])

@@ -9,10 +9,12 @@ value is one line naming it; what the error is measured on is checked against ea
 (:mod:`coupler.run.compared`); the count and an estimate of the time are printed (the rule of
 :data:`RUN_SECONDS`, then scaled by the runs done). A run that fails is recorded with its status;
 the study goes on. ``study.json`` (rewritten atomically when a run starts and ends) holds the
-study's ``status`` and ``planned`` runs and one record per run started: ``values``, ``status``,
-``seconds`` (``total`` and per phase), ``cost`` (cells and vertices of every participant's mesh,
-from the run's summary) and ``error`` (:mod:`coupler.run.compared`). ``study.png`` draws error
-against wall time and against cost.
+study's ``status``, ``planned`` runs, the machine's ``load_average`` before and after and one
+record per run started: ``values``, ``status``, ``seconds`` (``total`` and per phase), ``cost``
+(cells and vertices of every participant's mesh, from the run's summary) and ``error``
+(:mod:`coupler.run.compared`). ``study.png`` draws error against wall time and against cost (of a
+figure, the figure too), with two or more --vary keys one linked series per value of the first:
+each model's accuracy-cost frontier (:func:`series_of`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -113,47 +116,111 @@ def cost(summary: dict) -> dict | None:
             "participants": sizes}
 
 
+def _short(value) -> str:
+    """A --vary value as a legend shows it: a table's keys and values, anything else as TOML/JSON."""
+    if isinstance(value, dict):
+        return ", ".join(f"{k}={_short(v)}" for k, v in value.items())
+    return value if isinstance(value, str) else json.dumps(value)
+
+
+def series_of(study: dict) -> list[tuple[str | None, list[dict]]]:
+    """The runs grouped for the plot: with two or more --vary keys, one series per value of the
+    first (e.g. a model) holding its runs over the others (e.g. its resolutions), linked in the
+    plot; with one key, one series of points, unlinked. Runs without an error or a cost are left out."""
+    runs = [run for run in study["runs"] if run.get("error") is not None and run.get("cost")]
+    keys = list(study.get("vary", {}))
+    if len(keys) < 2:
+        return [(None, runs)]
+    first = keys[0]
+    return [(f"{first}={_short(value)}", [run for run in runs if run["values"][first] == value])
+            for value in study["vary"][first]]
+
+
 def study_plot(path: Path, study: dict) -> None:
     """Error against wall time and against cost (cells), one point per run with an error; of a
-    figure, one series per step of the reference (its error at that step)."""
+    figure, one series per step of the reference (its error at that step) and a first panel of the
+    figure itself against wall time. With two or more --vary keys each value of the first is one
+    colour, its runs linked in order of the x axis: the accuracy-cost frontier of each (e.g. each
+    fluid model over its resolutions, :func:`series_of`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     against = study["error"]
-    runs = [run for run in study["runs"] if run.get("error") and run.get("cost")]
+    groups = series_of(study)
+    runs = [run for _, members in groups for run in members]
     reference = next((run for run in study["runs"] if run["name"] == against.get("reference")), None)
     tolerance = next((run["check"]["tolerance"] for run in study["runs"] if run.get("check")), None)
     times = against.get("t") if "figure" in against else None
-    series = [(f"step {s} (t = {t:g})", lambda run, s=s: run["errors"][s]) for s, t in enumerate(times)] \
-        if times else [(None, lambda run: run["error"])]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    for ax, x, label in ((axes[0], lambda r: r["seconds"]["total"], "wall time [s]"),
-                         (axes[1], lambda r: r["cost"]["cells"], "cost [cells of all participants]")):
-        for k, (name, error) in enumerate(series):
-            points = [(x(run), error(run)) for run in runs if error(run)]
-            if points:
-                ax.loglog(*zip(*points), "o", color=f"C{k}", label=name)
+    steps = [(f"step {s} (t = {t:g})", s) for s, t in enumerate(times)] if times else [(None, None)]
+    grouped = groups[0][0] is not None
+    wall = (lambda r: r["seconds"]["total"], "wall time [s]")
+    panels = [(wall, "error"), ((lambda r: r["cost"]["cells"], "cost [cells of all participants]"), "error")]
+    if times:
+        panels.insert(0, (wall, "figure"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4))
+    for ax, ((x, xlabel), quantity) in zip(axes, panels):
+        for g, (group, members) in enumerate(groups):
+            for k, (step, s) in enumerate(steps):
+                if quantity == "figure":
+                    y = lambda run, s=s: _at(run.get("figure"), s)  # noqa: E731
+                else:
+                    y = (lambda run, s=s: run["errors"][s]) if times else (lambda run: run["error"])
+                # a figure may be 0 (no flow); an error of 0 (the reference) is not on log axes
+                points = sorted((x(run), y(run)) for run in members
+                                if y(run) is not None and (quantity == "figure" or y(run) > 0))
+                if not points:
+                    continue
+                colour, marker = (f"C{g}", "os^vD<>"[k % 7]) if grouped else (f"C{k}", "o")
+                name = ", ".join(n for n in (group, step) if n) or None
+                draw = ax.plot if quantity == "figure" else ax.loglog
+                draw(*zip(*points), marker=marker, ls="-" if grouped else "", color=colour, label=name)
+                if quantity == "figure":
+                    ax.set_xscale("log")
         for run in runs:
-            ax.annotate(run["name"], (x(run), run["error"]), fontsize=7, xytext=(3, 3), textcoords="offset points",
-                        color="k" if run["status"] == "completed" else "C3")
+            at = run["error"] if quantity == "error" else _at(run.get("figure"), -1)
+            if at:
+                ax.annotate(run["name"], (x(run), at), fontsize=7, xytext=(3, 3), textcoords="offset points",
+                            color="k" if run["status"] == "completed" else "C3")
         if reference is not None:
             ax.axvline(x(reference), color="k", ls=":", lw=1, label=f"reference {reference['name']}")
-        if tolerance is not None and not times:
+        if tolerance is not None and not times and quantity == "error":
             ax.axhline(tolerance, color="k", ls="--", lw=0.8, label=f"[check] tolerance {tolerance:g}")
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-        ax.set_xlabel(label)
+        if ax is axes[0] and ax.get_legend_handles_labels()[0]:
+            ax.legend(handles=_legend(ax, groups, steps) if grouped else None, fontsize=6)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(against["figure"] if quantity == "figure" else "")
         ax.grid(True, which="both", alpha=0.3)
     if not runs:
         axes[0].text(0.5, 0.5, "no run with an error to draw", transform=axes[0].transAxes, ha="center")
-    axes[0].set_ylabel(f"relative error of {against['figure']} per step" if times else
-                       f"relative L2 difference of {against['field']}" if "field" in against and reference else
-                       f"error ([check] {study['check']})" if study["check"] else "error")
-    fig.suptitle(f"{study['case']}: error against {against['against']}", fontsize=9)
+    axes[-2].set_ylabel(f"relative error of {against['figure']}" if times else
+                        f"relative L2 difference of {against['field']}" if "field" in against and reference else
+                        f"error ([check] {study['check']})" if study["check"] else "error")
+    fig.suptitle(f"{study['case']}: error against {against['against']}"
+                 + (f"\n{reference['name']}: {_short_values(reference)}" if reference else ""), fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
+
+
+def _at(values: list | None, step: int):
+    """The value of a run's `step` (None where the run has none: it stopped earlier)."""
+    return values[step] if values and -len(values) <= step < len(values) else None
+
+
+def _legend(ax, groups, steps) -> list:
+    """One entry per series (its colour), one per step (its marker) and the axis's other lines
+    (the reference): not each series' line per step."""
+    from matplotlib.lines import Line2D
+
+    own = [line for line in ax.get_lines() if line.get_linestyle() != "-" and not line.get_label().startswith("_")]
+    return ([Line2D([], [], color=f"C{g}", label=group) for g, (group, _) in enumerate(groups)]
+            + [Line2D([], [], color="k", marker="os^vD<>"[k % 7], ls="", label=step) for k, (step, _) in
+               enumerate(steps) if step] + own)
+
+
+def _short_values(run: dict) -> str:
+    return "; ".join(f"{key}={_short(value)}" for key, value in run["values"].items())
 
 
 def run_study(case, varies: list[str], output=None, field: str | None = None, figure: str | None = None,
@@ -180,7 +247,8 @@ def run_study(case, varies: list[str], output=None, field: str | None = None, fi
              "status": "running", "planned": {"runs": len(runs), "estimated_seconds": planned},
              "vary": {key: _distinct([values[key] for _, values, _ in runs]) for key in runs[0][1]},
              "check": base.check["kind"] if getattr(base, "check", None) else None,
-             "compared": {"kind": compared.kind, "name": compared.name}, "runs": []}
+             "compared": {"kind": compared.kind, "name": compared.name},
+             "load_average": {"before": os.getloadavg()}, "runs": []}
     with lock:
         try:
             done = 0.0
@@ -209,6 +277,7 @@ def run_study(case, varies: list[str], output=None, field: str | None = None, fi
                     run["status"] = study["status"]
             raise
         finally:
+            study["load_average"]["after"] = os.getloadavg()  # the runs' seconds are as loaded as the machine
             write_summary(directory, study, STUDY)  # the status first: the runs are kept whatever follows
             _conclude(study, directory, compared)
     for run in study["runs"]:

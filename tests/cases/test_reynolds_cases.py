@@ -106,3 +106,30 @@ def test_a_fracture_on_the_reynolds_fluid_says_why_e_h_has_no_error_estimate(tmp
     assert f["hydraulic_aperture"] > 0 and "hydraulic_aperture_error" not in f
     reason = "the fluid participant 'reynolds' gives no coarse_flow_rate"
     assert f["hydraulic_aperture_error_missing"].startswith(reason)
+
+
+@pytest.mark.slow
+def test_the_frontier_study_records_both_models(tmp_path):
+    """``varcouple study`` over the two models and two grids across the gap (hm_fracture at 1 MPa on
+    8 x 8 columns, the Chorin fluid by its Newton steady solve; slow: four coupled runs, about 40 s
+    on a loaded machine): every run recorded with its model and e_h, the reference the finest 3D
+    run (the largest cost, and of the two at that cost the longer: the 3D one), the Reynolds e_h
+    above the 3D one on both grids, and study.png drawn."""
+    case = copy_case(CASES / "hm_fracture", tmp_path, {"stress = [1.0e6, 2.0e6, 4.0e6]": "stress = [1.0e6]",
+                                                       "steps = 3": "steps = 1"})
+    out = tmp_path / "study"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("VARCOUPLE_PICTURES", "0")
+        code = main(["study", str(case), "--vary",
+                     'solvers.fluid=[{participant="reynolds"}, {participant="chorin", steady="newton"}]',
+                     "--vary", "geometry.fluid.shape=[[8, 8, 22], [8, 8, 43]]",
+                     "--figure", "fracture.hydraulic_aperture", "-o", str(out)])
+    study = json.loads((out / "study.json").read_text())
+    assert code == 0 and study["status"] == "completed", study
+    models = [run["values"]["solvers.fluid"]["participant"] for run in study["runs"]]
+    assert models == ["reynolds", "reynolds", "chorin", "chorin"]
+    assert study["error"]["reference"] == "run_04"
+    e_h = [run["figure"][0] for run in study["runs"]]
+    assert all(e > 0 for e in e_h) and min(e_h[:2]) > max(e_h[2:])
+    assert study["runs"][3]["error"] == 0.0 and all(run["error"] > 0 for run in study["runs"][:3])
+    assert (out / "study.png").stat().st_size > 0

@@ -4,6 +4,7 @@ serial run writes (fields equal to 1e-12, the same uncovered dofs); an input err
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 
 from transfer.generate import box_tetrahedra
-from vc_helpers import ROOT
+from vc_helpers import ROOT, write_xdmf
 
 pytestmark = pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
 
@@ -98,6 +99,9 @@ def test_pieces_are_read_by_their_ranks(files, tmp_path, name, kind, method):
                          "--method", method, ranks=ranks)
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert f"read    files opened per rank {[6] if ranks == 1 else [4, 2]}" in proc.stdout
+        cells = [sum(len(meshio.read(tmp_path / f"{file}_p{i}.vtu").cells[0].data) for file in ("src", "dst")
+                     for i in held) for held in ([range(3)] if ranks == 1 else [range(2), range(2, 3)])]
+        assert f"cells read per rank {cells}" in proc.stdout  # each rank its own pieces' cells, no more
         outputs[ranks] = meshio.read(out)
     whole = tmp_path / "whole.vtu"
     proc = varcouple(files / "src.vtu", files / "dst.vtu", "--field", name, "-o", whole, "--method", method)
@@ -155,3 +159,74 @@ def test_an_xdmf_target_is_read_by_rows(files, tmp_path):
         u, v = by_coordinates(a, "u", "point"), by_coordinates(b, "u", "point")
         np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
         assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
+
+
+def test_each_rank_reads_its_rows_of_an_xdmf(files, tmp_path):
+    """A 3,840-tet target as XDMF + HDF5, its points and cells in lattice order: on 2 ranks each
+    reads half of the topology rows, and of the geometry little more than the points its rows use
+    (the file's own order keeps them near: at most 60 % of the points each); the output is the
+    one-rank run's."""
+    dst = box_tetrahedra((8, 8, 10), lower=(0.3, -0.2, 0.1), upper=(1.3, 0.9, 0.8), jitter=0.2, seed=5)
+    write_xdmf(tmp_path / "dst.xdmf", dst.points, dst.cells)
+    n_src = len(meshio.read(files / "src.vtu").cells[0].data)
+    outputs = {}
+    for ranks in (1, 2):
+        out = tmp_path / f"out_{ranks}.vtu"
+        proc = varcouple(files / "src.vtu", tmp_path / "dst.xdmf", "--field", "k", "-o", out, ranks=ranks)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        line = next(x for x in proc.stdout.splitlines() if x.startswith("read    files opened per rank"))
+        cells = [n_src + dst.num_cells // ranks] + [dst.num_cells // 2] * (ranks - 1)
+        assert f"cells read per rank {cells}" in line  # rank 0 the source .vtu whole, each its rows
+        points = json.loads(line.rsplit("points ", 1)[1])
+        if ranks == 2:  # rank 0 also read the source's points
+            assert max(points[1], points[0] - len(meshio.read(files / "src.vtu").points)) <= 0.6 * dst.num_points
+        outputs[ranks] = meshio.read(out)
+    u, v = (m.cell_data["k"][0] for m in (outputs[1], outputs[2]))
+    np.testing.assert_array_equal(np.isnan(u), np.isnan(v))
+    assert np.nanmax(np.abs(u - v)) <= 1e-12 * np.nanmax(np.abs(u))
+
+
+@pytest.mark.parametrize("fault, message", [
+    ("elements", "dst.xdmf: grid 'mesh': Topology NumberOfElements is 999 but its DataItem Dimensions 720 rows"),
+    ("rows", "dst.xdmf: dst.h5:/Mesh/mesh/topology holds 720 x 4 but the XDMF's DataItem Dimensions say 999 x 4"),
+    ("point", "dst.xdmf: dst.h5:/Mesh/mesh/topology refers to point 210; the geometry has 210 points"),
+    ("h5", "dst.xdmf: its HDF5 file dst.h5 does not exist"),
+])
+def test_a_bad_xdmf_is_said_once_naming_it(files, tmp_path, fault, message):
+    """An XDMF whose counts do not match its HDF5 data, or whose cells name a point past the
+    geometry (on rank 1's rows), or without its .h5: exit 2 and one line naming the file and why."""
+    import h5py
+
+    dst = box_tetrahedra((4, 5, 6), jitter=0.2, seed=5)
+    declared = {"elements": {"elements": 999}, "rows": {"topology_rows": 999, "elements": 999}}.get(fault, {})
+    write_xdmf(tmp_path / "dst.xdmf", dst.points, dst.cells, **declared)
+    if fault == "point":
+        with h5py.File(tmp_path / "dst.h5", "r+") as f:
+            f["/Mesh/mesh/topology"][-1, 2] = dst.num_points
+    if fault == "h5":
+        (tmp_path / "dst.h5").unlink()
+    proc = varcouple(files / "src.vtu", tmp_path / "dst.xdmf", "--field", "u", "-o", tmp_path / "x.vtu", ranks=2)
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert proc.stderr.count("varcouple: error:") == 1 and "Traceback" not in proc.stderr
+    assert message in proc.stderr
+    assert not (tmp_path / "x.vtu").exists()
+
+
+def test_a_piece_whose_counts_do_not_match_its_data_is_named(files, tmp_path):
+    """Rank 1's piece declares fewer points than it holds: exit 2, the piece named."""
+    from coupler.output.results import write_pieces
+    from transfer import Mesh
+    from transfer.partition import slabs
+
+    mesh = meshio.read(files / "src.vtu")
+    write_pieces(mesh, tmp_path / "src.pvtu", slabs(Mesh.from_meshio(mesh), 2, axis=0))
+    piece = meshio.read(tmp_path / "src_p1.vtu")
+    meshio.write(tmp_path / "src_p1.vtu", piece, binary=False)
+    text = (tmp_path / "src_p1.vtu").read_text()
+    declared = f'NumberOfPoints="{len(piece.points)}"'
+    assert declared in text
+    (tmp_path / "src_p1.vtu").write_text(text.replace(declared, f'NumberOfPoints="{len(piece.points) - 5}"'))
+    proc = varcouple(tmp_path / "src.pvtu", files / "dst.vtu", "--field", "u", "-o", tmp_path / "x.vtu", ranks=2)
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert proc.stderr.count("varcouple: error:") == 1 and "Traceback" not in proc.stderr
+    assert "src_p1.vtu: cannot read the mesh with meshio" in proc.stderr

@@ -289,6 +289,7 @@ def test_a_study_of_a_figure(tmp_path, capsys):
                      r"about 16.3 s by the rule 3 s \+ 1 ms per cell and step a run", out[:first]), out
     study = json.loads((tmp_path / "study" / "study.json").read_text())
     assert study["status"] == "completed" and study["planned"]["runs"] == 2
+    assert all(len(study["load_average"][when]) == 3 for when in ("before", "after"))
     assert study["compared"] == {"kind": "figure", "name": "max_displacement"}
     reference = study["error"]["reference"]
     assert study["error"]["figure"] == "max_displacement" and study["error"]["t"] == pytest.approx(
@@ -364,3 +365,88 @@ def test_a_runs_record_takes_its_own_summary_not_one_left_there(tmp_path):
     assert _own_summary(tmp_path, "this") == {}
     write_summary(tmp_path, {"run_id": "this", "status": "failed"})
     assert _own_summary(tmp_path, "this")["status"] == "failed"
+
+
+# -- the accuracy-cost frontier of two models (issue 29, item 4) -------------------------
+def _frontier_study(models=("reynolds", "chorin"), across=(22, 43, 87)) -> dict:
+    """A study.json of two --vary keys, a model and the cells across, on a figure at two steps:
+    the finest run of the second model the reference, e_h and time fabricated."""
+    runs = []
+    for m, model in enumerate(models):
+        for a, n in enumerate(across):
+            figure = [(1.2 if model == "reynolds" else 1.0 + 0.5 / n) * e for e in (1e-4, 8e-5)]
+            runs.append({"name": f"run_{len(runs) + 1:02d}", "directory": f"run_{len(runs) + 1:02d}",
+                         "values": {"solvers.fluid.participant": model, "geometry.fluid.shape": [16, 16, n]},
+                         "status": "completed", "seconds": {"total": (1 + 10 * m) * (1 + a)},
+                         "cost": {"cells": 960 + 256 * n}, "check": None, "figure": figure})
+    reference = runs[-1]
+    for run in runs:
+        run["errors"] = [abs(f / r - 1) for f, r in zip(run["figure"], reference["figure"])]
+        run["error"] = max(run["errors"])
+    return {"case": "hm_fracture", "check": None, "runs": runs,
+            "vary": {"solvers.fluid.participant": list(models), "geometry.fluid.shape": [[16, 16, n] for n in across]},
+            "error": {"against": "the reference run", "reference": reference["name"],
+                      "figure": "fracture.hydraulic_aperture", "t": [1.0, 2.0]}}
+
+
+def _drawn(monkeypatch, tmp_path, study):
+    """study_plot's figure, kept instead of saved; the PNG written all the same."""
+    figures = []
+    saved = study_module.save_figure
+    monkeypatch.setattr(study_module, "save_figure", lambda fig, path, **kw: (figures.append(fig),
+                                                                              saved(fig, path, **kw)))
+    study_module.study_plot(tmp_path / "study.png", study)
+    assert (tmp_path / "study.png").stat().st_size > 0
+    return figures[0]
+
+
+def test_two_models_draw_one_line_per_model_and_step(monkeypatch, tmp_path):
+    """Each panel (e_h, its error against wall time, against cells) has per model and step one
+    line linking the model's runs in order of the x axis; the reference's error (0) is not on the
+    log axes, its e_h is."""
+    study = _frontier_study()
+    figure, error, cost = _drawn(monkeypatch, tmp_path, study).axes
+    for ax, per_model in ((figure, 3), (error, 3), (cost, 3)):
+        lines = [line for line in ax.get_lines() if line.get_linestyle() == "-"]
+        labels = sorted(line.get_label() for line in lines)
+        assert labels == sorted(f"solvers.fluid.participant={m}, step {s} (t = {t:g})"
+                                for m in ("reynolds", "chorin") for s, t in enumerate((1.0, 2.0)))
+        for line in lines:
+            x = list(line.get_xdata())
+            assert x == sorted(x) and len(x) == (per_model - (ax is not figure and "chorin" in line.get_label()))
+            model = line.get_label().split("=")[1].split(",")[0]
+            assert len({line.get_color() for line in lines if model in line.get_label()}) == 1
+    chorin = [line for line in figure.get_lines() if "chorin, step 0" in line.get_label()][0]
+    assert list(chorin.get_ydata()) == [run["figure"][0] for run in study["runs"][3:]]
+    assert "reference run_06" in [line.get_label() for line in error.get_lines()]
+
+
+def test_one_key_draws_points_unlinked(monkeypatch, tmp_path):
+    """One --vary key: points per step, no line between runs that need not be a sequence."""
+    study = _frontier_study(models=("chorin",))
+    study["vary"].pop("solvers.fluid.participant")
+    _, error, _ = _drawn(monkeypatch, tmp_path, study).axes
+    drawn = [line for line in error.get_lines() if line.get_marker() == "o"]
+    assert len(drawn) == 2 and all(line.get_linestyle() == "None" for line in drawn)
+
+
+def test_a_run_with_fewer_steps_is_drawn_where_it_has_them(monkeypatch, tmp_path):
+    """A run that recorded the first step only (its figure one value, its second error None)."""
+    study = _frontier_study()
+    short = study["runs"][0]
+    short["figure"], short["errors"] = short["figure"][:1], [short["errors"][0], None]
+    figure, error, _ = _drawn(monkeypatch, tmp_path, study).axes
+    for ax in (figure, error):
+        first = [line for line in ax.get_lines() if line.get_label().endswith("reynolds, step 0 (t = 1)")][0]
+        second = [line for line in ax.get_lines() if line.get_label().endswith("reynolds, step 1 (t = 2)")][0]
+        assert len(first.get_xdata()) == 3 and len(second.get_xdata()) == 2
+
+
+def test_a_figure_of_zero_is_drawn_on_the_figure_panel(monkeypatch, tmp_path):
+    """e_h = 0 (a fracture closed to the flow) is a value of the figure, drawn; its error is not 0."""
+    study = _frontier_study()
+    study["runs"][0]["figure"][0] = 0.0
+    study["runs"][0]["errors"][0] = 1.0
+    figure, _, _ = _drawn(monkeypatch, tmp_path, study).axes
+    first = [line for line in figure.get_lines() if line.get_label().endswith("reynolds, step 0 (t = 1)")][0]
+    assert 0.0 in list(first.get_ydata()) and len(first.get_xdata()) == 3

@@ -27,7 +27,8 @@ from coupler.protocol.roles import (DISPLACEMENT, IN_CONTACT, INLET_PRESSURE, PR
 from coupler.protocol.slabs import slab_bounds
 from coupler.scene.participants import for_role
 from coupler.scene.tables import Table
-from transfer.grid import BOX_FACES
+from transfer.grid import BOX_FACES, across_axis
+from transfer.penalization import LINES
 
 NAME = "flow"
 DESCRIPTION = "fluid flow on a structured grid, coupled to the solid (fluid participant, paper 2.3)"
@@ -83,13 +84,19 @@ def parse(scene, data: dict) -> None:
 
 
 def _check_slabs(scene) -> None:
-    """A fluid cut into slabs over its ranks (``slab_axis``) has enough cells for each."""
+    """A fluid cut into slabs over its ranks (``slab_axis``) has enough cells for each, and its
+    slabs do not cut the lines across the gap a penalization of :data:`LINES` reads."""
     solver = scene.solvers["fluid"]
     if "slab_axis" in solver.settings and solver.ranks > 1:
         try:
-            slab_bounds(scene.fluid.shape, solver.ranks, solver.settings["slab_axis"])
+            d, _ = slab_bounds(scene.fluid.shape, solver.ranks, solver.settings["slab_axis"])
         except ValueError as exc:
             raise SceneError(f"{scene.path}: [solvers.fluid] ranks: {exc} ([geometry.fluid] shape)") from None
+        mode = solver.settings.get("penalization")
+        if mode in LINES and d == across_axis(scene.fluid.shape, scene.fluid.spacing):
+            raise SceneError(f"{scene.path}: [solvers.fluid] slab_axis: penalization {mode!r} reads whole lines of "
+                             f"cells along {'xyz'[d]} (across the gap), the slabs along {'xyz'[d]} of {solver.ranks} "
+                             f"ranks would cut them: set slab_axis to an axis in the gap's plane")
 
 
 def _check_rate_control(scene) -> None:
