@@ -15,8 +15,8 @@ THROAT_CELLS = 4
 #: contact area fraction above which the open space is a few channels near percolation
 CONTACT_AREA_LIMIT = 0.5
 #: the order of convergence of e_h across the gap the error estimate assumes (Richardson: the
-#: error of the fine e_h is |e_h - e_h,c| / (2^p - 1)). Measured on hm_fracture
-#: (cases/hm_fracture/README.md, "Converged e_h"): the observed order is about 1 from 8 cells
+#: error of the fine e_h is |e_h - e_h,c| / (2^p - 1)). Measured on hm_fracture with penalization
+#: "wall" (cases/hm_fracture/README.md, "Converged e_h"): the observed order is about 1 from 8 cells
 #: across on (1.10 / 0.98 / 0.82 at 1 / 2 / 4 MPa) but 0.3 between 4, 8 and 16, where p = 1 gives
 #: 0.55 to 0.67 of the true error at 8 across and 0.76 at 16 across, 4 MPa: p = 1/2 (the factor
 #: 2.41) is the largest order that brackets the true error on that study's grids; on plates, whose

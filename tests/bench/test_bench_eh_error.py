@@ -1,6 +1,6 @@
-"""bench/eh_error.py's pieces that need no run: the study's extrapolated e_h (the truth the
-estimate is measured against, as cases/hm_fracture/README.md states it) and the fluid log's
-per-solve seconds, fine and coarse apart."""
+"""bench/eh_error.py's pieces that need no run: the converged e_h (the truth the estimate is
+measured against, as cases/hm_fracture/README.md states it) and the fluid log's per-solve
+seconds, fine and coarse apart."""
 
 import json
 
@@ -9,10 +9,13 @@ import pytest
 from vc_helpers import ROOT, load_bench
 
 
-def test_the_truth_is_the_studys_extrapolated_e_h():
+def test_the_truth_is_the_converged_e_h_of_each_penalization():
+    """penalization "wall": the study's extrapolated e_h; "lubrication": bench/hm.py --converged's."""
     bench = load_bench("eh_error")
     study = json.loads((ROOT / "bench" / "results" / "hm_fracture_across_study.json").read_text())
     assert [1e6 * e for e in bench.converged(study)] == pytest.approx([80.0, 70.77, 56.03], abs=0.01)
+    record = json.loads((ROOT / "bench" / "results" / "hm_converged.json").read_text())
+    assert [1e6 * e for e in bench.converged_lubrication(record)] == pytest.approx([80.37, 71.69, 58.06], abs=0.01)
 
 
 def test_the_coarse_solves_seconds_are_told_apart_in_the_fluid_log(tmp_path):

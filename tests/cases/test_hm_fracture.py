@@ -69,8 +69,8 @@ def test_rough_fracture_apertures_and_flow_fall_with_stress(coarse):
 def test_each_step_estimates_the_error_of_e_h_from_the_coarsened_grid(coarse):
     """The Chorin fluid's flow rate on its grid coarsened 2x across (53 cells: 27) gives e_h there
     and the estimate (Richardson at order 1/2) per step; at 10 cells across the mean aperture of
-    8 x 8 columns it is 39 to 61 % (e_h on the coarse grid 12 to 14 um above: measured), so each
-    step warns, printed once."""
+    8 x 8 columns, penalization "lubrication", it is 0.2, 0.2 and 2.2 % (measured): under 5 %, no
+    warning (with penalization "wall" 39 to 61 %, each step warns: fails)."""
     for step in coarse["steps"]:
         f, fluid = step["fracture"], step["figures"]["fluid"]
         assert f["coarse_hydraulic_aperture"] ** 3 == pytest.approx(
@@ -79,12 +79,11 @@ def test_each_step_estimates_the_error_of_e_h_from_the_coarsened_grid(coarse):
             (f["coarse_hydraulic_aperture"] - f["hydraulic_aperture"]) / (2 ** 0.5 - 1), rel=1e-12)
         assert f["hydraulic_aperture_relative_error"] == pytest.approx(
             f["hydraulic_aperture_error"] / f["hydraulic_aperture"], rel=1e-12)
-        assert 0.2 < f["hydraulic_aperture_relative_error"] < 1.0
-        warning = f"fracture: e_h {1e6 * f['hydraulic_aperture']:.4g} um is uncertain"
-        assert any(w.startswith(warning) for w in f["warnings"])
+        assert 0 < f["hydraulic_aperture_relative_error"] < 0.05
+        assert not any("is uncertain by about" in w for w in f.get("warnings", []))
         assert any("on the grid coarsened 2x across z" in r["solver"] and r["converged"]
                    for r in step["solves"]["fluid"])
-    assert sum("is uncertain by about" in w for w in coarse["warnings"]) == 1
+    assert not any("is uncertain by about" in w for w in coarse.get("warnings", []))
 
 
 #: e_h [m] at 1, 2 and 4 MPa converged across the gap on the scene's 16 x 16 columns (README.md,
