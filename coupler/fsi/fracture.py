@@ -93,7 +93,7 @@ class FractureFigures:
         estimate = self.error_estimate(e_h, rate, (reported or {}).get("fluid", {}).get(COARSE_FLOW_RATE))
         warnings = self.warnings({"contact area": contact_area_warning(fraction, self.cell),
                                   "cells across": cells_across_warning(open_aperture, self.h),
-                                  "throat": throat_warning(throat, self.h),
+                                  "throat": throat_warning(throat, self.h, "hydraulic_aperture_error" in estimate),
                                   "apertures": apertures_warning(e_h, e_m),
                                   "error": error_warning(e_h, estimate.get("hydraulic_aperture_error", 0.0),
                                                          open_aperture / self.h)})

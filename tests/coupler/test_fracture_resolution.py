@@ -48,6 +48,13 @@ def test_a_throat_under_four_cells_warns_with_its_cells_and_error():
     assert "under one cell it is open or closed by the rounding" in throat_warning(5e-6, 1e-5)
 
 
+def test_with_an_error_estimate_only_a_throat_under_one_cell_warns():
+    """The estimate measures the error the plates' 2 / n^2 guesses (a drag exact on plates makes
+    that guess wrong): 2.5 cells say nothing, half a cell still does."""
+    assert throat_warning(2.5e-5, 1e-5, estimated=True) is None
+    assert "under one cell it is open or closed by the rounding" in throat_warning(5e-6, 1e-5, estimated=True)
+
+
 def test_a_hydraulic_aperture_above_the_mechanical_warns():
     assert apertures_warning(8e-5, 8e-5) is None
     text = apertures_warning(9.5e-5, 9.0e-5)
