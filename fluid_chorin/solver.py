@@ -171,13 +171,15 @@ class ChorinSolver:
         rate = self.viscous_rate() + (spec.substeps / spec.dt if spec.transient else 0.0)
         self.drag = [1.0 / to_faces(1.0 / (rate + drag), c) - rate for c in range(3)]
         if spec.penalization in LINES:  # each in-plane face column: the cubic law of its own opening
+            # on the input box (the faces of its cells read both neighbours), then the local faces
             plates = plates_fraction(f.reshape(slabs.input_shape[::-1]), 2 - self.across)
-            plates = slabs.from_inputs(plates.ravel())
+            first = slabs.start - slabs.input_planes[0]
             for c in (c for c in range(3) if c != self.across):
                 F = face_fraction(plates, AXIS[c])
-                self.drag[c] = self.d_max * drag_fraction(F.ravel(), F.shape[::-1], spec.grid.spacing, spec.nu,
-                                                          self.d_max, spec.penalization, None,
-                                                          self.across).reshape(F.shape)
+                D = drag_fraction(F.ravel(), F.shape[::-1], spec.grid.spacing, spec.nu, self.d_max,
+                                  spec.penalization, None, self.across).reshape(F.shape)
+                local = slice(first, first + slabs.local_shape[slabs.d] + int(c == slabs.d))
+                self.drag[c] = self.d_max * D[along(slabs.axis, local)]
         if velocity is None:
             self.target = g.zeros()
             self.source = np.zeros(g.cells)

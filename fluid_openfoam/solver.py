@@ -49,6 +49,7 @@ from . import case as _case
 from .errors import OpenFOAMError
 from .fields import read_internal_field
 from .parallel import Decomposition, patch_cells
+from transfer.grid import across_axis
 from transfer.labels import cell_box
 from transfer.penalization import drag_fraction, drag_fraction_of, reach
 from .zones import body_sources, write_cell_set
@@ -216,13 +217,14 @@ class OpenFOAMSolver:
         the processors (:attr:`box`) when every processor is an index box of the grid, else the
         whole grid (logged once). Collective."""
         shape, mode = self.spec.grid.shape, self.spec.penalization
+        across = across_axis(shape, self.spec.grid.spacing)
         if not self.rigid_bodies:
-            return reach(self.cell_ids, shape, mode)
+            return reach(self.cell_ids, shape, mode, across=across)
         box = cell_box(self.cell_ids, shape)
         others = [r for r, boxed in enumerate(self.comm.allgather(box is not None)) if not boxed]
         if not others:
             self.box = box
-            return reach(self.cell_ids, shape, mode, at_least=1)
+            return reach(self.cell_ids, shape, mode, at_least=1, across=across)
         if self.rank == 0:
             log.info("fluid_openfoam: %s of the %s decomposition not an index box of the grid %s: every rank "
                      "receives the whole grid's inputs for the rigid bodies", ", ".join(f"processor{r}" for r in others),

@@ -221,21 +221,30 @@ def face_fraction(F, axis: int) -> np.ndarray:
     return np.maximum(np.take(padded, np.arange(n + 1), axis=axis), np.take(padded, np.arange(1, n + 2), axis=axis))
 
 
-def reach(cells, shape, mode: str, at_least: int = 0) -> np.ndarray:
+def reach(cells, shape, mode: str, at_least: int = 0, across: int | None = None) -> np.ndarray:
     """The cells whose fractions :func:`drag_fraction` of ``cells`` reads (grid indices, x fastest,
     sorted): each cell and those within ``REACH[mode]`` cells of it along each axis, or within
     ``at_least`` cells (another stencil read with it: a rigid body's interface layer, 1); in the
-    modes of :data:`LINES` also the whole lines along y and z (either can be across the gap)."""
+    modes of :data:`LINES` also the whole lines along the axis ``across`` the gap through each of
+    them (:func:`transfer.grid.across_axis`; required there)."""
+    if mode in LINES and across is None:
+        raise ValueError(f"reach of penalization {mode!r} needs the axis across the gap")
     cells = np.asarray(cells, dtype=np.int64).reshape(-1)
-    ijk, found = cell_ijk(cells, shape), [cells]
-    nx, ny, _ = (int(s) for s in shape)
-    for axis, n in enumerate(int(s) for s in shape):
-        layers = n - 1 if axis and mode in LINES else max(REACH[mode], at_least)
+    ijk, found = cell_ijk(cells, shape), [cell_ijk(cells, shape)]
+    sizes = [int(s) for s in shape]
+    layers = max(REACH[mode], at_least)
+    for axis, n in enumerate(sizes):
         for step in (s for s in range(-layers, layers + 1) if s):
             moved = ijk[(ijk[:, axis] + step >= 0) & (ijk[:, axis] + step < n)].copy()
             moved[:, axis] += step
-            found.append((moved[:, 2] * ny + moved[:, 1]) * nx + moved[:, 0])
-    return np.unique(np.concatenate(found))
+            found.append(moved)
+    ijk = np.unique(np.concatenate(found), axis=0)
+    if mode in LINES:
+        lines = np.unique(np.delete(ijk, across, axis=1), axis=0)
+        k = np.repeat(np.arange(sizes[across]), len(lines))
+        ijk = np.insert(np.tile(lines, (sizes[across], 1)), across, k, axis=1)
+    nx, ny = sizes[0], sizes[1]
+    return np.unique((ijk[:, 2] * ny + ijk[:, 1]) * nx + ijk[:, 0])
 
 
 def drag_fraction_of(cells, ids, fraction, shape, spacing, nu: float, d_max: float, mode: str,

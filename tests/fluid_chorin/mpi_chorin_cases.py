@@ -72,7 +72,23 @@ def plates_power() -> tuple[dict, tuple]:
     return {**config, "penalization": "power", "penalization_exponent": 2.0}, solid
 
 
-CASES = {"cavity": cavity, "plates": plates, "plates_power": plates_power, "box": box, "bodies": bodies}
+def rough_gap() -> tuple[dict, tuple]:
+    """A gap across z whose walls step from column to column (3 to 5 cells open, walls at random
+    sub-cell positions), pressure driven along x, "lubrication" penalization: the in-plane faces'
+    drag from the overlap of their two columns' openings."""
+    shape, h = (8, 6, 12), 1e-4
+    rng = np.random.default_rng(4)
+    lower = rng.uniform(2.2, 3.8, shape[1::-1])  # [j, i] in cells
+    upper = lower + rng.uniform(3.0, 5.0, shape[1::-1])
+    k = np.arange(shape[2], dtype=float)[:, None, None]
+    open_ = np.clip(np.minimum(k + 1, upper) - np.maximum(k, lower), 0.0, 1.0)  # [k, j, i]
+    return ({"grid": {"origin": [0, 0, 0], "spacing": [h] * 3, "shape": list(shape)}, "inlet": {"pressure": 1e-2},
+             "outlet": {"pressure": 0.0}, "walls": "wall", "rho": 1000.0, "mu": 1e-3, "tolerance": 1e-9,
+             "penalization": "lubrication"}, ((1.0 - open_).ravel(),))
+
+
+CASES = {"cavity": cavity, "plates": plates, "plates_power": plates_power, "box": box, "bodies": bodies,
+         "rough_gap": rough_gap}
 
 
 def solve(case: str, poisson: str, slab_axis: str, comm=None) -> tuple[ChorinSolver, object]:

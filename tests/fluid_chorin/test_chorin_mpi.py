@@ -54,6 +54,7 @@ def input_planes(bounds: list[int], layers: int | None) -> list[list[int]]:
     ("box", "gamg", "x", 3, 0, 2),
     ("bodies", "direct", "x", 2, 0, 2),  # a rigid body across the slab cut, labelled on the ranks
     ("bodies", "gamg", "y", 3, 1, 2),    # across both cuts
+    ("rough_gap", "direct", "x", 2, 0, 2),  # lubrication drag: the in-plane faces' from both columns
 ])
 def test_slabs_on_several_ranks_give_the_serial_fields(tmp_path, case, poisson, slab_axis, ranks, direction, layers):
     """Each rank is given the rows of its input cells only (the ghost layer and the wall drag's

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from transfer.grid import across_axis
 from transfer.penalization import (LINES, PENALIZATIONS, REACH, drag_fraction, drag_fraction_of, face_fraction,
                                    plates_fraction, reach)
 
@@ -47,14 +48,19 @@ def test_the_drag_of_some_cells_from_their_reach_is_the_whole_grids(mode):
     rng = np.random.default_rng(2)
     f = np.where(rng.random(int(np.prod(shape))) < 0.4, 1.0, rng.uniform(0.0, 0.6, int(np.prod(shape))))
     cells = np.sort(rng.choice(f.size, 40, replace=False))
-    ids = reach(cells, shape, mode)
+    across = across_axis(shape, [1e-3, 2e-3, 1.5e-3])  # z
+    ids = reach(cells, shape, mode, across=across)
     whole = drag_fraction(f, shape, [1e-3, 2e-3, 1.5e-3], 1e-6, 1e3, mode, 2.0)
     part = drag_fraction_of(cells, ids, f[ids], shape, [1e-3, 2e-3, 1.5e-3], 1e-6, 1e3, mode, 2.0)
     np.testing.assert_array_equal(part, whole[cells])
+    for cell in cells:  # one cell alone (a processor of one cell) from its own reach
+        alone = reach([cell], shape, mode, across=across)
+        assert drag_fraction_of([cell], alone, f[alone], shape, [1e-3, 2e-3, 1.5e-3], 1e-6, 1e3, mode,
+                                2.0)[0] == whole[cell], cell
     assert len(np.unique(whole[cells])) > 10  # the drag varies: not an equality of zeros
-    corner = reach([0], shape, mode)  # cell (0, 0, 0): itself and +1 along each axis (whole lines in y, z)
-    lines = list(range(0, 42, 7)) + list(range(42, 210, 42))
-    assert corner.tolist() == (sorted([1] + lines) if mode in LINES else [0, 1, 7, 42] if REACH[mode] else [0])
+    corner = reach([0], shape, mode, across=across)  # cell (0, 0, 0): itself and +1 along each axis
+    lines = sorted(42 * k + d for k in range(5) for d in (0, 1, 7))  # and the lines across the gap through them
+    assert corner.tolist() == (lines if mode in LINES else [0, 1, 7, 42] if REACH[mode] else [0])
     if REACH[mode]:  # without its neighbours' fractions a wall cell's drag is wrong
         wet = cells[(whole[cells] > 0) & (whole[cells] < 1)][:1]
         assert len(wet) == 1
@@ -112,7 +118,7 @@ def test_lubrication_drag_reads_the_whole_line_across_the_gap():
     open_top = np.tile(plates(12.0, 2.3)[:, None, None], (1, 2, 3)).ravel()  # no upper wall in the grid
     np.testing.assert_array_equal(drag_fraction(open_top, *args, "lubrication"), drag_fraction(open_top, *args, "wall"))
     cells = np.array([low, low + 1])
-    ids = reach(cells, shape, "lubrication")
+    ids = reach(cells, shape, "lubrication", across=2)
     np.testing.assert_array_equal(drag_fraction_of(cells, ids, F[ids], *args, "lubrication"), lub[cells])
 
 
