@@ -22,7 +22,7 @@ import dataclasses
 
 import numpy as np
 
-from transfer.grid import StructuredGrid
+from transfer.grid import StructuredGrid, across_axis
 
 from .slabs import Slabs
 from .solver import ChorinSolver
@@ -33,8 +33,7 @@ from .staggered import AXIS, along
 def across_direction(spec: ChorinSpec) -> int | None:
     """The direction (1 or 2) of the thinnest extent among y and z with more than one cell (None: neither)."""
     g = spec.grid
-    found = [d for d in (1, 2) if g.shape[d] > 1]
-    return min(found, key=lambda d: g.spacing[d] * g.shape[d]) if found else None
+    return across_axis(g.shape, g.spacing) if g.shape[1] > 1 or g.shape[2] > 1 else None
 
 
 def coarsened_spec(spec: ChorinSpec, d: int) -> ChorinSpec:

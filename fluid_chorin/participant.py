@@ -99,20 +99,23 @@ class ChorinParticipant(Participant):
             for s in solvers:
                 s.set_solid(fraction, arrays.get(SOLID_VELOCITY))
         self.solved(window, iteration, lambda: solver.transient(t, dt) if solver.spec.transient else solver.steady())
-        if self.coarse is not None:
-            self.solved(window, iteration, self.coarse.steady)
-            self.report_figures(**{COARSE_FLOW_RATE: self.coarse.flow_rate()})
+        if self.coarse is not None:  # a diagnostic: unconverged, it gives no figure and fails nothing
+            run = self.solved(window, iteration, self.coarse.steady, "coarsened across the gap, for the error estimate")
+            if run.converged and all(p.converged for p in run.poisson):
+                self.report_figures(**{COARSE_FLOW_RATE: self.coarse.flow_rate()})
         pressure, velocity = solver.part_fields()
         return {PRESSURE: Field(PRESSURE, pressure, "Pa"), VELOCITY: Field(VELOCITY, velocity, "m/s")}
 
-    def solved(self, window, iteration, solve) -> None:
-        """Run ``solve`` (returns a :class:`fluid_chorin.solver.Run`), log and report it."""
+    def solved(self, window, iteration, solve, diagnostic: str = "") -> Run:
+        """Run ``solve`` (returns a :class:`fluid_chorin.solver.Run`), log and report it; a
+        ``diagnostic`` solve (named by it) is reported accepted: its fields are not the step's."""
         t0 = time.perf_counter()
         run = solve()
-        log.info("window %d iteration %d: %s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
-                 iteration, run.report.solver, run.report.iterations, run.report.residual, len(run.poisson),
-                 time.perf_counter() - t0)
-        self.report(run)
+        log.info("window %d iteration %d: %s%s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
+                 iteration, run.report.solver, f" ({diagnostic})" if diagnostic else "", run.report.iterations,
+                 run.report.residual, len(run.poisson), time.perf_counter() - t0)
+        self.report(run, diagnostic)
+        return run
 
     def input_problem(self, inputs) -> str | None:
         """An input whose shape is not one row per input cell of this rank (:data:`INPUT_SHAPES`)
@@ -135,15 +138,18 @@ class ChorinParticipant(Participant):
                 return f"input {name!r} holds NaN/inf at index {int(np.argmin(np.isfinite(data)))}"
         return None
 
-    def report(self, run: Run) -> None:
-        """The stepping and, in one report, its pressure Poisson solves (the worst of them)."""
-        r = run.report
-        self.report_solve(r.solver, r.converged, r.iterations, r.residual, r.tolerance, r.detail)
+    def report(self, run: Run, diagnostic: str = "") -> None:
+        """The stepping and, in one report, its pressure Poisson solves (the worst of them); those of
+        a ``diagnostic`` solve named by it and accepted unconverged."""
+        r, named = run.report, f" ({diagnostic})" if diagnostic else ""
+        self.report_solve(r.solver + named, r.converged, r.iterations, r.residual, r.tolerance, r.detail,
+                          accepted=bool(diagnostic))
         if run.poisson:
             first = run.poisson[0]
-            self.report_solve(f"pressure Poisson ({first.method})", all(r.converged for r in run.poisson),
+            self.report_solve(f"pressure Poisson ({first.method}){named}", all(r.converged for r in run.poisson),
                               max(r.iterations for r in run.poisson), max(r.residual for r in run.poisson),
-                              first.tolerance, f"{len(run.poisson)} solves; iterations and residual of the worst")
+                              first.tolerance, f"{len(run.poisson)} solves; iterations and residual of the worst",
+                              accepted=bool(diagnostic))
 
     def save_state(self, window):
         if self.solver is None:

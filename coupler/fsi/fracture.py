@@ -14,6 +14,7 @@ import numpy as np
 
 from coupler.coupling.row_sums import RowSums
 from coupler.protocol.roles import COARSE_FLOW_RATE, GAP, IN_CONTACT, MORTAR_WEIGHT, PRESSURE, SLAVE, VELOCITY
+from transfer.grid import across_axis
 
 from .apertures import contact_area_fraction, hydraulic_aperture, mean_open_aperture, mechanical_aperture
 from .flow_rate import column_open_lengths, percolates, section_flow_rates, throat_aperture
@@ -42,10 +43,10 @@ class FractureFigures:
         # a flow rate: dp is what the rate control found (coupler/fsi/rate_control.py)
         self.control = ctx.shared("flow_rate_control", self.rate_control) if "flow_rate" in flow["inlet"] else None
         self.fixed_drop = flow["inlet"].get("pressure", 0.0) - flow["outlet"]["pressure"]
-        self.length, self.width = g.spacing[0] * g.shape[0], g.spacing[1] * g.shape[1]
-        self.viscosity = scene.fluid_material["viscosity"]
+        self.across = across_axis(g.shape, g.spacing)  # the fracture's normal: the fluids' rule
         extents = np.asarray(g.spacing) * np.asarray(g.shape)
-        self.across = int(np.argmin(extents))  # the fracture lies across the grid's thinnest extent
+        self.length, self.width = float(extents[0]), float(extents[3 - self.across])
+        self.viscosity = scene.fluid_material["viscosity"]
         self.h = float(g.spacing[self.across])
         self.cell = tuple(float(g.spacing[d]) for d in range(3) if d != self.across)
         self.told: set[str] = set()
@@ -125,7 +126,7 @@ class FractureFigures:
         if not solver.settings["error_estimate"]:
             return "[solvers.fluid] error_estimate = false"
         return (f"the fluid gave no {COARSE_FLOW_RATE} this step (it solves the coarsened grid for steady flow, "
-                f"with more than one cell across the gap)")
+                f"with more than one cell across the gap, and gives it when that solve converged: the fluid's log)")
 
     def warnings(self, found: dict[str, str | None]) -> list[str]:
         """This step's warnings on accuracy (by kind, None: none); each kind goes to the log (and

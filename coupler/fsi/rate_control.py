@@ -25,6 +25,7 @@ import numpy as np
 from coupler.coupling.row_sums import RowSums
 from coupler.errors import CouplerError
 from coupler.protocol.roles import VELOCITY
+from transfer.grid import across_axis
 
 from .flow_rate import percolates, section_flow_rates
 from .context import OperatorContext, fluid_solid
@@ -82,7 +83,7 @@ class FlowRateControl:
         undeformed geometry, W the other transverse extent."""
         g = self.grid
         extents = np.asarray(g.spacing) * np.asarray(g.shape)
-        across = min((d for d in (1, 2) if g.shape[d] > 1), key=lambda d: extents[d], default=1)
+        across = across_axis(g.shape, g.spacing)
         width, length = extents[3 - across], extents[0]
         open_cells = RowSums(self.comm).sum(float(np.sum(1.0 - np.asarray(self.fs.on_grid.fraction))))
         open_volume = open_cells * float(np.prod(g.spacing))
