@@ -100,7 +100,7 @@ class ChorinParticipant(Participant):
                 s.set_solid(fraction, arrays.get(SOLID_VELOCITY))
         self.solved(window, iteration, lambda: solver.transient(t, dt) if solver.spec.transient else solver.steady())
         if self.coarse is not None:  # a diagnostic: unconverged, it gives no figure and fails nothing
-            run = self.solved(window, iteration, self.coarse.steady, "coarsened across the gap, for the error estimate")
+            run = self.solved(window, iteration, self.coarse.steady, "error estimate")
             if run.converged and all(p.converged for p in run.poisson):
                 self.report_figures(**{COARSE_FLOW_RATE: self.coarse.flow_rate()})
         pressure, velocity = solver.part_fields()
@@ -111,9 +111,9 @@ class ChorinParticipant(Participant):
         ``diagnostic`` solve (named by it) is reported accepted: its fields are not the step's."""
         t0 = time.perf_counter()
         run = solve()
-        log.info("window %d iteration %d: %s%s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
-                 iteration, run.report.solver, f" ({diagnostic})" if diagnostic else "", run.report.iterations,
-                 run.report.residual, len(run.poisson), time.perf_counter() - t0)
+        log.info("window %d iteration %d: %s, %d iterations, residual %.3g, %d Poisson solves, %.3f s", window,
+                 iteration, run.report.solver, run.report.iterations, run.report.residual, len(run.poisson),
+                 time.perf_counter() - t0)
         self.report(run, diagnostic)
         return run
 
@@ -140,9 +140,10 @@ class ChorinParticipant(Participant):
 
     def report(self, run: Run, diagnostic: str = "") -> None:
         """The stepping and, in one report, its pressure Poisson solves (the worst of them); those of
-        a ``diagnostic`` solve named by it and accepted unconverged."""
+        a ``diagnostic`` solve (its stepping names it already) accepted unconverged, its Poisson
+        solves named by it."""
         r, named = run.report, f" ({diagnostic})" if diagnostic else ""
-        self.report_solve(r.solver + named, r.converged, r.iterations, r.residual, r.tolerance, r.detail,
+        self.report_solve(r.solver, r.converged, r.iterations, r.residual, r.tolerance, r.detail,
                           accepted=bool(diagnostic))
         if run.poisson:
             first = run.poisson[0]

@@ -135,12 +135,38 @@ def test_the_participant_reports_the_coarse_flow_rate_for_steady_flow_only():
     solves, figures = channel()
     assert [s.solver for s in solves] == ["chorin pseudo-time", "pressure Poisson (Cholesky)",
                                           "chorin pseudo-time on the grid coarsened 2x across y (error estimate)",
-                                          "pressure Poisson (Cholesky)"]
-    assert all(s.converged for s in solves)
+                                          "pressure Poisson (Cholesky) (error estimate)"]
+    assert all(s.converged for s in solves) and [s.accepted for s in solves] == [False, False, True, True]
     assert figures.keys() == {"coarse_flow_rate"} and figures["coarse_flow_rate"] > 0
     for extra in ({"error_estimate": False}, {"transient": True, "dt": 1e-3}):
         solves, figures = channel(**extra)
         assert figures == {} and not any("coarsened" in s.solver for s in solves)
+
+
+def test_an_unconverged_coarse_solve_gives_no_figure_and_fails_nothing(monkeypatch):
+    """The coarse solve is a diagnostic: unconverged, its reports are accepted (the step stands on
+    the fine solve) and no coarse_flow_rate is given (no estimate rather than a wrong one)."""
+    import dataclasses
+
+    steady = CoarsenedFlow.steady
+
+    def unconverged(self):
+        run = steady(self)
+        return dataclasses.replace(run, report=dataclasses.replace(run.report, converged=False))
+
+    monkeypatch.setattr(CoarsenedFlow, "steady", unconverged)
+    p = ChorinParticipant()
+    p.configure({"grid": {"origin": [0, 0, 0], "spacing": [1e-3, 1e-3, 1e-3], "shape": [8, 6, 1]},
+                 "inlet": {"pressure": 1.0}, "outlet": {"pressure": 0.0},
+                 "boundaries": {"zmin": "empty", "zmax": "empty"}, "rho": 1000.0, "mu": 0.1})
+    f = np.zeros(48)
+    f[:8] = f[-8:] = 1.0
+    p.advance(0, 0, 0.0, 1e-3, {"solid_fraction": Field("solid_fraction", f)})
+    solves, figures = p.take_reports()
+    assert figures == {}
+    coarse = [s for s in solves if "coarsened" in s.solver]
+    assert coarse and not coarse[0].converged and coarse[0].accepted
+    assert all(s.ok for s in solves if "coarsened" not in s.solver)
 
 
 def test_the_coarse_grid_is_the_scene_on_half_the_cells_across():
