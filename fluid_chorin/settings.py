@@ -44,7 +44,8 @@ PARTICIPANT = ParticipantSpec(
                 "across the thin gap (pairs of cells merged, their solid fractions averaged: exact) and report its "
                 "flow rate (figure coarse_flow_rate), from which the coupler estimates the error of a fracture's "
                 "hydraulic aperture (summary.json fracture.hydraulic_aperture_error); on hm_fracture the coarse solves "
-                "cost 0.18 of the fine ones with the march, 0.18 to 0.45 with Newton (bench/eh_error.py)", default=True),
+                "cost 0.18 of the fine ones with the march, 0.18 to 0.45 with Newton (bench/eh_error.py); only a fracture "
+                "(contact with flow) reads it: the hm_fracture scenes set it", default=False),
         Setting("substeps", "integer", "with dynamics: at least this many time steps per coupling step (more when "
                 "the explicit stability bound asks)", default=1, minimum=1),
         Setting("outer_correctors", "integer", "with dynamics: predictor-projection outer iterations per time step "

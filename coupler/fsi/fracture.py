@@ -124,7 +124,7 @@ class FractureFigures:
             return (f"the fluid participant {solver.kind!r} gives no {COARSE_FLOW_RATE} (the flow rate on its grid "
                     f"coarsened 2x across the gap): its model has no second grid across the fracture to compare with")
         if not solver.settings["error_estimate"]:
-            return "[solvers.fluid] error_estimate = false"
+            return "[solvers.fluid] error_estimate = false (true: the flow solved again on the grid coarsened 2x across)"
         return (f"the fluid gave no {COARSE_FLOW_RATE} this step (it solves the coarsened grid for steady flow, "
                 f"with more than one cell across the gap, and gives it when that solve converged: the fluid's log)")
 

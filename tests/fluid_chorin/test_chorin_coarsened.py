@@ -120,13 +120,14 @@ def test_a_rough_gap_estimate_brackets_the_error_against_a_finer_run():
 
 
 def test_the_participant_reports_the_coarse_flow_rate_for_steady_flow_only():
-    """Steady, ``error_estimate`` on (the default): the coarse solve is reported as a solve of its
+    """Steady, ``error_estimate`` on (the hm_fracture scenes'): the coarse solve is reported as a solve of its
     own and its flow rate as the figure ``coarse_flow_rate``; off, or transient: neither."""
     def channel(**extra):
         p = ChorinParticipant()
         p.configure({"grid": {"origin": [0, 0, 0], "spacing": [1e-3, 1e-3, 1e-3], "shape": [8, 6, 1]},
                      "inlet": {"pressure": 1.0}, "outlet": {"pressure": 0.0},
-                     "boundaries": {"zmin": "empty", "zmax": "empty"}, "rho": 1000.0, "mu": 0.1, **extra})
+                     "boundaries": {"zmin": "empty", "zmax": "empty"}, "rho": 1000.0, "mu": 0.1,
+                     "error_estimate": True, **extra})
         f = np.zeros(48)
         f[:8] = f[-8:] = 1.0  # solid rows at both sides across y
         p.advance(0, 0, 0.0, 1e-3, {"solid_fraction": Field("solid_fraction", f)})
@@ -158,7 +159,7 @@ def test_an_unconverged_coarse_solve_gives_no_figure_and_fails_nothing(monkeypat
     p = ChorinParticipant()
     p.configure({"grid": {"origin": [0, 0, 0], "spacing": [1e-3, 1e-3, 1e-3], "shape": [8, 6, 1]},
                  "inlet": {"pressure": 1.0}, "outlet": {"pressure": 0.0},
-                 "boundaries": {"zmin": "empty", "zmax": "empty"}, "rho": 1000.0, "mu": 0.1})
+                 "boundaries": {"zmin": "empty", "zmax": "empty"}, "rho": 1000.0, "mu": 0.1, "error_estimate": True})
     f = np.zeros(48)
     f[:8] = f[-8:] = 1.0
     p.advance(0, 0, 0.0, 1e-3, {"solid_fraction": Field("solid_fraction", f)})
