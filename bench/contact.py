@@ -214,44 +214,39 @@ def against(baseline: dict, levels: list) -> list[dict]:
     return rows
 
 
-def stress_table(levels) -> list[str]:
-    lines = ["The cost of a stress: AMG set up at every active-set iteration (scratch) or once per contact solve "
-             "(reused); per stress",
-             f"{'case':>18} {'dofs':>7} {'stress MPa':>10} | {'scratch: s':>10} {'solves':>6} {'its':>4} {'krylov':>6} "
-             f"{'amg s':>6} | {'reused: s':>9} {'solves':>6} {'its':>4} {'krylov':>6} {'amg s':>6} | {'time ratio':>10}"]
+def stress_pairs(levels, title: str, runs: tuple, total) -> list[str]:
+    """Per stress of each case the figures of two runs (``runs``: (label, key) each) side by side
+    (their AMG set-up time too when one sets it up from scratch) and the time ratio first /
+    second; ``total(level)``: the case's summary after its name."""
+    amg = any(key == "from_scratch" for _, key in runs)
+    head = [f"{label + ': s':>13} {'solves':>6} {'its':>4} {'krylov':>6}" + (f" {'amg s':>6}" if amg else "")
+            for label, _ in runs]
+    lines = [title, f"{'case':>18} {'dofs':>7} {'stress MPa':>10} | {head[0]} | {head[1]} | {'time ratio':>10}"]
     for lv in levels:
         name = f"{lv['case'].split('_')[0]} {','.join(str(v) for v in lv['parameters'].values())}"
-        for a, b in zip(lv["from_scratch"]["steps"], lv["reused"]["steps"]):
-            lines.append(f"{name:>18} {lv['dofs']:>7} {a['stress'] / 1e6:>10.3g} | {a['seconds']:>10.2f} "
-                         f"{a['contact_solves']:>6} {a['step_iterations']:>4} {a['step_krylov_iterations']:>6} "
-                         f"{a['seconds_amg_setup']:>6.2f} | {b['seconds']:>9.2f} {b['contact_solves']:>6} "
-                         f"{b['step_iterations']:>4} {b['step_krylov_iterations']:>6} {b['seconds_amg_setup']:>6.2f} | "
+        for a, b in zip(*(lv[key]["steps"] for _, key in runs)):
+            cells = [f"{x['seconds']:>13.2f} {x['contact_solves']:>6} {x['step_iterations']:>4} "
+                     f"{x['step_krylov_iterations']:>6}" + (f" {x['seconds_amg_setup']:>6.2f}" if amg else "")
+                     for x in (a, b)]
+            lines.append(f"{name:>18} {lv['dofs']:>7} {a['stress'] / 1e6:>10.3g} | {cells[0]} | {cells[1]} | "
                          f"{a['seconds'] / b['seconds']:>10.2f}")
-        lines.append(f"{name:>18} total: time scratch / reused {lv['ratio_time_from_scratch_over_reused']:.2f}, "
-                     f"Krylov reused / scratch {lv['ratio_krylov_reused_over_from_scratch']:.2f}, closures differ by "
-                     f"{lv['closure_difference']:.1e} (relative), reported seconds / wall >= "
-                     f"{lv['seconds_reported_over_wall']:.3f}")
+        lines.append(f"{name:>18} total: {total(lv)}")
     return lines
 
 
-def constraint_table(levels) -> list[str]:
-    """Per stress: the search (AMG reused) against the platen as an unknown (one contact solve)."""
-    lines = ["The platen's displacement as one more unknown (constraint) against the search of full solves (search, "
-             "AMG reused); per stress",
-             f"{'case':>18} {'dofs':>7} {'stress MPa':>10} | {'search: s':>9} {'solves':>6} {'its':>4} {'krylov':>6} | "
-             f"{'constraint: s':>13} {'solves':>6} {'its':>4} {'krylov':>6} | {'time ratio':>10}"]
-    for lv in levels:
-        name = f"{lv['case'].split('_')[0]} {','.join(str(v) for v in lv['parameters'].values())}"
-        for b, c in zip(lv["reused"]["steps"], lv["constraint"]["steps"]):
-            lines.append(f"{name:>18} {lv['dofs']:>7} {b['stress'] / 1e6:>10.3g} | {b['seconds']:>9.2f} "
-                         f"{b['contact_solves']:>6} {b['step_iterations']:>4} {b['step_krylov_iterations']:>6} | "
-                         f"{c['seconds']:>13.2f} {c['contact_solves']:>6} {c['step_iterations']:>4} "
-                         f"{c['step_krylov_iterations']:>6} | {b['seconds'] / c['seconds']:>10.2f}")
-        lines.append(f"{name:>18} total: time search / constraint {lv['ratio_time_search_over_constraint']:.2f}, "
-                     f"closures differ by {lv['constraint_closure_difference']:.1e} (relative; the search within its "
-                     f"stress tolerance), peak memory {lv['constraint']['peak_memory_mb']:.0f} MB (constraint, first "
-                     f"run) / {lv['reused']['peak_memory_mb']:.0f} MB (after all three)")
-    return lines
+#: the stress tables: (title, the two runs (label, key), the case's summary line)
+STRESS_TABLES = (
+    ("The cost of a stress: AMG set up at every active-set iteration (scratch) or once per contact solve (reused); "
+     "per stress", (("scratch", "from_scratch"), ("reused", "reused")),
+     lambda lv: f"time scratch / reused {lv['ratio_time_from_scratch_over_reused']:.2f}, Krylov reused / scratch "
+                f"{lv['ratio_krylov_reused_over_from_scratch']:.2f}, closures differ by {lv['closure_difference']:.1e} "
+                f"(relative), reported seconds / wall >= {lv['seconds_reported_over_wall']:.3f}"),
+    ("The platen's displacement as one more unknown (constraint) against the search of full solves (search, AMG "
+     "reused); per stress", (("search", "reused"), ("constraint", "constraint")),
+     lambda lv: f"time search / constraint {lv['ratio_time_search_over_constraint']:.2f}, closures differ by "
+                f"{lv['constraint_closure_difference']:.1e} (relative; the search within its stress tolerance), peak "
+                f"memory {lv['constraint']['peak_memory_mb']:.0f} MB (constraint, first run) / "
+                f"{lv['reused']['peak_memory_mb']:.0f} MB (after all three)"))
 
 
 def stress_goals(levels) -> dict:
@@ -322,7 +317,8 @@ def main(argv=None) -> dict:
         lines += table("Rough fracture closure", result["fracture"], "shape") + [""]
     if a.only != "solvers":
         result["stress"] = [stress_level(case, parameters, stresses) for case, parameters in stress_cases]
-        lines += stress_table(result["stress"]) + [""] + constraint_table(result["stress"]) + [""]
+        for title, runs, total in STRESS_TABLES:
+            lines += stress_pairs(result["stress"], title, runs, total) + [""]
         g = result["stress_goals"] = stress_goals(result["stress"])
         lines += [f"one contact solve per stress (constraint): {g['one_contact_solve_per_stress']['solves']} "
                   f"{g['one_contact_solve_per_stress']['status']}",
