@@ -11,7 +11,8 @@ displacements. The active set method is also run with BoomerAMG (the AMG SNES VI
 use: GAMG fails inside vinewtonrsls in PETSc 3.18), to tell the method's share of the
 speed-up from the AMG's.
 
-Goals: active-set iterations per load step that do not grow with refinement
+Goals: one contact solve per stress with ``method = "constraint"``, in less time than the
+search; active-set iterations per load step that do not grow with refinement
 (finest level's largest count at most the coarsest's + 1); time to solution at least 2x
 below SNES VI at the finest level (both problems).
 
@@ -22,7 +23,10 @@ active-set iteration ("from scratch", the old behaviour) against once per contac
 (``amg_reuse``), the two in the same run: per stress the wall time (the step's reported
 ``seconds`` and its split: assembly, AMG set-up, solves, other, platen search), contact
 solves, active-set and Krylov iterations; the ratios from scratch / reused, and the largest
-difference of the closures. ``--baseline OLD.json`` (this bench's output for the previous
+difference of the closures. The same with the platen's displacement one more unknown of a
+single contact solve (``method = "constraint"``, the AMG reused), against the search with the
+reused AMG: time per stress, contact solves per stress, the closures' difference, the
+process's peak memory after each run (runs in order: constraint, from scratch, reused). ``--baseline OLD.json`` (this bench's output for the previous
 commit, measured in the same session) adds the ratios of contact solves and time per stress
 of the reused AMG, old / new (the platen search's share).
 
@@ -122,12 +126,13 @@ def compare(level) -> dict:
     return level
 
 
-def stress_participant(case: str, parameters: dict, stresses, reuse: bool) -> SolidParticipant:
+def stress_participant(case: str, parameters: dict, stresses, reuse: bool, method: str = "search") -> SolidParticipant:
     """The configured solid of `case` with its generator's `parameters` changed, the platen's
-    `stresses` and the AMG reused (or set up at every active-set iteration)."""
+    `stresses` and `method`, and the AMG reused (or set up at every active-set iteration)."""
     config = make_plan(load(ROOT / "cases" / case)).participant("solid").config
     config["generator"]["parameters"].update(parameters)
-    next(ld for ld in config["loads"] if ld["type"] == "platen")["value"] = list(stresses)
+    platen = next(ld for ld in config["loads"] if ld["type"] == "platen")
+    platen.update(value=list(stresses), method=method)
     config["steps"] = len(stresses)
     p = SolidParticipant()
     p.comm, p.rank = None, 0
@@ -142,10 +147,10 @@ STRESS_FIGURES = ("seconds", "seconds_assembly", "seconds_amg_setup", "seconds_s
 COUNTS = ("contact_solves", "step_iterations", "step_krylov_iterations")
 
 
-def stress_steps(case, parameters, stresses, reuse) -> dict:
+def stress_steps(case, parameters, stresses, reuse, method="search") -> dict:
     """Each stress of `case` in turn: the step's figures, its measured wall time and whether
-    every inner solve converged."""
-    p = stress_participant(case, parameters, stresses, reuse)
+    every inner solve converged; the process's peak resident memory after the run."""
+    p = stress_participant(case, parameters, stresses, reuse, method)
     steps = []
     for k, stress in enumerate(stresses):
         start = time.perf_counter()
@@ -159,17 +164,28 @@ def stress_steps(case, parameters, stresses, reuse) -> dict:
         steps.append({"stress": stress, "wall_seconds": wall, "converged": True,
                       "amg_setups_last_solve": p.static.state.solution.info.get("amg_setups"),
                       **{k: int(figures[k]) if k in COUNTS else figures[k] for k in STRESS_FIGURES}})
-    return {"dofs": p.contact.num_dofs, "steps": steps,
+    return {"dofs": p.contact.num_dofs, "steps": steps, "peak_memory_mb": peak_memory_mb(),
             **{f"total_{k}": sum(st[k] for st in steps) for k in ("wall_seconds", "contact_solves",
                                                                    "step_iterations", "step_krylov_iterations",
                                                                    "seconds_amg_setup")}}
 
 
+def peak_memory_mb() -> float:
+    """The process's peak resident memory so far [MB] (a run's peak when it is the largest yet)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def stress_level(case, parameters, stresses) -> dict:
     out = {"case": case, "parameters": parameters}
-    for name, reuse in (("from_scratch", False), ("reused", True)):
-        out[name] = stress_steps(case, parameters, stresses, reuse)
-    a, b = out["from_scratch"], out["reused"]
+    for name, reuse, method in (("constraint", True, "constraint"), ("from_scratch", False, "search"),
+                                ("reused", True, "search")):
+        out[name] = stress_steps(case, parameters, stresses, reuse, method)
+    a, b, c = out["from_scratch"], out["reused"], out["constraint"]
+    out["ratio_time_search_over_constraint"] = b["total_wall_seconds"] / c["total_wall_seconds"]
+    out["constraint_closure_difference"] = max(abs(x["closure"] - y["closure"]) / abs(x["closure"])
+                                               for x, y in zip(b["steps"], c["steps"]))
     out["dofs"] = b["dofs"]
     out["ratio_time_from_scratch_over_reused"] = a["total_wall_seconds"] / b["total_wall_seconds"]
     out["ratio_krylov_reused_over_from_scratch"] = b["total_step_krylov_iterations"] / a["total_step_krylov_iterations"]
@@ -198,24 +214,48 @@ def against(baseline: dict, levels: list) -> list[dict]:
     return rows
 
 
-def stress_table(levels) -> list[str]:
-    lines = ["The cost of a stress: AMG set up at every active-set iteration (scratch) or once per contact solve "
-             "(reused); per stress",
-             f"{'case':>18} {'dofs':>7} {'stress MPa':>10} | {'scratch: s':>10} {'solves':>6} {'its':>4} {'krylov':>6} "
-             f"{'amg s':>6} | {'reused: s':>9} {'solves':>6} {'its':>4} {'krylov':>6} {'amg s':>6} | {'time ratio':>10}"]
+def stress_pairs(levels, title: str, runs: tuple, total) -> list[str]:
+    """Per stress of each case the figures of two runs (``runs``: (label, key) each) side by side
+    (their AMG set-up time too when one sets it up from scratch) and the time ratio first /
+    second; ``total(level)``: the case's summary after its name."""
+    amg = any(key == "from_scratch" for _, key in runs)
+    head = [f"{label + ': s':>13} {'solves':>6} {'its':>4} {'krylov':>6}" + (f" {'amg s':>6}" if amg else "")
+            for label, _ in runs]
+    lines = [title, f"{'case':>18} {'dofs':>7} {'stress MPa':>10} | {head[0]} | {head[1]} | {'time ratio':>10}"]
     for lv in levels:
         name = f"{lv['case'].split('_')[0]} {','.join(str(v) for v in lv['parameters'].values())}"
-        for a, b in zip(lv["from_scratch"]["steps"], lv["reused"]["steps"]):
-            lines.append(f"{name:>18} {lv['dofs']:>7} {a['stress'] / 1e6:>10.3g} | {a['seconds']:>10.2f} "
-                         f"{a['contact_solves']:>6} {a['step_iterations']:>4} {a['step_krylov_iterations']:>6} "
-                         f"{a['seconds_amg_setup']:>6.2f} | {b['seconds']:>9.2f} {b['contact_solves']:>6} "
-                         f"{b['step_iterations']:>4} {b['step_krylov_iterations']:>6} {b['seconds_amg_setup']:>6.2f} | "
+        for a, b in zip(*(lv[key]["steps"] for _, key in runs)):
+            cells = [f"{x['seconds']:>13.2f} {x['contact_solves']:>6} {x['step_iterations']:>4} "
+                     f"{x['step_krylov_iterations']:>6}" + (f" {x['seconds_amg_setup']:>6.2f}" if amg else "")
+                     for x in (a, b)]
+            lines.append(f"{name:>18} {lv['dofs']:>7} {a['stress'] / 1e6:>10.3g} | {cells[0]} | {cells[1]} | "
                          f"{a['seconds'] / b['seconds']:>10.2f}")
-        lines.append(f"{name:>18} total: time scratch / reused {lv['ratio_time_from_scratch_over_reused']:.2f}, "
-                     f"Krylov reused / scratch {lv['ratio_krylov_reused_over_from_scratch']:.2f}, closures differ by "
-                     f"{lv['closure_difference']:.1e} (relative), reported seconds / wall >= "
-                     f"{lv['seconds_reported_over_wall']:.3f}")
+        lines.append(f"{name:>18} total: {total(lv)}")
     return lines
+
+
+#: the stress tables: (title, the two runs (label, key), the case's summary line)
+STRESS_TABLES = (
+    ("The cost of a stress: AMG set up at every active-set iteration (scratch) or once per contact solve (reused); "
+     "per stress", (("scratch", "from_scratch"), ("reused", "reused")),
+     lambda lv: f"time scratch / reused {lv['ratio_time_from_scratch_over_reused']:.2f}, Krylov reused / scratch "
+                f"{lv['ratio_krylov_reused_over_from_scratch']:.2f}, closures differ by {lv['closure_difference']:.1e} "
+                f"(relative), reported seconds / wall >= {lv['seconds_reported_over_wall']:.3f}"),
+    ("The platen's displacement as one more unknown (constraint) against the search of full solves (search, AMG "
+     "reused); per stress", (("search", "reused"), ("constraint", "constraint")),
+     lambda lv: f"time search / constraint {lv['ratio_time_search_over_constraint']:.2f}, closures differ by "
+                f"{lv['constraint_closure_difference']:.1e} (relative; the search within its stress tolerance), peak "
+                f"memory {lv['constraint']['peak_memory_mb']:.0f} MB (constraint, first run) / "
+                f"{lv['reused']['peak_memory_mb']:.0f} MB (after all three)"))
+
+
+def stress_goals(levels) -> dict:
+    one = all(st["contact_solves"] == 1 for lv in levels for st in lv["constraint"]["steps"])
+    ratio = min(lv["ratio_time_search_over_constraint"] for lv in levels)
+    return {"one_contact_solve_per_stress": {"status": "PASS" if one else "MISS",
+                                             "solves": [[st["contact_solves"] for st in lv["constraint"]["steps"]]
+                                                        for lv in levels]},
+            "constraint_faster_than_search": {"worst_ratio": ratio, "status": "PASS" if ratio > 1 else "MISS"}}
 
 
 def goals(levels) -> dict:
@@ -277,7 +317,14 @@ def main(argv=None) -> dict:
         lines += table("Rough fracture closure", result["fracture"], "shape") + [""]
     if a.only != "solvers":
         result["stress"] = [stress_level(case, parameters, stresses) for case, parameters in stress_cases]
-        lines += stress_table(result["stress"]) + [""]
+        for title, runs, total in STRESS_TABLES:
+            lines += stress_pairs(result["stress"], title, runs, total) + [""]
+        g = result["stress_goals"] = stress_goals(result["stress"])
+        lines += [f"one contact solve per stress (constraint): {g['one_contact_solve_per_stress']['solves']} "
+                  f"{g['one_contact_solve_per_stress']['status']}",
+                  f"constraint faster than the search (time ratio search / constraint, the worst case): "
+                  f"{g['constraint_faster_than_search']['worst_ratio']:.2f} {g['constraint_faster_than_search']['status']}",
+                  ""]
         if a.baseline:
             result["against_baseline"] = against(json.loads(Path(a.baseline).read_text()), result["stress"])
             result["args"]["baseline"] = Path(a.baseline).name
@@ -285,6 +332,8 @@ def main(argv=None) -> dict:
                       f"{r['baseline_contact_solves']} -> {r['contact_solves']} (ratio {r['ratio_solves']:.2f}), "
                       f"time old / new {r['ratio_time']:.2f}" for r in result["against_baseline"]] + [""]
     result["meta"]["load_average_after"] = os.getloadavg()
+    lines.append(f"load average before {result['meta']['load_average_before'][0]:.2f}, after "
+                 f"{result['meta']['load_average_after'][0]:.2f}")
     for problem, g in result.get("goals", {}).items():
         lines.append(f"{problem}: active-set iterations per step {g['active_set_iterations_do_not_grow']['coarsest_max']}"
                      f" -> {g['active_set_iterations_do_not_grow']['finest_max']} "

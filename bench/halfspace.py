@@ -56,19 +56,22 @@ GOALS = {"mean_aperture": 0.05, "area_slope": 0.25, "thick_from": 0.5}
 
 
 def solid(directory, lower: np.ndarray, upper: np.ndarray, size: float, height: float, layers: int,
-          E: float, nu: float, stresses, tolerance: float = 1e-3):
+          E: float, nu: float, stresses, tolerance: float = 1e-3, coarsen: int = 1, grading: float | None = None,
+          method: str = "search"):
     """The configured solid participant of the faces `lower`, `upper` (one period, (cells,
     cells)) as a box of two blocks `height` thick with `layers` each (generator
     ``measured_fracture``, the map ``periodic``: the box spans one period; free sides, the bottom
     fixed), the rigid platen on top to the `stresses` (one load step each, within `tolerance`);
-    the map written to `directory`."""
+    the map written to `directory`; ``coarsen`` and ``grading`` as the generator takes them, the
+    platen's ``method`` as the scene does."""
     surfaces = write_npz(Path(directory) / "surfaces.npz", lower.T, upper.T, (size / lower.shape[0],) * 2)
     config = make_plan(load(CASE)).participant("solid").config
-    config["generator"]["parameters"].update(surfaces=str(surfaces), height=height, layers=layers, coarsen=1,
-                                             ratio=1, periodic=True, min_aperture=0.0, tolerance=None)
+    config["generator"]["parameters"].update(surfaces=str(surfaces), height=height, layers=layers, coarsen=coarsen,
+                                             ratio=1, periodic=True, min_aperture=0.0, tolerance=None,
+                                             grading=grading)
     config["material"].update(E=E, nu=nu)
     platen = next(ld for ld in config["loads"] if ld["type"] == "platen")
-    platen.update(value=[float(s) for s in stresses], area=size * size, tolerance=tolerance)
+    platen.update(value=[float(s) for s in stresses], area=size * size, tolerance=tolerance, method=method)
     config["steps"] = len(platen["value"])
     config["contact"]["search_distance"] = 2.0 * float(np.max(upper - lower)) + size / lower.shape[0]
     p = SolidParticipant()
@@ -78,16 +81,17 @@ def solid(directory, lower: np.ndarray, upper: np.ndarray, size: float, height: 
 
 
 def compare(lower: np.ndarray, upper: np.ndarray, size: float, height: float, layers: int, E: float, nu: float,
-            stresses, band: float = 0.125, tolerance: float = 1e-3, monitor=None) -> dict:
+            stresses, band: float = 0.125, tolerance: float = 1e-3, monitor=None, **mesh) -> dict:
     """Each stress in turn on the solid (:func:`solid`) and on the half-space at the stress the
     platen reached: mean apertures, area fractions, closures, the platen displacement and its
     part beyond the closure (the blocks' bulk compression), and the mean apertures of both on
     the nodes farther than `band` x size from the box's sides (the free sides' share of the
-    difference). Raises RuntimeError when a solve of the solid did not converge."""
+    difference); ``mesh``: ``coarsen``, ``grading`` and ``method`` of :func:`solid`. Raises RuntimeError when a
+    solve of the solid did not converge."""
     aperture = upper - lower
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        p = solid(tmp, lower, upper, size, height, layers, E, nu, stresses, tolerance)
+        p = solid(tmp, lower, upper, size, height, layers, E, nu, stresses, tolerance, **mesh)
         xy = p.contact.mortar.slave.points[:, :2]
         cell = size / lower.shape[0]
         ij = np.rint(xy / cell).astype(int) % lower.shape[0]  # map node of each slave node (the sides wrap)

@@ -10,6 +10,6 @@ where a component is free). This package knows matrices and vectors only: no
 meshes and no dolfinx. The solvers share one result type (:class:`Solution`).
 """
 
-from .problem import BoundConstrainedQP, NonsmoothSolveError, Solution
+from .problem import BoundConstrainedQP, Control, NonsmoothSolveError, Solution
 
-__all__ = ["BoundConstrainedQP", "NonsmoothSolveError", "Solution"]
+__all__ = ["BoundConstrainedQP", "Control", "NonsmoothSolveError", "Solution"]

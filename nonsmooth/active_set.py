@@ -44,7 +44,7 @@ from petsc4py import PETSc
 
 from .distributed import DistributedQP
 from .petsc import configure_cg_amg, converged_reason, near_nullspace, petsc_matrix, petsc_vector
-from .problem import BoundConstrainedQP, NonsmoothSolveError, Solution
+from .problem import BoundConstrainedQP, Control, NonsmoothSolveError, Solution
 
 log = logging.getLogger("varcouple.nonsmooth")
 
@@ -83,6 +83,13 @@ class _Serial:
     def fixed_system(self, active, value, diag) -> tuple[PETSc.Mat, PETSc.Vec]:
         K, rhs = _fixed_system(self.qp.A, self.qp.b, diag, active, value)
         return petsc_matrix(K, self.qp.block_size), petsc_vector(rhs)
+
+    def product(self, x: np.ndarray) -> np.ndarray:
+        return self.qp.A @ x
+
+    def shift(self, rhs: np.ndarray) -> None:
+        """b += rhs."""
+        self.qp.b += rhs
 
     @staticmethod
     def vector(values) -> PETSc.Vec:
@@ -141,9 +148,36 @@ class _SetHistory:
         return bool(same.any())
 
 
+def _controlled(algebra, qp, control: Control, ksp, sets, diag, bound, x):
+    """The Newton step of a :class:`Control` on the system of the current `sets`: its response
+    to a unit of c solved with the same operator and preconditioner, c moved so that the
+    response reaches the target (exact for these sets: the system is linear in c); `qp` and
+    the fixed values `bound` moved with it. Returns x, the change of c and the Krylov iterations."""
+    comm = algebra.comm
+    unit = np.where(sets != 0, control.bounds, 0.0)
+    rhs = algebra.vector(np.where(sets != 0, diag * unit, control.rhs - algebra.product(unit)))
+    xv = algebra.vector(unit)
+    ksp.solve(rhs, xv)
+    dx = xv.getArray().copy()
+    dx[sets != 0] = unit[sets != 0]
+    its = ksp.getIterationNumber()
+    for v in (rhs, xv):
+        v.destroy()
+    value, slope = comm.allreduce(np.array([np.dot(control.response, x), np.dot(control.response, dx)]), op=MPI.SUM)
+    if not abs(slope) > 1e-6 * abs(control.slope):  # no stiffness against c in these sets (the faces apart)
+        slope = control.slope
+    step = (control.target - value) / slope
+    algebra.shift(step * control.rhs)
+    qp.lower += step * control.bounds
+    qp.upper += step * control.bounds
+    bound += step * control.bounds
+    return x + step * dx, step, its
+
+
 def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | None = None, *, tol: float = 1e-10,
                      max_iter: int = 100, ksp_rtol: float = 1e-12, ksp_max_it: int = 2000,
-                     amg: str = "gamg", amg_reuse: bool = True, monitor=None) -> Solution:
+                     amg: str = "gamg", amg_reuse: bool = True, monitor=None,
+                     control: Control | None = None) -> Solution:
     """Solve the QP by the primal-dual active set method with CG + GAMG inner solves.
 
     qp : serial (scipy) or distributed (:class:`~nonsmooth.distributed.DistributedQP`: ``x0``
@@ -162,7 +196,11 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
         (``active_set_iteration``, ``residual``, ``cg_iterations`` so far) and every CG iteration
         (``cg_iteration``, ``cg_residual``): a caller's progress lines; without one, a log line
         every ``PROGRESS_SECONDS`` on rank 0
-    ``iterations`` counts active-set iterations (one linear solve each),
+    control : one more unknown (:class:`~nonsmooth.problem.Control`): after each iteration's
+        solve, a second with the same operator gives the response to it, and a Newton step
+        sets it so that the response reaches its target for those sets (exactly, when the sets
+        repeat); ``qp`` keeps its last value, ``info["control"]`` the change over the solve
+    ``iterations`` counts active-set iterations (one linear solve each, two with a control),
     ``history`` the relative scaled natural residual after each, ``info["changes"]``
     the number of components whose set changed before each solve, ``info["amg_setups"]``
     and ``info["amg_setup_seconds"]`` the AMG set-ups and their time.
@@ -192,7 +230,7 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
     ksp.setInitialGuessNonzero(True)
     if monitor is not None:
         ksp.setMonitor(lambda _, k, rnorm: monitor(cg_iteration=k, cg_residual=float(rnorm)))
-    preconditioner, setups, setup_seconds = None, 0, 0.0
+    preconditioner, setups, setup_seconds, moved = None, 0, 0.0, 0.0
 
     lam = qp.multiplier(x)
     sets = _Sets.predict(qp, x, lam, dinv, tol * scale(x))
@@ -226,6 +264,10 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
                                           f"({converged_reason(ksp)}) after {ksp.getIterationNumber()} iterations")
             x = xv.getArray().copy()
             x[sets != 0] = value[sets != 0]  # exact (a reused AMG couples the active rows to CG's tolerance)
+            if control is not None and inner >= 0:
+                x, step, its = _controlled(algebra, qp, control, ksp, sets, diag, bound, x)
+                moved += step
+                krylov += its
             for obj in (xv, bv) if M is preconditioner else (M, xv, bv):
                 obj.destroy()
             if not comm.allreduce(bool(np.all(np.isfinite(x))), op=MPI.LAND):
@@ -269,5 +311,6 @@ def solve_active_set(qp: BoundConstrainedQP | DistributedQP, x0: np.ndarray | No
                     seconds=time.perf_counter() - start, krylov_iterations=krylov, history=history,
                     active=sets != 0,
                     info={"changes": changes, "monotone_from": monotone_from, "kkt_residual": qp.kkt_residual(x),
-                          "amg_setups": setups, "amg_setup_seconds": setup_seconds},
+                          "amg_setups": setups, "amg_setup_seconds": setup_seconds,
+                          **({"control": moved} if control is not None else {})},
                     residual=history[-1] if history else float("nan"), tolerance=tol, reason=reason)

@@ -78,6 +78,10 @@ class DistributedQP:
         y.destroy()
         return out
 
+    def shift(self, rhs: np.ndarray) -> None:
+        """b += rhs (local parts)."""
+        self.b.setArray(self.b.getArray() + rhs)
+
     def diagonal(self) -> np.ndarray:
         d = self.A.getDiagonal()
         out = d.getArray().copy()

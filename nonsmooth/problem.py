@@ -93,6 +93,26 @@ class BoundConstrainedQP:
 
 
 @dataclass
+class Control:
+    """One more unknown of a QP: a scalar c the problem depends on affinely (``b + c rhs``, the
+    fixed components' bounds ``+ c bounds``) set so that the affine response ``sum(response * x)``
+    reaches ``target`` (e.g. a rigid platen's displacement under a prescribed mean stress, paper
+    4.1: the mean force as a constraint). Arrays are the local parts on several ranks.
+
+    rhs : d b / d c; bounds : d(lower = upper) / d c on the fixed components (0 elsewhere)
+    response : the gradient g of the controlled quantity g . x
+    target : the value g . x must reach
+    slope : d(g . x) / d c assumed while the active sets carry none (a body held only by c)
+    """
+
+    rhs: np.ndarray
+    bounds: np.ndarray
+    response: np.ndarray
+    target: float
+    slope: float
+
+
+@dataclass
 class Solution:
     """What every nonsmooth solver returns, converged or not: a solver raises
     :class:`NonsmoothSolveError` only when it has no usable iterate (NaN, a matrix that is

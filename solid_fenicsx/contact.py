@@ -248,14 +248,39 @@ class Contact:
         h = per_body_hierarchy(self.points, tets, levels, coarse_shape, margin=margin, block_size=3, nthreads=threads)
         return replace(h, prolongations=h.prolongations[:-1] + [sp.csr_matrix(self.to_x @ h.prolongations[-1])])
 
-    def solve(self) -> ContactState:
-        """Solve with the current loads, starting from the last solution (load stepping).
-        The state of an unconverged solve is returned too (``solution.converged`` False,
-        the last iterate): the caller reports or refuses it."""
+    def transposed(self, values: np.ndarray) -> np.ndarray:
+        """``P^T v`` of an owned u-space vector (dof numbering): the x-space vector g with
+        ``g . x = v . u`` (a load or a gradient in the unknowns of the QP)."""
+        if self.distributed is None:
+            return self.P.T @ values
+        P = self.distributed.P
+        v, out = P.createVecLeft(), P.createVecRight()
+        v.getArray()[:] = values
+        P.multTranspose(v, out)
+        result = out.getArray().copy()
+        v.destroy()
+        out.destroy()
+        return result
+
+    def fixed_components(self) -> tuple[np.ndarray, np.ndarray]:
+        """The owned Dirichlet dofs (u-space, unrolled) and their components of x."""
+        where = self if self.distributed is None else self.distributed
+        return where.fixed_dofs, where.fixed
+
+    def solve(self, control=None) -> ContactState:
+        """Solve with the current loads, starting from the last solution (load stepping);
+        `control`: one more unknown (:class:`nonsmooth.Control`, solver ``active_set``: a platen's
+        displacement under its mean stress, :meth:`solid_fenicsx.platen.Platen.control`), its
+        change in ``solution.info["control"]``. The state of an unconverged solve is returned
+        too (``solution.converged`` False, the last iterate): the caller reports or refuses it."""
+        if control is not None and self.solver != "active_set":
+            raise ContactSetupError(f"a platen's displacement as an unknown of the contact problem needs solver "
+                                    f"'active_set', not {self.solver!r}")
         t0 = time.perf_counter()
         qp = self.problem()
         t1 = time.perf_counter()
-        sol = nonsmooth_solvers.solve(qp, self.solver, x0=self.x, monitor=self.monitor, **self.options)
+        extra = {} if control is None else {"control": control}
+        sol = nonsmooth_solvers.solve(qp, self.solver, x0=self.x, monitor=self.monitor, **self.options, **extra)
         t2 = time.perf_counter()
         self.x = sol.x
         owned = self.elasticity.V.dofmap.index_map.size_local * 3

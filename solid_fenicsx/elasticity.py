@@ -447,21 +447,36 @@ class Elasticity:
         dolfinx.fem.petsc.set_bc(F, self.bcs)
         return K, F
 
+    def internal_force(self, values: np.ndarray | None = None) -> np.ndarray:
+        """The owned entries of the internal force ``int sigma(u) : eps(w)`` (dof numbering) of
+        the current u, or of the displacement `values` (u's local array, ghosts included)."""
+        if self._internal is None:
+            w = ufl.TestFunction(self.V)
+            self._internal = dolfinx.fem.form(ufl.inner(self.sigma(self.u), constitutive.epsilon(w))
+                                              * ufl.dx(domain=self.mesh))
+        kept = None if values is None else self.u.x.array.copy()
+        if kept is not None:
+            self.u.x.array[:] = values
+        f = self._assemble(self._internal)
+        out = f.array[:f.getLocalSize()].copy()
+        f.destroy()
+        if kept is not None:
+            self.u.x.array[:] = kept
+        return out
+
+    def boundary_dofs(self, boundary: Boundary) -> np.ndarray:
+        """The local (owned and ghost) block dofs of a boundary."""
+        return dolfinx.fem.locate_dofs_topological(self.V, self._fdim, self.solid.facets(boundary))
+
     def boundary_force(self, boundary: Boundary) -> np.ndarray:
         """(3,) the sum over the dofs of a boundary of the internal force ``int sigma(u) : eps(w)``
         of the current u: on a Dirichlet boundary without loads, the force the body exerts on
         its support (a loaded boundary needs its load added), on every rank."""
         from mpi4py import MPI
 
-        if self._internal is None:
-            w = ufl.TestFunction(self.V)
-            self._internal = dolfinx.fem.form(ufl.inner(self.sigma(self.u), constitutive.epsilon(w))
-                                              * ufl.dx(domain=self.mesh))
-        f = self._assemble(self._internal)
-        dofs = dolfinx.fem.locate_dofs_topological(self.V, self._fdim, self.solid.facets(boundary))
+        dofs = self.boundary_dofs(boundary)
         owned = dofs[dofs < self.V.dofmap.index_map.size_local]
-        local = f.array.reshape(-1, 3)[owned].sum(axis=0)
-        f.destroy()
+        local = self.internal_force().reshape(-1, 3)[owned].sum(axis=0)
         return self.mesh.comm.allreduce(local, op=MPI.SUM)
 
     def pressure_resultant(self, boundary: Boundary, p) -> np.ndarray:

@@ -90,7 +90,7 @@ def add_loads(elasticity, configs: list[dict], where) -> tuple[list[SteppedLoad]
             if platen is not None:
                 raise ValueError(f"{load.get('key', 'a load')}: one platen per solid")
             platen = Platen(elasticity, boundary, area=load.get("area"), tolerance=load.get("tolerance", 1e-3),
-                            max_solves=load.get("max_iterations", 20))
+                            max_solves=load.get("max_iterations", 20), method=load.get("method", "search"))
             stresses = [float(v) for v in value]  # one per step
             continue
         if kind == "dirichlet":
@@ -134,9 +134,9 @@ class StaticStep:
         faces = {} if contact is None else {contact.slave_boundary: 1.0, contact.master_boundary: -1.0}
         self.fluid = [(ld, faces[ld.boundary]) for ld in loads if ld.kind == "fluid_pressure" and ld.boundary in faces]
 
-    def _solve_once(self) -> bool:
+    def _solve_once(self, control=None) -> bool:
         if self.contact is not None:
-            self.state = self.contact.solve()
+            self.state = self.contact.solve(control)
             sol, seconds = self.state.solution, self.state.seconds
             for phase, key in (("assembly", "assemble"), ("amg_setup", "amg_setup"), ("solves", "solve")):
                 self.phases[phase] += seconds[key]
@@ -146,6 +146,12 @@ class StaticStep:
             return sol.converged
         self.elasticity.solve_static()
         return all(r.converged for r in self.elasticity.info.solves)
+
+    def _solve_controlled(self, control) -> tuple[bool, float]:
+        """One contact solve with the platen's displacement as one more unknown: converged, and
+        how far the displacement moved."""
+        converged = self._solve_once(control)
+        return converged, self.state.solution.info["control"]
 
     def run(self, step: int) -> tuple[list, dict, dict]:
         self.progress.start(step)
@@ -179,8 +185,11 @@ class StaticStep:
             closing = max(float(np.nanmin(self.contact.mortar.gap)), 0.0) if self.contact is not None else 0.0
             search = time.perf_counter()
             try:
-                result = self.platen.load_to(self.stresses[step], self._solve_once, closing=closing, stale=changed,
-                                             monitor=self.progress)
+                if self.platen.method == "constraint" and self.contact is not None:
+                    result = self.platen.hold(self.stresses[step], self.contact, self._solve_controlled, closing)
+                else:
+                    result = self.platen.load_to(self.stresses[step], self._solve_once, closing=closing,
+                                                 stale=changed, monitor=self.progress)
             except ContactLost as exc:
                 raise ContactLost(f"load step {step}: {exc}") from None
             seconds = time.perf_counter() - search

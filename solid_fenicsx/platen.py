@@ -17,6 +17,12 @@ The search is an inner solve: converged when ``|sigma / target - 1| <= tolerance
 stress no longer changes as the platen opens, the block is free of contact and its other
 loads (a fluid's pressure on a fracture face) alone push it onto the platen with more than the
 target: no displacement reaches it, :class:`ContactLost`.
+
+With contact, :meth:`hold` reaches a stress in one contact solve instead (``method =
+"constraint"``): the platen's displacement is one more unknown of the contact problem, its mean
+force the constraint; each active-set iteration takes a Newton step on the displacement with
+the tangent of its own linear system (exact for its active sets), from the last stress's
+displacement.
 """
 
 from __future__ import annotations
@@ -60,13 +66,14 @@ class Platen:
 
     area : the area the mean stress is taken over (default: the boundary's, projected on n)
     tolerance : relative tolerance on each target stress
-    max_solves : trial solves per target at most
+    max_solves : trial solves per target at most (``method = "search"``)
+    method : ``"search"`` (:meth:`load_to`) or ``"constraint"`` (:meth:`hold`, with contact)
     """
 
     def __init__(self, elasticity, boundary, area: float | None = None, tolerance: float = 1e-3,
-                 max_solves: int = 20):
+                 max_solves: int = 20, method: str = "search"):
         self.elasticity, self.boundary = elasticity, boundary
-        self.tolerance, self.max_solves = float(tolerance), int(max_solves)
+        self.tolerance, self.max_solves, self.method = float(tolerance), int(max_solves), method
         self.normal, projected = _flat_face(elasticity, boundary)
         self.area = float(area) if area is not None else projected
         x = elasticity.V.tabulate_dof_coordinates() @ self.normal
@@ -153,6 +160,52 @@ class Platen:
             if not ok:
                 return result(False, f"the solve at displacement {d:g} m did not converge")
         return result(True, "mean normal stress within the tolerance")
+
+    def control(self, contact, target: float):
+        """The platen's displacement d as one more unknown of `contact`'s problem
+        (:class:`nonsmooth.Control`): the load and the fixed components' values per unit of d
+        (the difference of the static system at d + 1 and d: the lifting of ``u = -d n``), the
+        mean normal stress as ``g . x`` (``g = -P^T K w / area``, w the normal n on the
+        platen's dofs: the force the body exerts on the platen, as :meth:`stress`), the
+        target, and the elastic column's stiffness for when no contact carries the platen."""
+        from nonsmooth import Control
+
+        el = self.elasticity
+        d = float(-self.holder.value @ self.normal)
+        loads = []
+        for at in (d + 1.0, d):
+            self.set(at)
+            _, F = el.static_system()
+            loads.append(F.getArray().copy())
+            F.destroy()
+        per_unit = loads[0] - loads[1]
+        fixed_dofs, fixed = contact.fixed_components()
+        bounds = np.zeros(len(per_unit))
+        bounds[fixed] = per_unit[fixed_dofs]
+        w = np.zeros(len(el.u.x.array))
+        w.reshape(-1, 3)[el.boundary_dofs(self.boundary)] = self.normal
+        gradient = -el.internal_force(w) / self.area
+        return Control(contact.transposed(per_unit), bounds, contact.transposed(gradient), float(target),
+                       1.0 / self.compliance)
+
+    def hold(self, target: float, contact, solve: Callable, closing: float = 0.0) -> PlatenResult:
+        """The mean normal stress `target` in one contact solve: ``solve(control)`` solves with
+        the platen's displacement one more unknown (:meth:`control`) and returns whether it
+        converged and how far the displacement moved; it starts where the last stress left it
+        (the first at `closing`, the faces touching at their nearest point). Converged when the
+        solve did and the stress is within the tolerance."""
+        start = self.history[-1][0] if self.history else closing
+        self.set(start)
+        ok, moved = solve(self.control(contact, target))
+        d = start + moved
+        self.set(d)
+        s = self.stress()
+        self.history.append((d, s))
+        within = abs(s - target) <= self.tolerance * abs(target)
+        reason = ("mean normal stress within the tolerance" if ok and within else
+                  "the contact solve with the platen's displacement as an unknown did not converge" if not ok else
+                  "the contact solve converged off the target stress")
+        return PlatenResult(ok and within, target, s, d, s * self.area, 1, reason, [(d, s)])
 
     def save_state(self) -> list:
         return list(self.history)

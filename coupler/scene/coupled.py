@@ -142,6 +142,8 @@ SOLID_KEYS = {"mesh": "mesh file (any format meshio reads) inside the case, rela
 FLUID_KEYS = {"origin": "grid origin", "spacing": "grid spacing", "shape": "cells per axis",
               "lower": "grid lower corner (instead of origin/spacing)", "upper": "grid upper corner",
               "generator": "the grid made by the solid's generator for it (its name), instead of the keys above"}
+#: how a platen finds its displacement (:class:`solid_fenicsx.platen.Platen`)
+PLATEN_METHODS = ("search", "constraint")
 LOAD_KEYS = {"type": f"one of {', '.join(LOAD_TYPES)}", "boundary": "a named boundary",
              "value": "number (pressure, fixed value) or [x, y, z] (traction, body force); dirichlet, pressure, "
                       "fluid_pressure: or a list of numbers, one per step",
@@ -149,7 +151,10 @@ LOAD_KEYS = {"type": f"one of {', '.join(LOAD_TYPES)}", "boundary": "a named bou
              "stress": "platen: the target mean normal stress of each step [Pa], a list",
              "tolerance": "platen: relative tolerance on each target stress (default 1e-3)",
              "area": "platen: the area the mean stress is taken over [m^2] (default: the boundary's, projected)",
-             "max_iterations": "platen: solves per step to find the platen's displacement (default 20)"}
+             "max_iterations": "platen: solves per step to find the platen's displacement (default 20)",
+             "method": "platen: 'search' (default: secant steps of full solves) or 'constraint' (with contact: "
+                       "the displacement one more unknown of a single contact solve, its mean force the "
+                       "constraint)"}
 
 def parse(path: Path, case_dir: Path, data: dict, output: str | Path | None = None) -> CoupledScene:
     """Validate the tables of a coupled scene (already read from TOML): the tables every scene
@@ -412,7 +417,7 @@ def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
         elif "boundary" in t.data:
             raise t.error("boundary", "a body force acts on the volume, not on a boundary")
         settings = {}
-        for key in ("stress", "tolerance", "area", "max_iterations"):
+        for key in ("stress", "tolerance", "area", "max_iterations", "method"):
             if key in t.data and kind != "platen":
                 raise t.error(key, "only platen loads have it")
         if kind == "platen":
@@ -424,7 +429,11 @@ def _loads(path, data, solid: SolidGeometry, effects) -> list[Load]:
             if min(value) < 0:
                 raise t.error("stress", f"mean normal stresses are compressive, >= 0; got {value!r}")
             settings = {"tolerance": t.number("tolerance", 1e-3, positive=True, maximum=0.5),
-                        "max_iterations": t.integer("max_iterations", 20)}
+                        "max_iterations": t.integer("max_iterations", 20),
+                        "method": t.string("method", "search", choices=PLATEN_METHODS)}
+            if settings["method"] == "constraint" and "contact" not in effects:
+                raise t.error("method", "'constraint' makes the displacement an unknown of the contact problem: "
+                                        "it needs the 'contact' effect")
             if "area" in t.data:
                 settings["area"] = t.number("area", positive=True)
         elif kind in ("traction", "body_force"):

@@ -1,6 +1,7 @@
 """Smoke run of the contact benchmark (bench/contact.py --quick): both problems, both
 solvers, every figure in the JSON, the solvers agreeing on the same problems; the cost of a
-stress with the AMG set up from scratch and reused, the same closures."""
+stress with the AMG set up from scratch and reused, the same closures; the platen as one more
+unknown in one contact solve per stress, its closures those of the search within its tolerance."""
 
 import json
 
@@ -39,3 +40,9 @@ def test_quick_run_writes_every_figure(tmp_path, capsys):
             assert len(steps) == 2 and all(st["converged"] for st in steps)
             assert all(st["contact_solves"] >= 1 and st["step_krylov_iterations"] > 0 for st in steps)
         assert all(st["amg_setups_last_solve"] == 1 for st in level["reused"]["steps"])
+        constraint = level["constraint"]["steps"]
+        assert len(constraint) == 2 and all(st["converged"] and st["contact_solves"] == 1 for st in constraint)
+        assert level["constraint_closure_difference"] < 1e-2 and level["constraint"]["peak_memory_mb"] > 0
+        assert level["ratio_time_search_over_constraint"] > 0
+    for goal in ("one_contact_solve_per_stress", "constraint_faster_than_search"):
+        assert data["stress_goals"][goal]["status"] in ("PASS", "MISS")

@@ -30,7 +30,7 @@ def test_steps_come_from_the_per_step_loads():
     assert generator["parameters"]["seed"] == 5 and generator["parameters"]["ratio"] == 2  # defaults filled in
     assert config["loads"][1] == {"type": "platen", "key": "[loads.2]", "boundary": "top", "value": [2e6, 2e6],
                                   "components": ["x", "y", "z"], "tolerance": 1e-3, "max_iterations": 20,
-                                  "area": 0.01168986626400762}
+                                  "method": "search", "area": 0.01168986626400762}
     assert {"fracture_lower", "fracture_upper", "top", "bottom"} <= set(scene.solid.boundaries)
 
 

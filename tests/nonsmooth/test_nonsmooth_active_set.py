@@ -301,3 +301,29 @@ def test_the_monitor_hears_every_active_set_and_cg_iteration():
     assert [v["active_set_iteration"] for v in outer] == list(range(1, sol.iterations + 1))
     assert [v["residual"] for v in outer] == sol.history
     assert sum(1 for v in heard if "cg_iteration" in v) >= sol.krylov_iterations
+
+
+def test_a_control_reaches_its_target_in_one_solve():
+    """A string pushed up against an obstacle (x <= 0.05), its left end fixed at a value c that
+    is one more unknown (:class:`nonsmooth.Control`): c is found so that the string's mean is
+    -0.1 in the one active-set solve, and the result solves the QP at that c (the same
+    solution from scratch, KKT residual at round-off); the active sets change as c moves."""
+    from nonsmooth import Control
+
+    n = 60
+    A = laplacian_1d(n)
+    lower, upper = np.full(n, -np.inf), np.full(n, 0.05)
+    lower[0] = upper[0] = 0.0  # the fixed end, moved by the control
+    qp = BoundConstrainedQP(A, np.full(n, 0.5), lower, upper, block_size=1)
+    unit = np.zeros(n)
+    unit[0] = 1.0
+    control = Control(np.zeros(n), unit, np.full(n, 1.0 / n), -0.1, 1.0)
+    sol = solve(qp, "active_set", control=control, tol=1e-12)
+    c = sol.info["control"]
+    assert sol.converged and sol.x[0] == pytest.approx(c, abs=1e-14) and c < 0
+    assert np.mean(sol.x) == pytest.approx(-0.1, rel=1e-9)
+    assert qp.lower[0] == qp.upper[0] == pytest.approx(c, abs=1e-14)
+    assert np.any(sol.x >= 0.05 - 1e-12)  # some of the string on the obstacle
+    fresh = BoundConstrainedQP(A, np.full(n, 0.5), np.where(unit > 0, c, lower), np.where(unit > 0, c, upper))
+    again = solve(fresh, "active_set", tol=1e-12)
+    assert np.allclose(again.x, sol.x, rtol=0, atol=1e-9)

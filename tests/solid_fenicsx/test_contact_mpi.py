@@ -66,22 +66,26 @@ def test_two_rough_blocks_on_several_ranks_equal_one_rank(solved, ranks):
     assert_same(solved("blocks", 1), solved("blocks", ranks))
 
 
-def closure_scene(tmp_path, ranks: int):
-    """cases/fracture_closure, coarser (lattice 8 x 8 x 3) and two stresses, on `ranks` ranks."""
+def closure_scene(tmp_path, ranks: int, method: str = "search"):
+    """cases/fracture_closure, coarser (lattice 8 x 8 x 3) and two stresses, on `ranks` ranks, the
+    platen's `method`."""
     return copy_case(ROOT / "cases" / "fracture_closure", tmp_path / f"ranks_{ranks}", {
         "lattice = [16, 16, 5] ": "lattice = [8, 8, 3] ",
         "stress = [1.0e6, 2.0e6, 4.0e6, 6.0e6, 10.0e6, 15.0e6, 20.0e6]": "stress = [1.0e6, 4.0e6]",
+        'type = "platen"': f'type = "platen"\nmethod = "{method}"',
         "[contact]": f"[solvers.solid]\nranks = {ranks}\n\n[output]\npictures = false\n\n[contact]"})
 
 
-def test_varcouple_runs_a_contact_scene_on_two_ranks(tmp_path, capsys):
-    """The platen's search of contact solves on 2 ranks: every figure of every step as on 1 rank
-    (but the Krylov iterations, timings and the round-off size of a closed gap)."""
+@pytest.mark.parametrize("method", ["search", "constraint"])
+def test_varcouple_runs_a_contact_scene_on_two_ranks(tmp_path, capsys, method):
+    """The platen's search of contact solves, or its displacement as one more unknown of one
+    contact solve per stress, on 2 ranks: every figure of every step as on 1 rank (but the Krylov
+    iterations, timings and the round-off size of a closed gap)."""
     from cli_helpers import run_cli
 
     summaries = []
     for ranks in (1, 2):
-        case = closure_scene(tmp_path, ranks)
+        case = closure_scene(tmp_path, ranks, method)
         code, _, err = run_cli(capsys, "run", case)
         assert code == 0, err
         summaries.append(json.loads((case / "results" / "summary.json").read_text()))
@@ -90,6 +94,7 @@ def test_varcouple_runs_a_contact_scene_on_two_ranks(tmp_path, capsys):
         assert one["converged"] and two["converged"]
         a, b = one["figures"]["solid"], two["figures"]["solid"]
         assert a.keys() == b.keys() and a["active_nodes"] > 0
+        assert (a["contact_solves"] == 1) == (method == "constraint")
         scale = {"force": abs(a["force_z"]), "gap": 1e-9, "fluid": 1.0}
         for key in {k for k in a if not k.startswith("seconds") and "krylov_iterations" not in k} - {"min_gap"}:
             atol = next((v for k, v in scale.items() if k in key), 0.0) * EQUAL

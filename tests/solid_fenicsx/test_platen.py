@@ -128,3 +128,44 @@ def test_a_stiffening_contact_is_found_by_secant_steps_in_few_solves():
     one at a smaller displacement), so the bracket's ends never come inverted."""
     found = CurvePlaten(lambda d: 1e5 * np.expm1(d / 1e-5), compliance=1e-11).load_to(2e6, solve=lambda: True)
     assert found.converged and found.stress == pytest.approx(2e6, rel=1e-3) and found.solves <= 8
+
+
+def measured_fracture(method: str, tolerance: float) -> list[dict]:
+    """cases/measured_fracture on every fourth map node (an 8 x 8 lattice), its three stresses
+    with the platen's `method` and `tolerance`: each step's figures and platen report."""
+    from vc_helpers import CASES
+
+    config = make_plan(load(CASES / "measured_fracture")).participant("solid").config
+    config["generator"]["parameters"]["coarsen"] = 4
+    platen = next(ld for ld in config["loads"] if ld["type"] == "platen")
+    platen.update(method=method, tolerance=tolerance)
+    p = SolidParticipant()
+    p.comm, p.rank = None, 0
+    p.configure(config)
+    out = []
+    for k in range(config["steps"]):
+        _, reports, figures = advance(p, k)
+        out.append({**figures, "platen": reports["platen"], "contact": reports["contact active_set"]})
+    return out
+
+
+def test_the_platen_as_an_unknown_closes_the_fracture_in_one_contact_solve_per_stress():
+    """method = "constraint": each stress (1, 5, 20 MPa) in one contact solve, the stress exact
+    to the solver's tolerance; the closure and the platen displacement those of the search of
+    full solves (today's path, here to a 1e-7 stress tolerance) within 1e-5: the same problem.
+    The search took 5 to 8 solves a stress at this tolerance."""
+    one, search = measured_fracture("constraint", 1e-3), measured_fracture("search", 1e-7)
+    for a, b in zip(one, search):
+        assert a["contact_solves"] == 1 and a["platen"].converged and a["contact"].converged
+        assert a["stress"] == pytest.approx(a["target_stress"], rel=1e-8)
+        assert b["contact_solves"] >= 3
+        assert a["closure"] == pytest.approx(b["closure"], rel=1e-5)
+        assert a["platen_displacement"] == pytest.approx(b["platen_displacement"], rel=1e-5)
+        assert a["area_fraction"] == pytest.approx(b["area_fraction"], abs=1e-9)
+
+
+def test_the_platen_as_an_unknown_needs_contact(tmp_path):
+    from coupler.scene import SceneError
+
+    with pytest.raises(SceneError, match="method: 'constraint' makes the displacement an unknown of the contact"):
+        participant(tmp_path, '[[loads]]\ntype = "platen"\nboundary = "zmax"\nstress = [1.0e6]\nmethod = "constraint"\n')

@@ -26,6 +26,8 @@ ROUGH = {"shape": [6, 4, 2], "size": [0.03, 0.02], "height": 0.005, "aperture": 
     ("rough_block", {"cells": [8, 8, 3], "size": [0.05, 0.05, 0.02], "rms": 5e-4}),
     ("measured_fracture", {"surfaces": str(CASES / "measured_fracture" / "surfaces.npz"), "height": 0.04,
                            "coarsen": 4, "ratio": 2, "layers": 2}),
+    ("measured_fracture", {"surfaces": str(CASES / "measured_fracture" / "surfaces.npz"), "height": 0.04,
+                           "coarsen": 2, "ratio": 2, "grading": 1.5}),
     ("penny_crack", {"extent": 2.0, "h_tip": 0.02}),
 ])
 def test_a_generator_makes_its_faces_and_the_cells_it_counts(name, values):

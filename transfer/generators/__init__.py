@@ -12,7 +12,8 @@ and, optionally, ``FILES`` (the parameters that name files: the scene gives them
 case directory and resolves them), ``cells(parameters)`` (the number of tetrahedra without
 building the mesh), ``notes(parameters)`` (what it did to its input that the user should know,
 e.g. a map's remainder cell: lines for the plan and the run's summary), ``lattices(parameters)`` (the mesh by index,
-:class:`~transfer.generators.lattices.Lattices`: any block of cells or points made alone) and,
+:class:`~transfer.generators.lattices.Lattices`: any block of cells or points made alone; None for
+parameters that make a mesh that is not a lattice, e.g. graded blocks) and,
 for geometry made for a fluid grid (an immersed-boundary study), ``grid(parameters) ->
 {"origin", "spacing", "shape"}``.
 
@@ -28,7 +29,8 @@ for geometry made for a fluid grid (an immersed-boundary study), ``grid(paramete
 
 The modules without ``NAME`` are their building blocks: :mod:`.surfaces` (self-affine rough
 surfaces), :mod:`.blocks` (:class:`~transfer.generators.blocks.Block`, the blocks around a
-fracture), :mod:`.lattice` (graded lattices), :mod:`.height_maps` (height map files).
+fracture), :mod:`.lattice` (graded lattices), :mod:`.graded` (blocks graded away from a fracture face,
+coarsened in-plane with depth), :mod:`.height_maps` (height map files).
 """
 
 from __future__ import annotations

@@ -15,7 +15,9 @@ Where the aperture ``upper - lower`` is below ``min_aperture`` the upper face is
 interpenetrate by more than ``tolerance`` (default :data:`RELATIVE_TOLERANCE` of the larger
 face's RMS height: the round-off of a pair in first contact) are refused, smaller overlaps
 closed to touching. Each block is ``height`` thick from its face's mean plane; the rectangle
-starts at the map's origin ((0, 0) for an ``.npz``).
+starts at the map's origin ((0, 0) for an ``.npz``). ``grading``: the blocks graded
+(:mod:`.graded`: the lattice's spacing at the faces, layers growing away from them, the in-plane
+lattice halved with depth) in place of ``layers`` uniform layers; made whole, not by index.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 
 from . import number
 from .blocks import FACE_TAGS, Block, lattice_block, mortar_lattices, stations
+from .graded import graded_blocks
 from .lattices import Lattices
 from .height_maps import read_npz, read_xyz
 from .surfaces import surface_mean
@@ -42,9 +45,12 @@ PARAMETERS = {"surfaces": ".npz file with arrays lower, upper (heights [m], (ny,
               "periodic": "true: the map is one period, closed by its first row and column (default false)",
               "min_aperture": "smaller apertures are raised to it by lifting the upper face [m] (default 0)",
               "tolerance": "after the raise, the faces may interpenetrate by this much before the map is refused "
-                           "[m] (default 1e-9 of the larger face's RMS height)"}
+                           "[m] (default 1e-9 of the larger face's RMS height)",
+              "grading": "ratio > 1 of successive layer thicknesses from the lattice spacing at the faces, the "
+                         "in-plane lattice halved where a layer is twice as thick as its cells are wide (default: "
+                         "none, layers uniform layers)"}
 DEFAULTS = {"surfaces": None, "lower": None, "upper": None, "layers": 4, "coarsen": 1, "ratio": 1,
-            "periodic": False, "min_aperture": 0.0, "tolerance": None}
+            "periodic": False, "min_aperture": 0.0, "tolerance": None, "grading": None}
 #: the default tolerance, a fraction of the larger face's RMS height (round-off of touching faces)
 RELATIVE_TOLERANCE = 1e-9
 #: parameters naming files: relative to the case directory (the scene resolves them)
@@ -116,6 +122,9 @@ def check(p: dict) -> dict:
     out.update({"height": number(p, "height", positive=True), "min_aperture": number(p, "min_aperture", minimum=0.0),
                 "periodic": p["periodic"]})
     out.update({k: number(p, k, minimum=1, integer=True) for k in ("layers", "coarsen", "ratio")})
+    out["grading"] = None if p["grading"] is None else number(p, "grading", positive=True)
+    if out["grading"] is not None and not out["grading"] > 1:
+        raise ValueError(f"grading: must be a ratio above 1 (layers growing away from the faces), got {p['grading']!r}")
     lower, upper, spacing, _ = closed_map(out)
     default = p["tolerance"] is None
     out["tolerance"] = (RELATIVE_TOLERANCE * max(float(np.std(lower)), float(np.std(upper))) if default
@@ -132,6 +141,8 @@ def check(p: dict) -> dict:
 
 
 def cells(p: dict) -> int:
+    if p["grading"] is not None:
+        return len(mesh(p).cells)
     nx, ny = (len(s) - 1 for s in _lattice(p, closed_map(p)[0].shape))
     ux, uy = len(stations(nx, p["ratio"])) - 1, len(stations(ny, p["ratio"])) - 1
     return 6 * (nx * ny + ux * uy) * p["layers"]
@@ -180,14 +191,28 @@ def _info(p: dict, m: dict) -> dict:
             "largest_lift": float(lift.max()), "cross_section": size[0] * size[1]}
 
 
-def _parts(p: dict) -> tuple[Lattices, dict]:
-    """The two blocks by index and the ``info`` of :func:`mesh`."""
+def _parts(p: dict) -> tuple[Lattices | None, dict, dict]:
+    """The two blocks by index (None when graded), the ``info`` of :func:`mesh` and the sampled map."""
     m = _sampled(p)
     i, j, size, axes = m["i"], m["j"], m["size"], m["axes"]
     low, up = m["lower"][np.ix_(i, j)], m["raised"][np.ix_(i, j)]
+    if p["grading"] is not None:
+        return None, _info(p, m), m
     lattices = mortar_lattices((len(i) - 1, len(j) - 1, p["layers"]), size, p["height"], (low, up), p["ratio"],
                                m["origin"], bottom=surface_mean(low, size, axes) - p["height"], axes=axes)
-    return lattices, _info(p, m)
+    return lattices, _info(p, m), m
+
+
+def _graded(p: dict, m: dict, info: dict) -> Block:
+    """The two blocks graded (:func:`~transfer.generators.graded.graded_blocks`): the ends where
+    the lattices put them, the upper face on its coarser lattice with ``ratio``."""
+    i, j, size, axes = m["i"], m["j"], m["size"], m["axes"]
+    low, up = m["lower"][np.ix_(i, j)], m["raised"][np.ix_(i, j)]
+    xs, ys = m["origin"][0] + axes[0], m["origin"][1] + axes[1]
+    ui, uj = m["ui"], m["uj"]
+    bottom = surface_mean(low, size, axes) - p["height"]
+    top = surface_mean(up, size, axes) + p["height"]
+    return graded_blocks((xs, ys, low), (xs[ui], ys[uj], up[np.ix_(ui, uj)]), bottom, top, p["grading"], NAME, info)
 
 
 def notes(p: dict) -> list[str]:
@@ -209,14 +234,15 @@ def notes(p: dict) -> list[str]:
     return out
 
 
-def lattices(p: dict) -> Lattices:
-    """The two blocks by index (:mod:`.lattices`)."""
+def lattices(p: dict) -> Lattices | None:
+    """The two blocks by index (:mod:`.lattices`); None when graded (not a lattice: the mesh is
+    made whole)."""
     return _parts(p)[0]
 
 
 def mesh(p: dict) -> Block:
     """The two blocks in one mesh; ``info``: the map's nodes and spacing, the lattice, the
     aperture's mean, minimum and maximum on the lower lattice, the nodes of the map raised to
-    ``min_aperture``, the cross-section."""
-    lattices, info = _parts(p)
-    return lattice_block(lattices, NAME, info)
+    ``min_aperture``, the cross-section (graded: also the layers per zone and the halvings)."""
+    lattices, info, m = _parts(p)
+    return _graded(p, m, info) if lattices is None else lattice_block(lattices, NAME, info)

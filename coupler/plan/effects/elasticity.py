@@ -21,7 +21,9 @@ def describe_load(load) -> str:
     where = f" on '{load.boundary}'" if load.boundary else ""
     value = (", ".join(f"{v:g}" for v in load.value) + " per step") if load.per_step else load.value
     if load.type == "platen":
-        return (f"platen{where}: rigid, mean normal stress {value} Pa (its displacement found by bracketing, "
+        how = ("one more unknown of the contact solve" if load.settings.get("method") == "constraint"
+               else "found by bracketing")
+        return (f"platen{where}: rigid, mean normal stress {value} Pa (its displacement {how}, "
                 f"tolerance {load.settings['tolerance']:g})")
     if load.type == "dirichlet":
         return f"dirichlet{where}: u_{''.join(load.components)} = {value if load.per_step else f'{value:g}'}"
