@@ -55,7 +55,7 @@ def test_announce_geometry_and_the_outputs_of_an_advance():
     assert u[2:].min() > 0 and np.abs(u[:2]).max() < 1e-3 * u.max()  # flow above the block, none in it
     solves, _ = p.take_reports()
     assert [s.solver for s in solves[:2]] == ["chorin pseudo-time", "pressure Poisson (Cholesky)"]
-    assert "coarsened 2x across y" in solves[2].solver  # the error estimate's (test_chorin_coarsened.py)
+    assert len(solves) == 2  # no coarse solve: error_estimate is off by default (test_chorin_coarsened.py)
     assert all(s.converged for s in solves) and solves[0].residual < solves[0].tolerance == 1e-7
     with pytest.raises(ValueError, match=r"input 'solid_fraction' has shape \(47,\), expected \(48,\)"):
         p.advance(0, 1, 0.0, 1.0, inputs(np.zeros(47)))
