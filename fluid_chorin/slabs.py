@@ -38,12 +38,13 @@ class Slabs:
     cut along ``slab_axis`` (:data:`coupler.protocol.slabs.SLAB_AXES`), each rank receiving its
     inputs on ``input_layers`` planes beyond its slab."""
 
-    def __init__(self, shape, faces: dict, comm=None, slab_axis: str = "longest", input_layers: int = 1):
+    def __init__(self, shape, faces: dict, comm=None, slab_axis: str = "longest", input_layers: int = 1,
+                 whole: int | None = None):
         self.comm = comm if comm is not None and comm.Get_size() > 1 else None
         self.rank = self.comm.Get_rank() if self.comm else 0
         self.size = self.comm.Get_size() if self.comm else 1
         self.shape = tuple(int(n) for n in shape)
-        self.d, self.bounds = slab_bounds(self.shape, self.size, slab_axis)
+        self.d, self.bounds = slab_bounds(self.shape, self.size, slab_axis, whole)
         self.axis = AXIS[self.d]
         n = self.shape[self.d]
         self.lo, self.hi = self.bounds[self.rank], self.bounds[self.rank + 1]

@@ -106,13 +106,10 @@ class ChorinSolver:
         self.spec = spec
         # the inputs of a rank: its cells, the ghost layer (which also holds the face neighbours a
         # rigid body's interface layer reads) and the cells the drag of a ghost reads
-        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis, 1 + REACH[spec.penalization])
         #: the axis across the gap (the drag of penalization "lubrication" reads whole lines along it)
         self.across = across_axis(spec.grid.shape, spec.grid.spacing)
-        if spec.penalization in LINES and self.slabs.size > 1 and self.slabs.d == self.across:
-            raise ValueError(f"penalization {spec.penalization!r} reads whole lines of cells along "
-                             f"{'xyz'[self.across]} (across the gap), the slabs of {self.slabs.size} ranks cut "
-                             f"them: set slab_axis to an axis in the gap's plane")
+        self.slabs = Slabs(spec.grid.shape, spec.faces, comm, spec.slab_axis, 1 + REACH[spec.penalization],
+                           self.across if spec.penalization in LINES else None)
         #: this rank's part of the grid, ghosts included (the whole grid on one rank)
         self.grid = Staggered(self.slabs.local_shape, spec.grid.spacing, self.slabs.faces)
         self.state = State(self.grid.zeros(), np.zeros(self.grid.cells))

@@ -19,12 +19,23 @@ def slab_direction(shape, setting: str) -> int:
     return "xyz".index(setting)
 
 
-def slab_bounds(shape, ranks: int, setting: str) -> tuple[int, list[int]]:
+def slab_bounds(shape, ranks: int, setting: str, whole: int | None = None) -> tuple[int, list[int]]:
     """(direction, bounds): slab r holds the cells ``bounds[r]`` to ``bounds[r + 1] - 1`` along the
-    direction; ValueError (one line, the reason) when a slab would have fewer than :data:`MIN_CELLS`."""
+    direction; ValueError (one line, the reason) when a slab would have fewer than :data:`MIN_CELLS`,
+    or (:func:`check_whole`) when the slabs would cut the lines along ``whole`` each rank must hold."""
     d = slab_direction(shape, setting)
     n = int(shape[d])
     if ranks > 1 and n < MIN_CELLS * ranks:
         raise ValueError(f"{ranks} ranks need at least {MIN_CELLS} cells each along {'xyz'[d]} (slab_axis "
                          f"{setting!r}), the grid has {n}")
+    check_whole(d, ranks, whole)
     return d, [n * r // ranks for r in range(ranks + 1)]
+
+
+def check_whole(d: int, ranks: int, whole: int | None) -> None:
+    """ValueError when slabs along direction ``d`` on ``ranks`` ranks cut the lines of cells along
+    ``whole`` (None: none) that a drag reads whole (the lines across a gap of a lubrication drag)."""
+    if ranks > 1 and d == whole:
+        raise ValueError(f"its drag reads whole lines of cells along {'xyz'[d]} (across the gap), the slabs "
+                         f"along {'xyz'[d]} of {ranks} ranks would cut them: set slab_axis to an axis in the "
+                         f"gap's plane")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from coupler.protocol.slabs import slab_bounds
 from coupler.checks.cubic_law import flow_rates
 from fluid_chorin.solver import ChorinSolver
 from fluid_chorin.spec import ChorinSpec
@@ -149,25 +150,16 @@ def test_lubrication_penalization_gives_plates_the_cubic_law_at_any_resolution(n
     assert abs(error["wall"]) > 0.01
 
 
-class TwoRanks:
-    """The size and rank a slab decomposition reads first (nothing is sent before the refusal)."""
-
-    def Get_size(self):
-        return 2
-
-    def Get_rank(self):
-        return 0
-
-
 def test_lubrication_penalization_refuses_slabs_that_cut_the_lines_across_the_gap():
-    """The drag of penalization "lubrication" reads whole lines across the gap (y for the plates):
-    slabs along y on two ranks are refused, naming the mode, the axis and the setting to change."""
-    p = parameters("plates", {"aperture": 1e-3, "length": 2e-3, "cells_across": 8, "offset": 0.3})
-    config = {"grid": GENERATORS["plates"].grid(p), "inlet": {"pressure": 1e-2}, "outlet": {"pressure": 0.0},
-              "rho": 1000.0, "mu": 1e-3, "boundaries": {"zmin": "empty", "zmax": "empty"},
-              "penalization": "lubrication", "slab_axis": "y"}
-    with pytest.raises(ValueError, match=r"penalization 'lubrication' .* along y .* set slab_axis"):
-        ChorinSolver(ChorinSpec.from_config(config), TwoRanks())
+    """The drag of penalization "lubrication" reads whole lines across the gap: the slab cut that
+    the solver's slabs and the scene check share (coupler.protocol.slabs) refuses slabs along that
+    axis on two ranks, naming the axis and the setting to change; one rank, or slabs in the gap's
+    plane, are cut."""
+    with pytest.raises(ValueError, match=r"whole lines of cells along y \(across the gap\), the slabs along y "
+                                         r"of 2 ranks would cut them: set slab_axis"):
+        slab_bounds((8, 16, 1), 2, "y", whole=1)
+    assert slab_bounds((8, 16, 1), 1, "y", whole=1) == (1, [0, 16])
+    assert slab_bounds((8, 16, 1), 2, "x", whole=1) == (0, [0, 4, 8])
 
 
 def couette(n: int, omega: float):

@@ -115,8 +115,8 @@ def test_the_scene_selects_chorin_and_checks_its_keys(tmp_path):
                              r"scene.toml: \[solvers.fluid\] ranks: 6 ranks need at least 2 cells each along z \(slab_axis "
                              r"'z'\), the grid has 11 \(\[geometry.fluid\] shape\)$"),
                             ('penalization = "wall"', 'penalization = "lubrication"\nranks = 2\nslab_axis = "z"',
-                             r"\[solvers.fluid\] slab_axis: penalization 'lubrication' reads whole lines of cells "
-                             r"along z \(across the gap\), the slabs along z of 2 ranks would cut them"),
+                             r"\[solvers.fluid\] slab_axis: penalization 'lubrication': its drag reads whole lines of "
+                             r"cells along z \(across the gap\), the slabs along z of 2 ranks would cut them"),
                             ('penalization = "wall"', 'steady = "newton"\nranks = 2',
                              r"\[solvers.fluid\] participant = 'chorin': steady = 'newton' solves on one rank, got "
                              r"ranks = 2: use steady = 'march'")):

@@ -24,7 +24,7 @@ import math
 from coupler.errors import SceneError
 from coupler.protocol.roles import (DISPLACEMENT, IN_CONTACT, INLET_PRESSURE, PRESSURE, SOLID_FRACTION, SOLID_VELOCITY,
                                      TRACTION, VELOCITY)
-from coupler.protocol.slabs import slab_bounds
+from coupler.protocol.slabs import check_whole, slab_bounds
 from coupler.scene.participants import for_role
 from coupler.scene.tables import Table
 from transfer.grid import BOX_FACES, across_axis
@@ -93,10 +93,10 @@ def _check_slabs(scene) -> None:
         except ValueError as exc:
             raise SceneError(f"{scene.path}: [solvers.fluid] ranks: {exc} ([geometry.fluid] shape)") from None
         mode = solver.settings.get("penalization")
-        if mode in LINES and d == across_axis(scene.fluid.shape, scene.fluid.spacing):
-            raise SceneError(f"{scene.path}: [solvers.fluid] slab_axis: penalization {mode!r} reads whole lines of "
-                             f"cells along {'xyz'[d]} (across the gap), the slabs along {'xyz'[d]} of {solver.ranks} "
-                             f"ranks would cut them: set slab_axis to an axis in the gap's plane")
+        try:
+            check_whole(d, solver.ranks, across_axis(scene.fluid.shape, scene.fluid.spacing) if mode in LINES else None)
+        except ValueError as exc:
+            raise SceneError(f"{scene.path}: [solvers.fluid] slab_axis: penalization {mode!r}: {exc}") from None
 
 
 def _check_rate_control(scene) -> None:
