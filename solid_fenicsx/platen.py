@@ -32,6 +32,8 @@ from typing import Callable
 
 import numpy as np
 
+from nonsmooth import Control
+
 
 
 class PlatenError(ValueError):
@@ -168,8 +170,6 @@ class Platen:
         mean normal stress as ``g . x`` (``g = -P^T K w / area``, w the normal n on the
         platen's dofs: the force the body exerts on the platen, as :meth:`stress`), the
         target, and the elastic column's stiffness for when no contact carries the platen."""
-        from nonsmooth import Control
-
         el = self.elasticity
         d = float(-self.holder.value @ self.normal)
         loads = []
